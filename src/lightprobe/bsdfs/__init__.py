@@ -1,0 +1,8 @@
+"""BSDFs in the local shading frame (normal +z, ``wo`` toward the viewer, ``wi`` toward the light)."""
+
+from .base import BSDF
+from .conductor import GGXConductor
+from .lambert import Lambert
+from .phong import Phong
+
+__all__ = ["BSDF", "GGXConductor", "Lambert", "Phong"]

@@ -1,0 +1,85 @@
+"""The BSDF interface shared by every material, and the parameter block the Numba kernels read.
+
+Conventions (pbrt's): directions are unit vectors in the local shading frame, the normal on +z; ``wo`` points
+toward the viewer, ``wi`` toward the light.  ``eval`` is the BRDF value f(wo, wi) without the cosine; ``pdf`` and
+the pdf from ``sample`` are per steradian over the whole sphere (a sampler may produce directions below the
+horizon, whose value is 0: they are valid samples of its density).  All materials are one-sided: f = 0 unless
+both directions are above the surface, and nothing is sampled when ``wo`` is below it (pdf 0).
+
+``u`` has three columns: column 0 picks a lobe (for materials with several), columns 1 and 2 drive the warp.
+
+Every material is a kind (an integer) and a fixed-size float64 parameter block; one dispatching kernel per
+operation (:mod:`lightprobe.bsdfs.dispatch`) serves these Python methods and the renderer alike.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import ParameterError
+
+__all__ = ["BSDF", "PARAM_SIZE", "rgb_param"]
+
+#: Length of every material's parameter block.
+PARAM_SIZE = 16
+
+
+def rgb_param(value, name: str, *, upper: float | None = None) -> np.ndarray:
+    """A scalar or RGB triple as a float64 (3,) array, checked finite, >= 0 and <= ``upper``."""
+    arr = np.asarray(value, dtype=np.float64).reshape(-1)
+    if arr.size == 1:
+        arr = np.repeat(arr, 3)
+    if arr.size != 3 or not np.all(np.isfinite(arr)):
+        raise ParameterError(f"{name} must be a finite number or an RGB triple, got {value!r}")
+    if np.any(arr < 0.0) or (upper is not None and np.any(arr > upper)):
+        bound = f"[0, {upper}]" if upper is not None else ">= 0"
+        raise ParameterError(f"{name} must be in {bound}, got {value!r}")
+    return arr
+
+
+def _directions(v, name: str, n: int | None = None) -> np.ndarray:
+    arr = np.asarray(v, dtype=np.float64)
+    if arr.ndim == 1 and arr.shape[0] == 3 and n is not None:
+        arr = np.broadcast_to(arr, (n, 3))
+    if arr.ndim != 2 or arr.shape[1] != 3:
+        raise ParameterError(f"{name} must be an (N, 3) array of directions, got shape {arr.shape}")
+    if n is not None and arr.shape[0] != n:
+        raise ParameterError(f"{name} has {arr.shape[0]} rows, expected {n}")
+    return np.ascontiguousarray(arr)
+
+
+class BSDF:
+    """Base class: subclasses set ``kind`` and fill ``params`` (length :data:`PARAM_SIZE`)."""
+
+    kind: int = -1
+
+    def __init__(self) -> None:
+        self.params = np.zeros(PARAM_SIZE)
+
+    def eval(self, wo, wi) -> np.ndarray:
+        """BRDF value f(wo, wi), RGB (N, 3), without the cosine factor."""
+        from .dispatch import eval_batch
+
+        wi = _directions(wi, "wi")
+        return eval_batch(self.kind, self.params, _directions(wo, "wo", wi.shape[0]), wi)
+
+    def pdf(self, wo, wi) -> np.ndarray:
+        """Density per steradian (N,) with which :meth:`sample` produces ``wi`` given ``wo``."""
+        from .dispatch import pdf_batch
+
+        wi = _directions(wi, "wi")
+        return pdf_batch(self.kind, self.params, _directions(wo, "wo", wi.shape[0]), wi)
+
+    def sample(self, wo, u) -> tuple[np.ndarray, np.ndarray]:
+        """Sample incident directions: returns ``(wi (N, 3), pdf (N,))``."""
+        wi, pdf, _ = self.sample_weight(wo, u)
+        return wi, pdf
+
+    def sample_weight(self, wo, u) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Like :meth:`sample`, plus the sample weight f(wo, wi) cos(theta_i) / pdf (N, 3), 0 when invalid."""
+        from .dispatch import sample_batch
+
+        uu = np.asarray(u, dtype=np.float64)
+        if uu.ndim != 2 or uu.shape[1] != 3:
+            raise ParameterError(f"u must be an (N, 3) array, got shape {uu.shape}")
+        return sample_batch(self.kind, self.params, _directions(wo, "wo", uu.shape[0]), np.ascontiguousarray(uu))

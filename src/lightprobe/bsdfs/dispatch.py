@@ -1,0 +1,81 @@
+"""One dispatching kernel per BSDF operation: ``kind`` selects the material, ``p`` is its parameter block.
+
+The renderer's kernels call :func:`bsdf_eval`, :func:`bsdf_pdf` and :func:`bsdf_sample`; the Python methods of
+:class:`~lightprobe.bsdfs.base.BSDF` call the batch versions below, so both run the same code.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .._numba import jit, jit_parallel, prange
+from .conductor import GGX_CONDUCTOR, ggx_conductor_eval, ggx_conductor_pdf, ggx_conductor_sample
+from .lambert import LAMBERT, lambert_eval, lambert_pdf, lambert_sample
+from .phong import PHONG, phong_eval, phong_pdf, phong_sample
+
+__all__ = ["bsdf_eval", "bsdf_pdf", "bsdf_sample", "eval_batch", "pdf_batch", "sample_batch"]
+
+
+@jit
+def bsdf_eval(kind, p, wo, wi):
+    if kind == LAMBERT:
+        return lambert_eval(p, wo, wi)
+    if kind == PHONG:
+        return phong_eval(p, wo, wi)
+    if kind == GGX_CONDUCTOR:
+        return ggx_conductor_eval(p, wo, wi)
+    return 0.0, 0.0, 0.0
+
+
+@jit
+def bsdf_pdf(kind, p, wo, wi):
+    if kind == LAMBERT:
+        return lambert_pdf(p, wo, wi)
+    if kind == PHONG:
+        return phong_pdf(p, wo, wi)
+    if kind == GGX_CONDUCTOR:
+        return ggx_conductor_pdf(p, wo, wi)
+    return 0.0
+
+
+@jit
+def bsdf_sample(kind, p, wo, u0, u1, u2):
+    """Returns (wi, pdf, weight = f cos / pdf)."""
+    if kind == LAMBERT:
+        return lambert_sample(p, wo, u0, u1, u2)
+    if kind == PHONG:
+        return phong_sample(p, wo, u0, u1, u2)
+    if kind == GGX_CONDUCTOR:
+        return ggx_conductor_sample(p, wo, u0, u1, u2)
+    return (0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0)
+
+
+@jit_parallel
+def eval_batch(kind, p, wo, wi):
+    out = np.empty((wi.shape[0], 3))
+    for i in prange(wi.shape[0]):
+        f = bsdf_eval(kind, p, (wo[i, 0], wo[i, 1], wo[i, 2]), (wi[i, 0], wi[i, 1], wi[i, 2]))
+        out[i, 0], out[i, 1], out[i, 2] = f
+    return out
+
+
+@jit_parallel
+def pdf_batch(kind, p, wo, wi):
+    out = np.empty(wi.shape[0])
+    for i in prange(wi.shape[0]):
+        out[i] = bsdf_pdf(kind, p, (wo[i, 0], wo[i, 1], wo[i, 2]), (wi[i, 0], wi[i, 1], wi[i, 2]))
+    return out
+
+
+@jit_parallel
+def sample_batch(kind, p, wo, u):
+    n = u.shape[0]
+    wi = np.empty((n, 3))
+    pdf = np.empty(n)
+    weight = np.empty((n, 3))
+    for i in prange(n):
+        d, pr, w = bsdf_sample(kind, p, (wo[i, 0], wo[i, 1], wo[i, 2]), u[i, 0], u[i, 1], u[i, 2])
+        wi[i, 0], wi[i, 1], wi[i, 2] = d
+        pdf[i] = pr
+        weight[i, 0], weight[i, 1], weight[i, 2] = w
+    return wi, pdf, weight

@@ -1,0 +1,42 @@
+"""Exact unpolarised Fresnel reflectance (not Schlick's approximation), as pbrt-v4's ``FrDielectric``/``FrComplex``.
+
+``eta`` is the index of the material relative to the outside medium; ``k`` the extinction coefficient of a
+conductor.  cos_theta_i is measured on the side the light arrives from.
+"""
+
+from __future__ import annotations
+
+import cmath
+import math
+
+from .._numba import jit
+
+__all__ = ["fresnel_conductor", "fresnel_dielectric"]
+
+
+@jit
+def fresnel_dielectric(cos_theta_i, eta):
+    """Reflectance of a dielectric interface; light arriving from inside (cos < 0) sees 1/eta."""
+    c = min(max(cos_theta_i, -1.0), 1.0)
+    if c < 0.0:
+        eta = 1.0 / eta
+        c = -c
+    sin2_t = (1.0 - c * c) / (eta * eta)
+    if sin2_t >= 1.0:
+        return 1.0  # total internal reflection
+    cos_t = math.sqrt(1.0 - sin2_t)
+    r_parl = (eta * c - cos_t) / (eta * c + cos_t)
+    r_perp = (c - eta * cos_t) / (c + eta * cos_t)
+    return 0.5 * (r_parl * r_parl + r_perp * r_perp)
+
+
+@jit
+def fresnel_conductor(cos_theta_i, eta, k):
+    """Reflectance of a conductor with complex index eta + i k."""
+    c = min(max(cos_theta_i, 0.0), 1.0)
+    n = complex(eta, k)
+    sin2_t = (1.0 - c * c) / (n * n)
+    cos_t = cmath.sqrt(1.0 - sin2_t)
+    r_parl = (n * c - cos_t) / (n * c + cos_t)
+    r_perp = (c - n * cos_t) / (c + n * cos_t)
+    return 0.5 * (abs(r_parl) ** 2 + abs(r_perp) ** 2)

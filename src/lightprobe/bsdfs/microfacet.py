@@ -1,0 +1,74 @@
+"""The isotropic GGX (Trowbridge-Reitz) microfacet distribution, with visible-normal sampling.
+
+``alpha`` is the roughness parameter itself (not squared, not "perceptual").  In the local frame (normal +z)::
+
+    D(m)     = alpha^2 / (pi (cos^2(theta_m) (alpha^2 - 1) + 1)^2)
+    G1(v, m) = 2 / (1 + sqrt(1 + alpha^2 tan^2(theta_v)))   if dot(v, m) cos(theta_v) > 0, else 0
+    D_v(m)   = G1(v, m) max(0, dot(v, m)) D(m) / cos(theta_v)       (distribution of visible normals)
+
+Visible normals are sampled with Heitz 2018, "Sampling the GGX Distribution of Visible Normals" (JCGT 7(4)).
+"""
+
+from __future__ import annotations
+
+import math
+
+from .._numba import jit
+
+__all__ = ["ggx_d", "ggx_g1", "ggx_sample_visible_normal"]
+
+
+@jit
+def ggx_d(alpha, mx, my, mz):
+    if mz <= 0.0:
+        return 0.0
+    a2 = alpha * alpha
+    c2 = mz * mz
+    denom = c2 * (a2 - 1.0) + 1.0
+    return a2 / (math.pi * denom * denom)
+
+
+@jit
+def ggx_g1(alpha, vx, vy, vz, mx, my, mz):
+    """Smith masking of direction v for microfacet normal m (the separable form is G1(wi) G1(wo))."""
+    if (vx * mx + vy * my + vz * mz) * vz <= 0.0:
+        return 0.0
+    c2 = vz * vz
+    if c2 >= 1.0:
+        return 1.0
+    tan2 = (1.0 - c2) / c2
+    return 2.0 / (1.0 + math.sqrt(1.0 + alpha * alpha * tan2))
+
+
+@jit
+def ggx_sample_visible_normal(alpha, vx, vy, vz, u1, u2):
+    """A microfacet normal visible from v (v.z > 0), distributed as D_v (Heitz 2018, listing 1)."""
+    # stretch the view direction to the hemisphere configuration
+    hx, hy, hz = alpha * vx, alpha * vy, vz
+    inv = 1.0 / math.sqrt(hx * hx + hy * hy + hz * hz)
+    hx, hy, hz = hx * inv, hy * inv, hz * inv
+    lensq = hx * hx + hy * hy
+    if lensq > 0.0:
+        il = 1.0 / math.sqrt(lensq)
+        t1x, t1y, t1z = -hy * il, hx * il, 0.0
+    else:
+        t1x, t1y, t1z = 1.0, 0.0, 0.0
+    # t2 = cross(h, t1)
+    t2x = hy * t1z - hz * t1y
+    t2y = hz * t1x - hx * t1z
+    t2z = hx * t1y - hy * t1x
+    # uniform point on the disc, warped to the projected visible hemisphere
+    r = math.sqrt(u1)
+    phi = 2.0 * math.pi * u2
+    p1 = r * math.cos(phi)
+    p2 = r * math.sin(phi)
+    s = 0.5 * (1.0 + hz)
+    p2 = (1.0 - s) * math.sqrt(max(0.0, 1.0 - p1 * p1)) + s * p2
+    p3 = math.sqrt(max(0.0, 1.0 - p1 * p1 - p2 * p2))
+    nx = p1 * t1x + p2 * t2x + p3 * hx
+    ny = p1 * t1y + p2 * t2y + p3 * hy
+    nz = p1 * t1z + p2 * t2z + p3 * hz
+    # unstretch
+    mx, my, mz = alpha * nx, alpha * ny, max(1e-12, nz)
+    inv = 1.0 / math.sqrt(mx * mx + my * my + mz * mz)
+    return mx * inv, my * inv, mz * inv

@@ -1,0 +1,450 @@
+"""Environment map: an HDR image of radiance arriving from infinitely far away, with importance sampling.
+
+Parameters (keyword-only options of :meth:`EnvironmentMap.load` and :meth:`EnvironmentMap.from_array`)
+-----------------------------------------------------------------------------------------------------------
+mapping : {"latlong", "angular"}
+    Layout of the input image (see :mod:`lightprobe.emitters.mappings`).  Angular maps (Debevec's light probes)
+    are resampled once to lat-long (height = size/2, width = size, 4x4 supersampling); everything else works on
+    the lat-long image, so radiance lookups and the sampling PDF describe the same function.
+scale : float
+    Multiplies the radiance (> 0).
+rotation : None, float or (3, 3) array
+    Environment-to-world rotation: an angle in degrees about +Y, or a rotation matrix.
+lookup : {"bilinear", "nearest"}
+    Radiance reconstruction.  ``bilinear`` follows Mitsuba 3 exactly (columns at u = (i + 0.5)/W, rows at
+    v = j/(H - 1)); ``nearest`` returns the texel that contains the direction, the piecewise-constant function that
+    the sampling PDF is exactly proportional to.
+pdf : {"exact", "pbrt"}
+    ``exact`` (Krivanek, default): texel probability = luminance x the texel's solid angle
+    dphi (cos theta0 - cos theta1), and the direction is uniform *on the sphere* inside the texel (phi uniform,
+    cos theta uniform), so p(w) = luminance(texel) / integral of luminance: exactly proportional, no pixel-centre
+    or half-texel bias.  ``pbrt``: texel probability = luminance x sin(theta at the row centre), (u, v) uniform
+    inside the texel, and p(w) = p(u, v) W H / (2 pi^2 sin theta) with the direction's own theta.
+pdf_blur : bool
+    Build the PDF from the luminance blurred by a 3x3 binomial kernel ([1 2 1] x [1 2 1] / 16, wrapping in u).
+    Every texel whose 3x3 neighbourhood has light gets probability, so a direction with non-zero *bilinear*
+    radiance never has zero density (pbrt's reason for its slightly blurred PDF).  Default: on for bilinear
+    lookups, off for nearest (where the exact PDF already covers every lit direction).
+
+Two distributions are built: the plain one, and the MIS-compensated one (Karlik et al. 2019, as pbrt-v4:
+subtract the solid-angle mean luminance, clamp at zero; falls back to the plain one for a constant map).  The
+compensated PDF is zero on dim texels, so it is only valid combined with BSDF sampling under MIS:
+``sample(u, compensated=True)``, ``pdf(dirs, compensated=True)``.
+
+Input hygiene: NaN or infinite texels are an :class:`~lightprobe.errors.ImageError` naming the file; negative
+values (lossy EXR compression rings) are clamped to 0 with a :class:`~lightprobe.errors.LightprobeWarning`; a map
+that is black everywhere is rejected (nothing could be lit and there is no distribution to sample).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import warnings
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+
+from .._numba import jit, jit_parallel, prange
+from ..color import luminance
+from ..errors import ImageError, LightprobeWarning, ParameterError
+from ..sampling.distributions import PiecewiseConstant2D, invert_2d, pdf_2d, sample_2d
+from ..sampling.kernels import TWO_PI
+from . import mappings
+from .mappings import bilinear_latlong, direction_to_latlong, nearest_latlong
+
+__all__ = ["EnvKernel", "EnvironmentMap"]
+
+LOOKUPS = {"nearest": 0, "bilinear": 1}
+PDF_MODES = {"exact": 0, "pbrt": 1}
+EXACT, PBRT = 0, 1
+NEAREST, BILINEAR = 0, 1
+
+
+class EnvKernel(NamedTuple):
+    """Arrays the Numba kernels need (built once by :class:`EnvironmentMap`)."""
+
+    image: np.ndarray  # (H, W, 3) float32 radiance, scale applied
+    to_env: np.ndarray  # (3, 3) world -> environment frame
+    to_world: np.ndarray  # (3, 3) environment -> world frame
+    lookup: int
+    mode: int
+    cos_edges: np.ndarray  # (H + 1,) cos(theta) at the row boundaries
+    marginal_density: np.ndarray
+    marginal_cdf: np.ndarray
+    conditional_density: np.ndarray
+    conditional_cdf: np.ndarray
+    comp_marginal_density: np.ndarray
+    comp_marginal_cdf: np.ndarray
+    comp_conditional_density: np.ndarray
+    comp_conditional_cdf: np.ndarray
+
+
+# --- kernels ------------------------------------------------------------------------------------------------------
+@jit
+def _mat_vec(m, x, y, z):
+    return (
+        m[0, 0] * x + m[0, 1] * y + m[0, 2] * z,
+        m[1, 0] * x + m[1, 1] * y + m[1, 2] * z,
+        m[2, 0] * x + m[2, 1] * y + m[2, 2] * z,
+    )
+
+
+@jit
+def env_eval(k, x, y, z):
+    """Radiance (r, g, b) arriving from world direction (x, y, z)."""
+    ex, ey, ez = _mat_vec(k.to_env, x, y, z)
+    u, v = direction_to_latlong(ex, ey, ez)
+    if k.lookup == BILINEAR:
+        return bilinear_latlong(k.image, u, v)
+    return nearest_latlong(k.image, u, v)
+
+
+@jit
+def _texel_pdf(k, joint_density, row, sin_theta):
+    """Solid-angle density from the unit-square density of the texel (eqs. in the module docstring)."""
+    h = k.image.shape[0]
+    if k.mode == EXACT:
+        return joint_density / (TWO_PI * h * (k.cos_edges[row] - k.cos_edges[row + 1]))
+    if sin_theta <= 0.0:
+        return 0.0
+    return joint_density / (2.0 * math.pi * math.pi * sin_theta)
+
+
+@jit
+def env_sample(k, compensated, u0, u1):
+    """Sample a world direction: returns (x, y, z, pdf per steradian)."""
+    if compensated:
+        x, y, p, _, row = sample_2d(
+            k.comp_marginal_density,
+            k.comp_marginal_cdf,
+            k.comp_conditional_density,
+            k.comp_conditional_cdf,
+            u0,
+            u1,
+        )
+    else:
+        x, y, p, _, row = sample_2d(
+            k.marginal_density, k.marginal_cdf, k.conditional_density, k.conditional_cdf, u0, u1
+        )
+    h = k.image.shape[0]
+    if k.mode == EXACT:
+        # uniform in cos(theta) between the row's edges: uniform in solid angle inside the texel
+        t = min(max(y * h - row, 0.0), 1.0)
+        c0 = k.cos_edges[row]
+        cos_theta = c0 - t * (c0 - k.cos_edges[row + 1])
+    else:
+        cos_theta = math.cos(math.pi * y)
+    sin_theta = math.sqrt(max(0.0, (1.0 - cos_theta) * (1.0 + cos_theta)))
+    phi = TWO_PI * x
+    ex, ey, ez = math.sin(phi) * sin_theta, cos_theta, -math.cos(phi) * sin_theta
+    wx, wy, wz = _mat_vec(k.to_world, ex, ey, ez)
+    return wx, wy, wz, _texel_pdf(k, p, row, sin_theta)
+
+
+@jit
+def env_pdf(k, compensated, x, y, z):
+    """Density per steradian of sampling world direction (x, y, z)."""
+    ex, ey, ez = _mat_vec(k.to_env, x, y, z)
+    u, v = direction_to_latlong(ex, ey, ez)
+    h = k.image.shape[0]
+    row = min(int(v * h), h - 1)
+    if compensated:
+        p = pdf_2d(k.comp_marginal_density, k.comp_conditional_density, u, (row + 0.5) / h)
+    else:
+        p = pdf_2d(k.marginal_density, k.conditional_density, u, (row + 0.5) / h)
+    sin_theta = math.sqrt(max(0.0, (1.0 - ey) * (1.0 + ey)))
+    return _texel_pdf(k, p, row, sin_theta)
+
+
+@jit
+def env_to_square(k, compensated, x, y, z):
+    """The (u0, u1) that ``env_sample`` maps to world direction (x, y, z)."""
+    ex, ey, ez = _mat_vec(k.to_env, x, y, z)
+    u, v = direction_to_latlong(ex, ey, ez)
+    h = k.image.shape[0]
+    if k.mode == EXACT:
+        row = min(int(v * h), h - 1)
+        c0 = k.cos_edges[row]
+        t = min(max((c0 - ey) / (c0 - k.cos_edges[row + 1]), 0.0), 1.0 - 1e-12)
+        v = (row + t) / h
+    if compensated:
+        return invert_2d(k.comp_marginal_cdf, k.comp_conditional_cdf, u, v)
+    return invert_2d(k.marginal_cdf, k.conditional_cdf, u, v)
+
+
+@jit_parallel
+def _eval_batch(k, dirs):
+    out = np.empty((dirs.shape[0], 3))
+    for i in prange(dirs.shape[0]):
+        out[i, 0], out[i, 1], out[i, 2] = env_eval(k, dirs[i, 0], dirs[i, 1], dirs[i, 2])
+    return out
+
+
+@jit_parallel
+def _sample_batch(k, compensated, u):
+    dirs = np.empty((u.shape[0], 3))
+    pdf = np.empty(u.shape[0])
+    for i in prange(u.shape[0]):
+        dirs[i, 0], dirs[i, 1], dirs[i, 2], pdf[i] = env_sample(k, compensated, u[i, 0], u[i, 1])
+    return dirs, pdf
+
+
+@jit_parallel
+def _pdf_batch(k, compensated, dirs):
+    out = np.empty(dirs.shape[0])
+    for i in prange(dirs.shape[0]):
+        out[i] = env_pdf(k, compensated, dirs[i, 0], dirs[i, 1], dirs[i, 2])
+    return out
+
+
+@jit_parallel
+def _to_square_batch(k, compensated, dirs):
+    out = np.empty((dirs.shape[0], 2))
+    for i in prange(dirs.shape[0]):
+        out[i, 0], out[i, 1] = env_to_square(k, compensated, dirs[i, 0], dirs[i, 1], dirs[i, 2])
+    return out
+
+
+# --- construction helpers ---------------------------------------------------------------------------------------------
+def _rotation_matrix(rotation) -> np.ndarray:
+    if rotation is None:
+        return np.eye(3)
+    if isinstance(rotation, int | float | np.integer | np.floating):
+        angle = float(rotation)
+        if not math.isfinite(angle):
+            raise ParameterError(f"rotation must be a finite angle in degrees, got {rotation}")
+        a = math.radians(angle)
+        c, s = math.cos(a), math.sin(a)
+        return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+    try:
+        m = np.asarray(rotation, dtype=np.float64)
+    except (TypeError, ValueError):
+        m = np.zeros(0)
+    if m.shape != (3, 3) or not np.all(np.isfinite(m)):
+        raise ParameterError("rotation must be an angle in degrees about +Y or a finite 3x3 matrix")
+    if not np.allclose(m @ m.T, np.eye(3), atol=1e-6) or np.linalg.det(m) < 0:
+        raise ParameterError("rotation matrix must be a proper rotation (orthonormal, determinant +1)")
+    return m
+
+
+def _binomial_blur(lum: np.ndarray) -> np.ndarray:
+    """[1 2 1] x [1 2 1] / 16, periodic in u (columns), edge-replicated in v (rows)."""
+    horizontal = 0.25 * np.roll(lum, 1, axis=1) + 0.5 * lum + 0.25 * np.roll(lum, -1, axis=1)
+    padded = np.concatenate([horizontal[:1], horizontal, horizontal[-1:]], axis=0)
+    return 0.25 * padded[:-2] + 0.5 * padded[1:-1] + 0.25 * padded[2:]
+
+
+def _as_rgb(pixels, source: str) -> np.ndarray:
+    data = np.asarray(pixels, dtype=np.float32)
+    if data.ndim == 2:
+        data = data[:, :, None]
+    if data.ndim != 3 or data.shape[0] < 1 or data.shape[1] < 1:
+        raise ImageError(f"{source}: expected an image of shape (height, width[, channels]), got {data.shape}")
+    channels = data.shape[2]
+    if channels == 1:
+        data = np.repeat(data, 3, axis=2)
+    elif channels == 4:
+        data = data[:, :, :3]
+    elif channels != 3:
+        raise ImageError(f"{source}: expected 1, 3 or 4 channels, got {channels}")
+    bad = ~np.isfinite(data)
+    if bad.any():
+        raise ImageError(f"{source}: {int(bad.any(axis=2).sum())} texels are NaN or infinite; repair the image first")
+    negative = data < 0.0
+    if negative.any():
+        warnings.warn(
+            f"{source}: clamped {int(negative.sum())} negative values (min {float(data.min()):.3g}) to 0",
+            LightprobeWarning,
+            stacklevel=3,
+        )
+        data = np.maximum(data, 0.0)
+    return np.ascontiguousarray(data)
+
+
+class EnvironmentMap:
+    """Distant radiance L(w) from a lat-long image, with importance sampling.  See the module docstring.
+
+    Use :meth:`load` or :meth:`from_array`.  All directions are world-space unit vectors (N, 3); ``u`` is
+    (N, 2) in [0, 1); pdfs are per steradian.
+    """
+
+    def __init__(
+        self,
+        latlong,
+        *,
+        scale: float = 1.0,
+        rotation=None,
+        lookup: str = "bilinear",
+        pdf: str = "exact",
+        pdf_blur: bool | None = None,
+        source: str = "<array>",
+        mapping: str = "latlong",
+    ):
+        if lookup not in LOOKUPS:
+            raise ParameterError(f"lookup must be one of {sorted(LOOKUPS)}, got {lookup!r}")
+        if pdf not in PDF_MODES:
+            raise ParameterError(f"pdf must be one of {sorted(PDF_MODES)}, got {pdf!r}")
+        scale = float(scale)
+        if not (math.isfinite(scale) and scale > 0.0):
+            raise ParameterError(f"scale must be a finite number > 0, got {scale}")
+        image = _as_rgb(latlong, source)
+        self.source = source
+        self.mapping = mapping
+        self.scale = scale
+        self.lookup = lookup
+        self.pdf_mode = pdf
+        self.pdf_blur = (lookup == "bilinear") if pdf_blur is None else bool(pdf_blur)
+        self.radiance = image  # unscaled, as read
+        self.to_world = _rotation_matrix(rotation)
+
+        lum = luminance(image)
+        if not lum.max() > 0.0:
+            raise ImageError(f"{source}: the environment map is black everywhere; nothing would be lit")
+        h, w = lum.shape
+        self.cos_edges = np.cos(np.pi * np.arange(h + 1) / h)
+        self.cos_edges[0], self.cos_edges[-1] = 1.0, -1.0
+        # solid angle of each texel row: dphi (cos theta0 - cos theta1)
+        self.texel_solid_angle = (TWO_PI / w) * (self.cos_edges[:-1] - self.cos_edges[1:])
+        self.luminance = lum
+        self.mean_luminance = float((lum * self.texel_solid_angle[:, None]).sum() / (4.0 * math.pi))
+
+        weights = _binomial_blur(lum) if self.pdf_blur else lum
+        compensated = np.maximum(weights - float((weights * self.texel_solid_angle[:, None]).sum()) / (4 * np.pi), 0)
+        if not compensated.max() > 0.0:  # constant map: nothing above the mean
+            compensated = weights
+        self.distribution = PiecewiseConstant2D(self._texel_weights(weights))
+        self.compensated_distribution = PiecewiseConstant2D(self._texel_weights(compensated))
+        self._kernel = EnvKernel(
+            np.ascontiguousarray(image * np.float32(scale)),
+            np.ascontiguousarray(self.to_world.T),
+            np.ascontiguousarray(self.to_world),
+            LOOKUPS[lookup],
+            PDF_MODES[pdf],
+            self.cos_edges,
+            *self.distribution.kernel_arrays(),
+            *self.compensated_distribution.kernel_arrays(),
+        )
+
+    def _texel_weights(self, lum: np.ndarray) -> np.ndarray:
+        h = lum.shape[0]
+        if self.pdf_mode == "exact":
+            return lum * (self.cos_edges[:-1] - self.cos_edges[1:])[:, None]
+        return lum * np.sin(np.pi * (np.arange(h) + 0.5) / h)[:, None]
+
+    # --- construction ---------------------------------------------------------------------------------------------
+    @classmethod
+    def from_array(cls, rgb, *, mapping: str = "latlong", source: str = "<array>", **options) -> EnvironmentMap:
+        """Build from an (H, W[, C]) float array in ``mapping`` layout; ``options`` as in the class."""
+        if mapping == "latlong":
+            return cls(rgb, source=source, mapping=mapping, **options)
+        if mapping == "angular":
+            data = _as_rgb(rgb, source)
+            size = data.shape[0]
+            if data.shape[1] != size or size < 2:
+                raise ImageError(f"{source}: an angular map must be square (at least 2x2), got {data.shape[:2]}")
+            height = max(1, size // 2)
+            latlong = mappings.angular_to_latlong_image(data, height, 2 * height, 4)
+            return cls(latlong, source=source, mapping=mapping, **options)
+        raise ParameterError(f"mapping must be 'latlong' or 'angular', got {mapping!r}")
+
+    @classmethod
+    def load(cls, path: str | os.PathLike, *, mapping: str = "latlong", **options) -> EnvironmentMap:
+        """Read an .exr, .hdr or .pfm file (see the class for ``options``: scale, rotation, lookup, pdf, ...)."""
+        from ..io.images import read_image
+
+        return cls.from_array(read_image(path), mapping=mapping, source=str(Path(path)), **options)
+
+    # --- queries --------------------------------------------------------------------------------------------------
+    @property
+    def kernel(self) -> EnvKernel:
+        """The arrays for Numba kernels (:func:`env_eval`, :func:`env_sample`, :func:`env_pdf`)."""
+        return self._kernel
+
+    @property
+    def resolution(self) -> tuple[int, int]:
+        """(width, height) of the lat-long image."""
+        return self.radiance.shape[1], self.radiance.shape[0]
+
+    def eval(self, dirs) -> np.ndarray:
+        """Radiance (N, 3) arriving from world directions ``dirs`` (N, 3)."""
+        return _eval_batch(self._kernel, _directions(dirs))
+
+    def sample(self, u, *, compensated: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """Map ``u`` (N, 2) to world directions (N, 3) and their pdf per steradian (N,)."""
+        return _sample_batch(self._kernel, bool(compensated), _unit_square(u))
+
+    def pdf(self, dirs, *, compensated: bool = False) -> np.ndarray:
+        return _pdf_batch(self._kernel, bool(compensated), _directions(dirs))
+
+    def to_square(self, dirs, *, compensated: bool = False) -> np.ndarray:
+        """Inverse of :meth:`sample`: the ``u`` that produces each direction."""
+        return _to_square_batch(self._kernel, bool(compensated), _directions(dirs))
+
+    def integral(self) -> float:
+        """Integral of luminance over the sphere (with ``scale``), for the nearest-texel function."""
+        return 4.0 * math.pi * self.mean_luminance * self.scale
+
+    def pdf_image(self, *, compensated: bool = False) -> np.ndarray:
+        """(H, W) sampling density per steradian at each texel (at the row centre for ``pdf='pbrt'``)."""
+        dist = self.compensated_distribution if compensated else self.distribution
+        joint = dist.marginal_density[:, None] * dist.conditional_density
+        h = joint.shape[0]
+        if self.pdf_mode == "exact":
+            return joint / (TWO_PI * h * (self.cos_edges[:-1] - self.cos_edges[1:]))[:, None]
+        return joint / (2 * math.pi**2 * np.sin(np.pi * (np.arange(h) + 0.5) / h))[:, None]
+
+    def to_array(self, *, mapping: str = "latlong", size: int | None = None) -> np.ndarray:
+        """The radiance image (scale applied, rotation not) as lat-long, or resampled to an angular map."""
+        image = self.radiance * np.float32(self.scale)
+        if mapping == "latlong":
+            return image
+        if mapping == "angular":
+            side = int(size) if size else self.resolution[0]
+            if side < 2:
+                raise ParameterError(f"size must be >= 2, got {side}")
+            return mappings.latlong_to_angular_image(np.ascontiguousarray(image), side, 4)
+        raise ParameterError(f"mapping must be 'latlong' or 'angular', got {mapping!r}")
+
+    def stats(self) -> dict:
+        """Resolution, luminance min/max/mean (solid-angle weighted), dynamic range, energy of the top 0.1%."""
+        lum = self.luminance * self.scale
+        energy = (lum * self.texel_solid_angle[:, None]).reshape(-1)
+        order = np.argsort(lum.reshape(-1))[::-1]
+        top = max(1, round(0.001 * lum.size))
+        positive = lum[lum > 0]
+        return {
+            "source": self.source,
+            "mapping": self.mapping,
+            "width": self.resolution[0],
+            "height": self.resolution[1],
+            "min_luminance": float(lum.min()),
+            "max_luminance": float(lum.max()),
+            "mean_luminance": float(self.mean_luminance * self.scale),
+            "median_luminance": float(np.median(lum)),
+            "dynamic_range_stops": float(np.log2(lum.max() / np.percentile(positive, 1))),
+            "top_0.1%_energy_fraction": float(energy[order[:top]].sum() / energy.sum()),
+            "integral": self.integral(),
+        }
+
+    def __repr__(self) -> str:
+        w, h = self.resolution
+        return (
+            f"EnvironmentMap({self.source!r}, {w}x{h}, scale={self.scale:g}, lookup={self.lookup!r}, "
+            f"pdf={self.pdf_mode!r}, pdf_blur={self.pdf_blur})"
+        )
+
+
+def _directions(dirs) -> np.ndarray:
+    d = np.asarray(dirs, dtype=np.float64)
+    if d.ndim != 2 or d.shape[1] != 3:
+        raise ParameterError(f"dirs must be an (N, 3) array, got shape {d.shape}")
+    return np.ascontiguousarray(d)
+
+
+def _unit_square(u) -> np.ndarray:
+    a = np.asarray(u, dtype=np.float64)
+    if a.ndim != 2 or a.shape[1] != 2:
+        raise ParameterError(f"u must be an (N, 2) array, got shape {a.shape}")
+    return np.ascontiguousarray(a)

@@ -1,0 +1,62 @@
+"""The chi-square machinery itself: pooling, outright failures, Sidak correction, quadrature."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lightprobe.analysis import chi2
+
+
+def test_passes_on_exact_multinomial_draws():
+    rng = np.random.default_rng(0)
+    p = rng.random(500) ** 4
+    p /= p.sum()
+    counts = rng.multinomial(100_000, p)
+    assert chi2.goodness_of_fit(counts, 100_000 * p).passed
+
+
+def test_fails_on_a_biased_distribution():
+    rng = np.random.default_rng(0)
+    p = np.full(100, 0.01)
+    q = p.copy()
+    q[:50] *= 1.05
+    q /= q.sum()
+    assert not chi2.goodness_of_fit(rng.multinomial(200_000, q), 200_000 * p).passed
+
+
+def test_outright_failures():
+    res = chi2.goodness_of_fit(np.array([10, 0, 5]), np.array([10.0, 5.0, 0.0]))
+    assert not res.passed and "integrates to 0" in res.message
+    res = chi2.goodness_of_fit(np.array([10, 10]), np.array([11.0, 11.0]))
+    assert not res.passed and "> 1" in res.message
+    assert not chi2.goodness_of_fit(np.zeros(3), np.ones(3)).passed
+
+
+def test_sidak_correction():
+    res = chi2.goodness_of_fit(np.array([50, 50]), np.array([50.0, 50.0]), alpha=0.01, test_count=10)
+    assert res.alpha == pytest.approx(1 - 0.99**0.1)
+
+
+def test_adaptive_quadrature_resolves_a_narrow_spike():
+    """A cap of 0.1 degree inside one cell covering the sphere.  No quadrature node lands in it at first, so
+    plain refinement sees 0 = 0 and stops; ``refine`` (set where samples fell) keeps looking until it is found,
+    then refinement resolves its edge."""
+    cos_max = np.cos(np.radians(0.1))
+    axis = np.array([0.3, 0.4, np.sqrt(0.75)])
+
+    def pdf(v):
+        return np.where(v @ axis >= cos_max, 1.0 / (2 * np.pi * (1 - cos_max)), 0.0)
+
+    cell = (np.array([0.0, np.pi]), np.array([0.0, 2 * np.pi]))
+    blind = chi2.spherical_expected(pdf, *cell, max_depth=14, subdivisions=8, rtol=1e-7).sum()
+    assert blind == 0.0
+    total = chi2.spherical_expected(
+        pdf, *cell, max_depth=16, subdivisions=8, rtol=1e-7, refine=np.ones((1, 1), bool), refine_depth=12
+    ).sum()
+    assert total == pytest.approx(1.0, abs=2e-3)
+
+
+def test_non_unit_directions_fail():
+    res = chi2.spherical_test(np.array([[0.0, 0.0, 2.0]] * 10), lambda v: np.full(len(v), 1 / (4 * np.pi)))
+    assert not res.passed and "unit" in res.message

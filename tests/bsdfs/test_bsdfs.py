@@ -1,0 +1,193 @@
+"""BSDFs: chi-square of sample() against pdf(), pdf normalisation, consistency, energy, reciprocity."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from lightprobe.analysis import chi2
+from lightprobe.bsdfs import GGXConductor, Lambert, Phong
+from lightprobe.bsdfs.conductor import CONDUCTOR_PRESETS
+from lightprobe.bsdfs.fresnel import fresnel_conductor, fresnel_dielectric
+from lightprobe.bsdfs.microfacet import ggx_d
+from lightprobe.errors import ParameterError
+from lightprobe.geometry.frame import frame_matrix
+
+
+def wo_at(theta_deg: float, phi: float = 0.3) -> np.ndarray:
+    t = math.radians(theta_deg)
+    return np.array([math.sin(t) * math.cos(phi), math.sin(t) * math.sin(phi), math.cos(t)])
+
+
+ANGLES = (0.0, 30.0, 60.0, 85.0, 89.5)  # 85 and 89.5 degrees: grazing
+MATERIALS = {
+    "lambert": Lambert(0.7),
+    **{f"phong n={n:g}": Phong(0.3, 0.6, n) for n in (1, 10, 100, 1000, 10000)},
+    "phong specular-only n=50": Phong(0.0, 0.9, 50),
+    **{f"ggx alpha={a:g}": GGXConductor(a) for a in (0.01, 0.05, 0.1, 0.3, 1.0)},
+    "ggx no fresnel": GGXConductor(0.2, fresnel=False),
+}
+CASES = [(m, a) for m in MATERIALS for a in ANGLES]
+
+
+@pytest.mark.parametrize(("name", "angle"), CASES)
+def test_chi2(name, angle):
+    result = chi2.check_bsdf_sampling(MATERIALS[name], wo_at(angle), test_count=len(CASES))
+    assert result.passed, str(result)
+    assert result.pdf_integral == pytest.approx(1.0, abs=2e-4)
+
+
+@pytest.mark.parametrize("name", list(MATERIALS))
+def test_sample_pdf_equals_pdf_and_weight_equals_f_cos_over_pdf(name):
+    bsdf = MATERIALS[name]
+    for angle in ANGLES:
+        wo = wo_at(angle)
+        wi, pdf, weight = bsdf.sample_weight(wo, np.random.default_rng(1).random((20_000, 3)))
+        ok = pdf > 0
+        np.testing.assert_allclose(bsdf.pdf(wo, wi[ok]), pdf[ok], rtol=1e-9)
+        expected = bsdf.eval(wo, wi[ok]) * np.maximum(wi[ok, 2:3], 0) / pdf[ok, None]
+        np.testing.assert_allclose(weight[ok], expected, rtol=1e-7, atol=1e-12)
+        assert np.all(np.isfinite(weight)) and np.all(weight >= 0)
+
+
+@pytest.mark.parametrize("name", list(MATERIALS))
+def test_reciprocity(name):
+    bsdf = MATERIALS[name]
+    rng = np.random.default_rng(2)
+    a, b = rng.normal(size=(2, 1000, 3))
+    a[:, 2], b[:, 2] = np.abs(a[:, 2]), np.abs(b[:, 2])
+    a /= np.linalg.norm(a, axis=1, keepdims=True)
+    b /= np.linalg.norm(b, axis=1, keepdims=True)
+    np.testing.assert_allclose(bsdf.eval(a, b), bsdf.eval(b, a), rtol=1e-9, atol=1e-12)
+
+
+def test_one_sided():
+    for bsdf in MATERIALS.values():
+        below = np.array([[0.3, 0.0, -0.9]]) / np.linalg.norm([0.3, 0.0, -0.9])
+        above = wo_at(20.0)[None]
+        assert np.all(bsdf.eval(above, below) == 0) and np.all(bsdf.eval(below, above) == 0)
+        assert bsdf.pdf(below, above)[0] == 0.0
+        _, pdf, weight = bsdf.sample_weight(below[0], np.full((4, 3), 0.5))
+        assert np.all(pdf == 0) and np.all(weight == 0)
+
+
+def directional_albedo(bsdf, wo, n=400_000, seed=3):
+    _, _, weight = bsdf.sample_weight(wo, np.random.default_rng(seed).random((n, 3)))
+    return weight.mean(axis=0), weight.std(axis=0) / math.sqrt(n)
+
+
+def test_lambert_albedo_is_exact():
+    mean, err = directional_albedo(Lambert([0.2, 0.5, 0.9]), wo_at(40.0))
+    np.testing.assert_allclose(mean, [0.2, 0.5, 0.9], rtol=1e-10)  # summation rounding only
+    np.testing.assert_allclose(err, 0.0, atol=1e-14)
+
+
+def test_phong_diffuse_albedo_and_energy():
+    mean, _ = directional_albedo(Phong(0.6, 0.0, 10), wo_at(50.0))
+    np.testing.assert_allclose(mean, 0.6, rtol=1e-10)
+    # At normal incidence the specular lobe is centred on the normal and nothing is lost below the horizon:
+    # albedo = (n+2)/(2 pi) * 2 pi * integral of c^(n+1) dc over [0, 1] = 1 exactly (the seed's normalisation).
+    for n in (1, 10, 100):
+        mean, err = directional_albedo(Phong(0.0, 1.0, n), wo_at(0.0))
+        assert mean[0] == pytest.approx(1.0, abs=5 * err[0] + 1e-12)
+    # at grazing incidence part of the lobe falls below the horizon: energy is lost, never created
+    mean, err = directional_albedo(Phong(0.0, 1.0, 10), wo_at(80.0))
+    assert mean[0] < 1.0 - 10 * err[0]
+
+
+def test_phong_chosen_lobe_estimator_is_unbiased():
+    """The seed's sec. 2.4 estimator has the same expectation as the mixture (but more variance)."""
+    wo = wo_at(35.0)
+    mix, err_mix = directional_albedo(Phong(0.4, 0.5, 30), wo)
+    chosen, err_chosen = directional_albedo(Phong(0.4, 0.5, 30, estimator="chosen_lobe"), wo)
+    z = np.abs(mix - chosen) / np.sqrt(err_mix**2 + err_chosen**2)
+    assert np.all(z < 5), z
+
+
+def test_ggx_distribution_is_normalised():
+    """The projected area of the microfacets is the macro surface: integral of D(m) cos(theta_m) dm = 1."""
+    for alpha in (0.01, 0.1, 0.5, 1.0):
+
+        def projected(m, a=alpha):
+            return np.array([ggx_d(a, *v) * v[2] for v in m])
+
+        edges = chi2.equal_mass_theta_edges(projected, 32, n_fine=512, n_phi=4)
+        total = chi2.spherical_expected(projected, edges, np.linspace(0, 2 * np.pi, 3), max_depth=2).sum()
+        assert total == pytest.approx(1.0, abs=1e-4), alpha
+
+
+def test_ggx_white_furnace_albedo():
+    """A perfect GGX reflector (F = 1) loses energy only to masking (single scattering).
+
+    At normal incidence with alpha = 1: D = 1/pi, G1(wo) = 1, G1(wi) = 2c/(1 + c) with c = cos(theta_i), so
+    f = 1/(2 pi (1 + c)) and the albedo is 2 pi * integral of c f dc = integral of c/(1 + c) dc = 1 - ln 2.
+    Smooth surfaces keep nearly everything.
+    """
+    mean, err = directional_albedo(GGXConductor(1.0, fresnel=False), wo_at(0.0))
+    assert mean[0] == pytest.approx(1.0 - math.log(2.0), abs=5 * err[0])
+    mean, err = directional_albedo(GGXConductor(0.01, fresnel=False), wo_at(30.0))
+    assert 0.999 < mean[0] <= 1.0
+
+
+def test_conductor_fresnel_at_normal_incidence_matches_the_peer_scene():
+    """scene.json lists Mitsuba's normal-incidence reflectance of its Al and Au presets."""
+    expected = {"Al": (0.928, 0.9178, 0.9189), "Au": (0.9667, 0.802, 0.3241)}
+    for name, (eta, k) in CONDUCTOR_PRESETS.items():
+        got = [fresnel_conductor(1.0, e, kk) for e, kk in zip(eta, k, strict=True)]
+        np.testing.assert_allclose(got, expected[name], atol=6e-4)
+        # ((eta - 1)^2 + k^2) / ((eta + 1)^2 + k^2) is the closed form at normal incidence
+        closed = [((e - 1) ** 2 + kk**2) / ((e + 1) ** 2 + kk**2) for e, kk in zip(eta, k, strict=True)]
+        np.testing.assert_allclose(got, closed, rtol=1e-12)
+        assert fresnel_conductor(0.0, eta[0], k[0]) == pytest.approx(1.0)
+
+
+def test_dielectric_fresnel():
+    assert fresnel_dielectric(1.0, 1.5) == pytest.approx(0.04)
+    assert fresnel_dielectric(0.0, 1.5) == pytest.approx(1.0)
+    assert fresnel_dielectric(-0.2, 1.5) == 1.0  # total internal reflection from inside
+    # Brewster's angle: the parallel component vanishes, F = r_perp^2 / 2
+    c = math.cos(math.atan(1.5))
+    s = math.sqrt(1 - c * c) / 1.5
+    ct = math.sqrt(1 - s * s)
+    assert fresnel_dielectric(c, 1.5) == pytest.approx(0.5 * ((c - 1.5 * ct) / (c + 1.5 * ct)) ** 2)
+
+
+def test_chi2_sees_a_wrong_roughness():
+    """A test must be able to fail: GGX samples at alpha 0.1 against the pdf of alpha 0.105."""
+    wo = wo_at(30.0)
+    u = np.random.default_rng(0).random((1_000_000, 3))
+    wi, pdf = GGXConductor(0.1).sample(wo, u)
+    wrong = GGXConductor(0.105)
+    frame = frame_matrix(np.array([-wo[0], -wo[1], wo[2]]))
+    edges = chi2.equal_mass_theta_edges(lambda v: wrong.pdf(wo, v), 64, frame=frame)
+    result = chi2.spherical_test(wi[pdf > 0], lambda v: wrong.pdf(wo, v), frame=frame, theta_edges=edges)
+    assert not result.passed
+
+
+@pytest.mark.parametrize(
+    ("make", "match"),
+    [
+        (lambda: Lambert(1.5), "albedo"),
+        (lambda: Lambert([0.1, 0.2]), "albedo"),
+        (lambda: Phong(0.5, 0.5, -1), "exponent"),
+        (lambda: Phong(0.0, 0.0, 10), "reflects nothing"),
+        (lambda: Phong(0.5, 0.5, 10, estimator="best"), "estimator"),
+        (lambda: GGXConductor(0.0), "alpha"),
+        (lambda: GGXConductor(2.0), "alpha"),
+        (lambda: GGXConductor(0.1, material="Unobtainium"), "material"),
+        (lambda: GGXConductor(0.1, material="Al", eta=1.0), "either"),
+        (lambda: GGXConductor(0.1, eta=[0.0, 1, 1], k=1), "eta"),
+    ],
+)
+def test_bad_parameters(make, match):
+    with pytest.raises(ParameterError, match=match):
+        make()
+
+
+def test_bad_array_shapes():
+    with pytest.raises(ParameterError, match=r"\(N, 3\)"):
+        Lambert(0.5).sample([0, 0, 1], np.zeros((4, 2)))
+    with pytest.raises(ParameterError, match="wo"):
+        Lambert(0.5).eval(np.zeros((2, 3)), np.zeros((3, 3)))

@@ -1,0 +1,36 @@
+"""Shared fixtures.  Every random number in the suite comes from a fixed seed: tests never flake."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+from lightprobe.data import data_dir
+from lightprobe.errors import LightprobeWarning
+
+DATA = data_dir()
+
+requires_data = pytest.mark.skipif(DATA is None, reason="../shared/data is absent (set LIGHTPROBE_DATA)")
+
+
+def real_envmap_paths():
+    """Every real map in the shared data folder (empty when it is absent)."""
+    if DATA is None:
+        return []
+    return sorted(p for p in (DATA / "envmaps").iterdir() if p.suffix in (".exr", ".hdr"))
+
+
+def load_quietly(path, **options):
+    """Load a real map without the (expected) warning about clamped DWAB ringing."""
+    from lightprobe.emitters.envmap import EnvironmentMap
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", LightprobeWarning)
+        return EnvironmentMap.load(path, **options)
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(12345)
