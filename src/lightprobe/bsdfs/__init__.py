@@ -4,5 +4,6 @@ from .base import BSDF
 from .conductor import GGXConductor
 from .lambert import Lambert
 from .phong import Phong
+from .plastic import RoughPlastic
 
-__all__ = ["BSDF", "GGXConductor", "Lambert", "Phong"]
+__all__ = ["BSDF", "GGXConductor", "Lambert", "Phong", "RoughPlastic"]

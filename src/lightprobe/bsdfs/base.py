@@ -21,7 +21,7 @@ from ..errors import ParameterError
 __all__ = ["BSDF", "PARAM_SIZE", "rgb_param"]
 
 #: Length of every material's parameter block.
-PARAM_SIZE = 16
+PARAM_SIZE = 80
 
 
 def rgb_param(value, name: str, *, upper: float | None = None) -> np.ndarray:

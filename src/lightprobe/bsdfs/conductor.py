@@ -45,7 +45,7 @@ CONDUCTOR_PRESETS = {
     "Al": ((1.6575009, 0.8804047, 0.52124447), (9.223811, 6.269502, 4.837004)),
     "Au": ((0.14303598, 0.37530708, 1.4420453), (3.982997, 2.3855565, 1.6033592)),
 }
-# parameter block: alpha[0], eta[1:4], k[4:7], specular_reflectance[7:10], fresnel[10]
+# parameter block (PARAM_SIZE floats): alpha[0], eta[1:4], k[4:7], specular_reflectance[7:10], fresnel[10]
 _ALPHA, _ETA, _K, _R, _FRESNEL = 0, 1, 4, 7, 10
 
 

@@ -12,6 +12,7 @@ from .._numba import jit, jit_parallel, prange
 from .conductor import GGX_CONDUCTOR, ggx_conductor_eval, ggx_conductor_pdf, ggx_conductor_sample
 from .lambert import LAMBERT, lambert_eval, lambert_pdf, lambert_sample
 from .phong import PHONG, phong_eval, phong_pdf, phong_sample
+from .plastic import PLASTIC, plastic_eval, plastic_pdf, plastic_sample
 
 __all__ = ["bsdf_eval", "bsdf_pdf", "bsdf_sample", "eval_batch", "pdf_batch", "sample_batch"]
 
@@ -24,6 +25,8 @@ def bsdf_eval(kind, p, wo, wi):
         return phong_eval(p, wo, wi)
     if kind == GGX_CONDUCTOR:
         return ggx_conductor_eval(p, wo, wi)
+    if kind == PLASTIC:
+        return plastic_eval(p, wo, wi)
     return 0.0, 0.0, 0.0
 
 
@@ -35,6 +38,8 @@ def bsdf_pdf(kind, p, wo, wi):
         return phong_pdf(p, wo, wi)
     if kind == GGX_CONDUCTOR:
         return ggx_conductor_pdf(p, wo, wi)
+    if kind == PLASTIC:
+        return plastic_pdf(p, wo, wi)
     return 0.0
 
 
@@ -47,6 +52,8 @@ def bsdf_sample(kind, p, wo, u0, u1, u2):
         return phong_sample(p, wo, u0, u1, u2)
     if kind == GGX_CONDUCTOR:
         return ggx_conductor_sample(p, wo, u0, u1, u2)
+    if kind == PLASTIC:
+        return plastic_sample(p, wo, u0, u1, u2)
     return (0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0)
 
 
