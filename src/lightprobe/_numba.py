@@ -19,11 +19,17 @@ from numba import njit, prange
 __all__ = ["jit", "jit_parallel", "prange"]
 
 
+# Fast-math flags that keep IEEE semantics for NaN, infinities and signed zeros' meaning in comparisons:
+# contraction into FMA, reciprocal approximations and approximate library functions.  'nnan'/'ninf' are left
+# out on purpose: the renderer tests isfinite() to keep NaN and Inf out of images.
+FASTMATH = {"contract", "arcp", "afn"}
+
+
 def jit(func):
     """Compile a scalar or serial kernel (cached on disk)."""
-    return njit(cache=True, nogil=True, error_model="numpy")(func)
+    return njit(cache=True, nogil=True, error_model="numpy", fastmath=FASTMATH)(func)
 
 
 def jit_parallel(func):
     """Compile a batch kernel that splits its ``prange`` loop over all cores (cached on disk)."""
-    return njit(cache=True, nogil=True, parallel=True, error_model="numpy")(func)
+    return njit(cache=True, nogil=True, parallel=True, error_model="numpy", fastmath=FASTMATH)(func)

@@ -32,6 +32,117 @@ def _split(text: str) -> list[str]:
     return [t.strip() for t in text.split(",") if t.strip()]
 
 
+@app.command("render")
+def render_command(
+    scene_file: Annotated[Path | None, typer.Argument(metavar="SCENE", help="Scene file (TOML).")] = None,
+    output: Annotated[Path, typer.Option("--output", "-o", help=".exr, .hdr, .pfm or .png.")] = Path("render.exr"),
+    demo: Annotated[bool, typer.Option("--demo", help="Render the built-in demo scene (no files needed).")] = False,
+    spp: Annotated[int | None, typer.Option(help="Camera samples per pixel [scene or 16].")] = None,
+    strategy: Annotated[str | None, typer.Option(help="uniform, cosine, brdf, env or mis [mis].")] = None,
+    heuristic: Annotated[str | None, typer.Option(help="MIS heuristic: balance or power [power].")] = None,
+    bsdf_samples: Annotated[int | None, typer.Option(help="BSDF samples per camera sample [1].")] = None,
+    env_samples: Annotated[int | None, typer.Option(help="Environment samples per camera sample [1].")] = None,
+    seed: Annotated[int | None, typer.Option(help="Random seed [0].")] = None,
+    mis_compensation: Annotated[
+        bool | None,
+        typer.Option("--mis-compensation/--no-mis-compensation", help="Sample the MIS-compensated env PDF."),
+    ] = None,
+    time_limit: Annotated[float | None, typer.Option(help="Stop after this many seconds (keeps the result).")] = None,
+    threads: Annotated[int | None, typer.Option(help="Threads [all cores].")] = None,
+    width: Annotated[int | None, typer.Option(help="Override the image width (height keeps the aspect).")] = None,
+    variance: Annotated[bool, typer.Option(help="Add variance.R/G/B channels to an EXR.")] = False,
+    exposure: Annotated[float, typer.Option(help="PNG exposure in stops.")] = 0.0,
+    png: Annotated[Path | None, typer.Option(help="Also write a tone-mapped PNG preview here.")] = None,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+) -> None:
+    """Render a scene (or the built-in demo) with direct illumination from its environment map."""
+    from .integrators.wavefront import RenderSettings, render
+    from .io.outputs import write_render
+
+    if demo == (scene_file is not None):
+        raise LightprobeError("give a SCENE file or --demo (one of them)")
+    if demo:
+        from .demo import demo_scene
+
+        scene, defaults = demo_scene(), {}
+    else:
+        from .io.scene_file import load_scene
+
+        scene, defaults = load_scene(scene_file)
+    if width is not None:
+        if width < 1:
+            raise LightprobeError(f"--width must be >= 1, got {width}")
+        w, h = scene.camera.resolution
+        scene.camera = scene.camera.with_resolution(width, max(1, round(h * width / w)))
+    chosen = {
+        "spp": spp,
+        "strategy": strategy,
+        "heuristic": heuristic,
+        "n_bsdf": bsdf_samples,
+        "n_env": env_samples,
+        "seed": seed,
+        "mis_compensation": mis_compensation,
+    }
+    from_file = {"bsdf_samples": "n_bsdf", "env_samples": "n_env"}
+    settings = {from_file.get(k, k): v for k, v in defaults.items()}
+    settings.update({k: v for k, v in chosen.items() if v is not None})
+    settings.setdefault("spp", 16)
+    settings = RenderSettings(time_limit=time_limit, threads=threads, **settings)
+    settings.validate()
+    if not quiet:
+        typer.echo(scene.summary(), err=True)
+    result = _render_with_progress(scene, settings, render, quiet=quiet)
+    stats = result.stats
+    files = write_render(output, result, variance=variance, exposure=exposure, png=png)
+    note = ""
+    if stats["interrupted"]:
+        note = " (interrupted: the image holds the samples accumulated so far)"
+    elif stats["stopped_by_time_limit"]:
+        note = " (stopped by the time limit)"
+    typer.echo(
+        f"wrote {', '.join(str(f) for f in files)}: {stats['spp_done']}"
+        + (f"-{stats['spp_max']}" if stats["spp_max"] != stats["spp_done"] else "")
+        + f" spp in {stats['seconds']:.2f} s, {stats['samples_per_s'] / 1e6:.2f} M samples/s, "
+        f"{stats['rays_per_s'] / 1e6:.2f} M rays/s{note}",
+        err=True,
+    )
+    if stats["nonfinite_samples"]:
+        warnings.warn(f"{stats['nonfinite_samples']} samples were NaN or infinite and counted as 0", stacklevel=1)
+
+
+def _render_with_progress(scene, settings, render, *, quiet: bool):
+    if quiet:
+        return render(scene, settings)
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+    w, h = scene.camera.resolution
+    total = settings.spp * w * h
+    columns = (
+        TextColumn("[progress.description]{task.description}"),
+        BarColumn(),
+        TextColumn("{task.fields[spp]} spp"),
+        TextColumn("pass {task.fields[passes]}"),
+        TextColumn("{task.fields[rate]}"),
+        TimeElapsedColumn(),
+        TextColumn("ETA"),
+        TimeRemainingColumn(),
+    )
+    with Progress(*columns, transient=True) as bar:
+        task = bar.add_task("rendering", total=total, spp=0, passes=0, rate="")
+
+        def update(stats):
+            rate = stats["camera_rays"] / max(stats["seconds"], 1e-9)
+            bar.update(
+                task,
+                completed=stats["camera_rays"],
+                spp=stats["spp_done"],
+                passes=stats["passes"],
+                rate=f"{rate / 1e6:.2f} M samples/s",
+            )
+
+        return render(scene, settings, progress=update)
+
+
 @experiment_app.command("shading-point")
 def experiment_shading_point(
     maps: Annotated[

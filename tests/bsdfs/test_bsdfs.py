@@ -217,7 +217,7 @@ def test_plastic_energy():
     and at normal incidence the diffuse lobe is about 0.69 x a Lambertian of the same reflectance (scene.json).
     """
     for alpha in (0.05, 0.3, 1.0):
-        mean, err = directional_albedo(RoughPlastic(1.0, alpha), wo_at(0.0))
+        mean, _ = directional_albedo(RoughPlastic(1.0, alpha), wo_at(0.0))
         assert 0.3 < mean[0] < 1.0  # alpha = 1 keeps only 34 %
     mean, _ = directional_albedo(RoughPlastic(0.0, 0.05), wo_at(0.0))
     assert 0.035 < mean[0] < 0.042

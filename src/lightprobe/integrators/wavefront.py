@@ -1,0 +1,461 @@
+"""Wavefront direct-illumination renderer: environment light, BSDF/env/MIS sampling, shadow rays.
+
+The image is rendered in *passes*: a pass is a few samples per pixel over a band of pixels (the whole image when
+it fits the ``pass_samples`` budget), so memory is bounded by the pass, not by the sample count.  A pass runs as a
+wavefront of kernels:
+
+1. camera rays (box filter with jitter) and their nearest sphere/rectangle hit, and which rays may reach a mesh;
+2. Embree closest hits for those rays only;
+3. shading: for each hit, ``n_bsdf + n_env`` directions from the chosen strategy, their unoccluded
+   contributions, and shadow rays (tested against spheres and rectangles on the spot);
+4. Embree occlusion for the shadow rays that may reach a mesh;
+5. accumulation: each pixel's samples are added *in sample order* to a running mean and variance (Welford).
+
+Every random number is a hash of (seed, pixel, sample index, dimension) and each pixel is accumulated in sample
+order, so the image is bit-identical for any pass size and any thread count.  Camera rays that miss show the
+environment.  Objects cast shadows but do not light each other (direct illumination from the environment only).
+
+Strategies (per camera sample, ``n = n_bsdf + n_env`` directions for the single-technique ones, so that all
+strategies cost the same number of shadow rays): ``uniform`` and ``cosine`` hemisphere sampling about the shading
+normal, ``brdf``, ``env``, and ``mis`` with ``n_bsdf`` BSDF and ``n_env`` environment samples weighted by the balance
+or power heuristic on sample-count-weighted densities.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .._numba import jit_parallel, prange
+from ..bsdfs.dispatch import bsdf_eval, bsdf_pdf, bsdf_sample
+from ..bsdfs.phong import PHONG
+from ..emitters.envmap import env_eval, env_pdf, env_sample
+from ..errors import ParameterError
+from ..geometry.camera import camera_ray
+from ..geometry.frame import coordinate_system, to_local, to_world
+from ..geometry.intersect import MESH, MISS, closest_analytic, may_hit_mesh, occluded_analytic, ray_offset, surface
+from ..geometry.raytracer import RayTracer
+from ..geometry.scene import Scene
+from ..sampling.kernels import (
+    INV_2PI,
+    cosine_hemisphere_pdf,
+    square_to_cosine_hemisphere,
+    square_to_uniform_hemisphere,
+)
+from ..sampling.mis import mis_weight
+from ..sampling.rng import random_uniform, sample_key
+
+__all__ = ["STRATEGIES", "RenderResult", "RenderSettings", "render"]
+
+STRATEGIES = {"uniform": 0, "cosine": 1, "brdf": 2, "env": 3, "mis": 4}
+UNIFORM, COSINE, BRDF, ENV, MIS = range(5)
+HEURISTICS = {"balance": 1.0, "power": 2.0}
+# flags of a shading sample's shadow ray: no ray, unblocked, to be tested against meshes, blocked
+NONE, VISIBLE, TEST_MESH, BLOCKED = 0, 1, 2, 3
+
+
+@dataclass(frozen=True)
+class RenderSettings:
+    """How to render.  ``spp`` camera samples per pixel; see the module docstring for the strategies."""
+
+    spp: int = 16
+    strategy: str = "mis"
+    heuristic: str = "power"
+    n_bsdf: int = 1
+    n_env: int = 1
+    seed: int = 0
+    mis_compensation: bool = False
+    time_limit: float | None = None
+    threads: int | None = None
+    pass_samples: int = 1 << 19
+
+    def validate(self) -> None:
+        if self.strategy not in STRATEGIES:
+            raise ParameterError(f"strategy must be one of {list(STRATEGIES)}, got {self.strategy!r}")
+        if self.heuristic not in HEURISTICS:
+            raise ParameterError(f"heuristic must be one of {list(HEURISTICS)}, got {self.heuristic!r}")
+        if not (isinstance(self.spp, int) and self.spp >= 1):
+            raise ParameterError(f"spp must be an integer >= 1, got {self.spp!r}")
+        if self.n_bsdf < 0 or self.n_env < 0 or self.n_bsdf + self.n_env < 1 or self.n_bsdf + self.n_env > 64:
+            raise ParameterError(
+                f"bsdf and env sample counts must be >= 0 with 1 to 64 in all, got {self.n_bsdf} and {self.n_env}"
+            )
+        if self.mis_compensation and self.strategy != "mis":
+            raise ParameterError("MIS compensation needs strategy 'mis' (the compensated PDF is zero on dim texels)")
+        if self.time_limit is not None and not (self.time_limit > 0):
+            raise ParameterError(f"time limit must be > 0 seconds, got {self.time_limit!r}")
+        if self.threads is not None and not (1 <= self.threads <= 256):
+            raise ParameterError(f"threads must be between 1 and 256, got {self.threads!r}")
+        if not 1 <= self.seed < 2**63 and self.seed != 0:
+            raise ParameterError(f"seed must be in [0, 2^63), got {self.seed!r}")
+        if self.pass_samples < 1:
+            raise ParameterError(f"pass_samples must be >= 1, got {self.pass_samples!r}")
+
+    @property
+    def shading_samples(self) -> int:
+        return self.n_bsdf + self.n_env
+
+
+@dataclass
+class RenderResult:
+    """Mean radiance (H, W, 3), variance of that mean (H, W, 3), samples per pixel (H, W), and statistics."""
+
+    image: np.ndarray
+    variance: np.ndarray
+    counts: np.ndarray
+    stats: dict = field(default_factory=dict)
+
+
+# --- kernels ------------------------------------------------------------------------------------------------------
+@jit_parallel
+def _camera_pass(s, cam, seed, pixel_start, spp_pass, sample_start, dirs, t, kind, index, needs_mesh):
+    ox, oy, oz = cam[0], cam[1], cam[2]
+    for k in prange(dirs.shape[0]):
+        pixel = pixel_start + k // spp_pass
+        key = sample_key(seed, pixel, sample_start + k % spp_pass)
+        dx, dy, dz = camera_ray(cam, pixel, random_uniform(key, 0), random_uniform(key, 1))
+        dirs[k, 0], dirs[k, 1], dirs[k, 2] = dx, dy, dz
+        t[k], kind[k], index[k] = closest_analytic(s, ox, oy, oz, dx, dy, dz, np.inf)
+        needs_mesh[k] = may_hit_mesh(s, ox, oy, oz, dx, dy, dz, t[k])
+
+
+@jit_parallel
+def _shade(
+    s,
+    env,
+    cam,
+    seed,
+    pixel_start,
+    spp_pass,
+    sample_start,
+    dirs,
+    t,
+    kind,
+    index,
+    prim,
+    b1,
+    b2,
+    strategy,
+    n_bsdf,
+    n_env,
+    beta,
+    compensated,
+    direct,
+    contrib,
+    flags,
+    shadow_o,
+    shadow_d,
+):
+    m = n_bsdf + n_env
+    inv_m = 1.0 / m
+    ox, oy, oz = cam[0], cam[1], cam[2]
+    for k in prange(dirs.shape[0]):
+        base = k * m
+        for j in range(m):
+            flags[base + j] = NONE
+        dx, dy, dz = dirs[k, 0], dirs[k, 1], dirs[k, 2]
+        if kind[k] == MISS:
+            direct[k, 0], direct[k, 1], direct[k, 2] = env_eval(env, dx, dy, dz)
+            continue
+        direct[k, 0] = direct[k, 1] = direct[k, 2] = 0.0
+        p, ng, ns, mat, two_sided = surface(s, kind[k], index[k], prim[k], b1[k], b2[k], ox, oy, oz, dx, dy, dz, t[k])
+        if two_sided == 1 and -(dx * ng[0] + dy * ng[1] + dz * ng[2]) < 0.0:
+            ng = (-ng[0], -ng[1], -ng[2])
+            ns = (-ns[0], -ns[1], -ns[2])
+        ts, tt = coordinate_system(ns[0], ns[1], ns[2])
+        wo = to_local(ts, tt, ns, -dx, -dy, -dz)
+        if wo[2] <= 0.0:  # seen from below a one-sided surface: black
+            continue
+        mk = s.material_kind[mat]
+        mp = s.material_params[mat]
+        pixel = pixel_start + k // spp_pass
+        key = sample_key(seed, pixel, sample_start + k % spp_pass)
+        for j in range(m):
+            u0 = random_uniform(key, 2 + 3 * j)
+            u1 = random_uniform(key, 3 + 3 * j)
+            u2 = random_uniform(key, 4 + 3 * j)
+            technique = strategy
+            if strategy == MIS:
+                technique = BRDF if j < n_bsdf else ENV
+            cr = cg = cb = 0.0
+            if technique == BRDF:
+                wi, pdf_b, w = bsdf_sample(mk, mp, wo, u0, u1, u2)
+                if pdf_b <= 0.0 or (w[0] == 0.0 and w[1] == 0.0 and w[2] == 0.0):
+                    continue
+                wx, wy, wz = to_world(ts, tt, ns, wi[0], wi[1], wi[2])
+                scale = inv_m
+                if strategy == MIS:
+                    pe = env_pdf(env, compensated, wx, wy, wz)
+                    scale = mis_weight(n_bsdf, pdf_b, n_env, pe, beta) / n_bsdf
+                lr, lg, lb = env_eval(env, wx, wy, wz)
+                cr, cg, cb = w[0] * lr * scale, w[1] * lg * scale, w[2] * lb * scale
+            else:
+                if technique == ENV:
+                    wx, wy, wz, pdf = env_sample(env, compensated, u0, u1)
+                    wi = to_local(ts, tt, ns, wx, wy, wz)
+                else:
+                    if technique == UNIFORM:
+                        wi = square_to_uniform_hemisphere(u0, u1)
+                        pdf = INV_2PI
+                    else:
+                        wi = square_to_cosine_hemisphere(u0, u1)
+                        pdf = cosine_hemisphere_pdf(wi[0], wi[1], wi[2])
+                    wx, wy, wz = to_world(ts, tt, ns, wi[0], wi[1], wi[2])
+                if wi[2] <= 0.0 or pdf <= 0.0:
+                    continue
+                f = bsdf_eval(mk, mp, wo, wi)
+                if f[0] == 0.0 and f[1] == 0.0 and f[2] == 0.0:
+                    continue
+                scale = wi[2] / pdf * inv_m
+                if strategy == MIS:
+                    pb = bsdf_pdf(mk, mp, wo, wi)
+                    scale = wi[2] / pdf * mis_weight(n_env, pdf, n_bsdf, pb, beta) / n_env
+                lr, lg, lb = env_eval(env, wx, wy, wz)
+                cr, cg, cb = f[0] * lr * scale, f[1] * lg * scale, f[2] * lb * scale
+            if cr == 0.0 and cg == 0.0 and cb == 0.0:
+                continue
+            r = base + j
+            qx, qy, qz = ray_offset(p[0], p[1], p[2], ng[0], ng[1], ng[2], wx, wy, wz)
+            if occluded_analytic(s, qx, qy, qz, wx, wy, wz, np.inf):
+                flags[r] = BLOCKED
+                continue
+            contrib[r, 0], contrib[r, 1], contrib[r, 2] = cr, cg, cb
+            if may_hit_mesh(s, qx, qy, qz, wx, wy, wz, np.inf):
+                flags[r] = TEST_MESH
+                shadow_o[r, 0], shadow_o[r, 1], shadow_o[r, 2] = qx, qy, qz
+                shadow_d[r, 0], shadow_d[r, 1], shadow_d[r, 2] = wx, wy, wz
+            else:
+                flags[r] = VISIBLE
+
+
+@jit_parallel
+def _accumulate(direct, contrib, flags, m, spp_pass, pixel_start, mean, m2, count, nonfinite):
+    n_pixels = direct.shape[0] // spp_pass
+    for q in prange(n_pixels):
+        p = pixel_start + q
+        for j in range(spp_pass):
+            k = q * spp_pass + j
+            vr, vg, vb = direct[k, 0], direct[k, 1], direct[k, 2]
+            for i in range(k * m, k * m + m):
+                if flags[i] == VISIBLE:
+                    vr += contrib[i, 0]
+                    vg += contrib[i, 1]
+                    vb += contrib[i, 2]
+            if not (math.isfinite(vr) and math.isfinite(vg) and math.isfinite(vb)):
+                vr = vg = vb = 0.0
+                nonfinite[p] += 1
+            count[p] += 1
+            c = count[p]
+            d0 = vr - mean[p, 0]
+            d1 = vg - mean[p, 1]
+            d2 = vb - mean[p, 2]
+            mean[p, 0] += d0 / c
+            mean[p, 1] += d1 / c
+            mean[p, 2] += d2 / c
+            m2[p, 0] += d0 * (vr - mean[p, 0])
+            m2[p, 1] += d1 * (vg - mean[p, 1])
+            m2[p, 2] += d2 * (vb - mean[p, 2])
+
+
+# --- driver -------------------------------------------------------------------------------------------------------
+class _Accumulator:
+    def __init__(self, n_pixels: int):
+        self.mean = np.zeros((n_pixels, 3))
+        self.m2 = np.zeros((n_pixels, 3))
+        self.count = np.zeros(n_pixels, dtype=np.int64)
+        self.nonfinite = np.zeros(n_pixels, dtype=np.int64)
+
+
+def _check_material_strategy(scene: Scene, settings: RenderSettings) -> None:
+    if settings.strategy == "mis":
+        for name, bsdf in scene.materials.items():
+            if bsdf.kind == PHONG and getattr(bsdf, "estimator", "mixture") != "mixture":
+                raise ParameterError(f"material {name!r}: MIS needs Phong's mixture estimator (seed eq. 19)")
+
+
+def render(
+    scene: Scene,
+    settings: RenderSettings | None = None,
+    *,
+    progress: Callable[[dict], None] | None = None,
+    tracer: RayTracer | None = None,
+) -> RenderResult:
+    """Render ``scene``; ``progress(stats)`` is called after every pass.  Ctrl-C keeps what has been accumulated
+    (``stats['interrupted']``), as does a time limit (``stats['stopped_by_time_limit']``)."""
+    settings = settings or RenderSettings()
+    settings.validate()
+    _check_material_strategy(scene, settings)
+    import numba
+
+    if settings.threads is not None:
+        numba.set_num_threads(min(settings.threads, numba.config.NUMBA_NUM_THREADS))
+    threads = numba.get_num_threads()
+    t_setup = time.perf_counter()
+    arrays = scene.compile()
+    own_tracer = tracer is None
+    tracer = tracer or RayTracer(arrays, threads=threads)
+    cam = scene.camera.kernel_array()
+    width, height = scene.camera.resolution
+    n_pixels = width * height
+    m = settings.shading_samples
+    spp_pass = max(1, min(settings.spp, settings.pass_samples // n_pixels))
+    band = max(1, min(n_pixels, settings.pass_samples // spp_pass))
+    acc = _Accumulator(n_pixels)
+    env = scene.environment.kernel
+    args = (
+        STRATEGIES[settings.strategy],
+        settings.n_bsdf,
+        settings.n_env,
+        HEURISTICS[settings.heuristic],
+        bool(settings.mis_compensation),
+    )
+    stats = {
+        "width": width,
+        "height": height,
+        "spp_requested": settings.spp,
+        "strategy": settings.strategy,
+        "heuristic": settings.heuristic,
+        "n_bsdf": settings.n_bsdf,
+        "n_env": settings.n_env,
+        "seed": settings.seed,
+        "mis_compensation": settings.mis_compensation,
+        "threads": threads,
+        "spp_per_pass": spp_pass,
+        "camera_rays": 0,
+        "shadow_rays": 0,
+        "embree_rays": 0,
+        "passes": 0,
+        "interrupted": False,
+        "stopped_by_time_limit": False,
+        "triangles": scene.triangle_count,
+    }
+    buffers: dict[int, tuple] = {}
+
+    def run_pass(acc: _Accumulator, pixel_start: int, count: int, spp_now: int, sample_start: int) -> int:
+        """One pass over ``count`` pixels x ``spp_now`` samples; returns the number of shadow rays traced."""
+        n = count * spp_now
+        if n not in buffers:
+            buffers[n] = (
+                np.empty((n, 3)),
+                np.empty(n),
+                np.empty(n, np.int64),
+                np.empty(n, np.int64),
+                np.empty(n, np.bool_),
+                np.empty((n, 3)),
+                np.empty((n * m, 3)),
+                np.empty(n * m, np.int8),
+                np.empty((n * m, 3), np.float32),
+                np.empty((n * m, 3), np.float32),
+            )
+        dirs, t, kind, index, needs, direct, contrib, flags, so, sd = buffers[n]
+        _camera_pass(arrays, cam, settings.seed, pixel_start, spp_now, sample_start, dirs, t, kind, index, needs)
+        prim = np.zeros(n, np.int64)
+        b1 = np.zeros(n)
+        b2 = np.zeros(n)
+        sel = np.nonzero(needs)[0]
+        if sel.size and arrays.mesh_faces.shape[0]:
+            tfar = np.where(np.isfinite(t[sel]), t[sel], 3e38).astype(np.float32)
+            origin = np.ascontiguousarray(np.broadcast_to(cam[:3].astype(np.float32), (sel.size, 3)))
+            mt, geom, face, u, v = tracer.embree_intersect(origin, dirs[sel].astype(np.float32), tfar)
+            hit = geom != -1
+            rows = sel[hit]
+            t[rows] = mt[hit]
+            kind[rows] = MESH
+            index[rows] = geom[hit]
+            prim[rows] = face[hit]
+            b1[rows] = u[hit]
+            b2[rows] = v[hit]
+        _shade(
+            arrays,
+            env,
+            cam,
+            settings.seed,
+            pixel_start,
+            spp_now,
+            sample_start,
+            dirs,
+            t,
+            kind,
+            index,
+            prim,
+            b1,
+            b2,
+            *args,
+            direct,
+            contrib,
+            flags,
+            so,
+            sd,
+        )
+        shadow_rays = int(np.count_nonzero(flags))
+        test = np.nonzero(flags == TEST_MESH)[0]
+        if test.size:
+            blocked = tracer.embree_occluded(so[test], sd[test])
+            flags[test] = np.where(blocked, BLOCKED, VISIBLE).astype(np.int8)
+        _accumulate(direct, contrib, flags, m, spp_now, pixel_start, acc.mean, acc.m2, acc.count, acc.nonfinite)
+        return shadow_rays
+
+    # warm up every kernel on one pixel (loads cached machine code) before the clock starts
+    run_pass(_Accumulator(n_pixels), 0, 1, 1, 0)
+    buffers.clear()
+    embree_before = tracer.embree_rays
+    stats["setup_seconds"] = time.perf_counter() - t_setup
+
+    start = time.perf_counter()
+    try:
+        for sample_start in range(0, settings.spp, spp_pass):
+            spp_now = min(spp_pass, settings.spp - sample_start)
+            for pixel_start in range(0, n_pixels, band):
+                count = min(band, n_pixels - pixel_start)
+                stats["shadow_rays"] += run_pass(acc, pixel_start, count, spp_now, sample_start)
+                stats["camera_rays"] += count * spp_now
+                stats["passes"] += 1
+                stats["seconds"] = time.perf_counter() - start
+                stats["spp_done"] = int(acc.count.min())
+                if progress is not None:
+                    progress(dict(stats, spp_target=settings.spp, pixels_done=pixel_start + count))
+                if settings.time_limit is not None and stats["seconds"] >= settings.time_limit:
+                    stats["stopped_by_time_limit"] = True
+                    raise _Stop
+    except _Stop:
+        pass  # pixels of the unfinished pass have one pass fewer: their counts say so
+    except KeyboardInterrupt:
+        stats["interrupted"] = True
+    stats["seconds"] = time.perf_counter() - start
+    stats["embree_rays"] = tracer.embree_rays - embree_before
+    if own_tracer:
+        tracer.close()
+    return _finish(acc, stats, width, height)
+
+
+class _Stop(Exception):
+    """The time limit was reached."""
+
+
+def _finish(acc: _Accumulator, stats: dict, width: int, height: int) -> RenderResult:
+    counts = acc.count
+    with np.errstate(divide="ignore", invalid="ignore"):
+        var = np.where((counts >= 2)[:, None], acc.m2 / (counts * np.maximum(counts - 1, 1))[:, None], 0.0)
+    samples = int(counts.sum())
+    seconds = max(stats.get("seconds", 0.0), 1e-12)
+    rays = stats["camera_rays"] + stats["shadow_rays"]
+    stats.update(
+        spp_done=int(counts.min()),
+        spp_max=int(counts.max()),
+        camera_samples=samples,
+        samples_per_s=samples / seconds,
+        rays=rays,
+        rays_per_s=rays / seconds,
+        nonfinite_samples=int(acc.nonfinite.sum()),
+    )
+    image = np.nan_to_num(acc.mean.reshape(height, width, 3), nan=0.0, posinf=0.0, neginf=0.0)
+    return RenderResult(
+        image.astype(np.float32),
+        np.nan_to_num(var.reshape(height, width, 3), nan=0.0, posinf=0.0).astype(np.float32),
+        counts.reshape(height, width),
+        stats,
+    )

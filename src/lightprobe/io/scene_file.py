@@ -1,0 +1,293 @@
+"""The scene file format (TOML).  Relative paths are relative to the scene file.
+
+Example (every key shown; optional ones have their default)::
+
+    [camera]
+    origin = [0.0, 2.6, 6.8]
+    target = [0.0, 0.7, 0.0]
+    up = [0.0, 1.0, 0.0]                # optional
+    fov = 40.0                          # degrees, along fov_axis
+    fov_axis = "y"                      # optional: "y" vertical (default) or "x" horizontal
+    resolution = [512, 512]
+
+    [environment]                       # exactly one of file / sky / constant
+    file = "sky.exr"                    # .exr, .hdr, .pfm
+    mapping = "latlong"                 # or "angular" (Debevec light probe)
+    scale = 1.0
+    rotation = 0.0                      # degrees about +Y
+    lookup = "bilinear"                 # or "nearest"
+    pdf = "exact"                       # or "pbrt"
+    # sky = { sun_elevation = 35, sun_azimuth = 45, sun_diameter = 0.5, sun_radiance = [4e4, 3.8e4, 3.4e4],
+    #         width = 1024, height = 512 }     # the procedural sky with a sun
+    # constant = [1.0, 1.0, 1.0]              # a uniform white furnace
+
+    [materials.floor]
+    type = "lambert"                    # lambert: albedo
+    albedo = 0.5
+    [materials.red]
+    type = "plastic"                    # plastic: diffuse, alpha, eta
+    diffuse = [0.6, 0.15, 0.1]
+    alpha = 0.3
+    [materials.gold]
+    type = "conductor"                  # conductor: alpha, material ("Al", "Au", "none") or eta + k, fresnel
+    alpha = 0.3
+    material = "Au"
+    [materials.shiny]
+    type = "phong"                      # phong: rho_d, rho_s, exponent, estimator
+    rho_d = 0.2
+    rho_s = 0.7
+    exponent = 200
+
+    [[objects]]
+    type = "mesh"                       # OBJ, PLY, PLY.GZ, glTF/GLB
+    file = "bunny.obj"
+    material = "red"
+    transform = { scale = 5.0, rotate = [0, 1, 0, 30], translate = [0, 0, 0] }   # or { matrix = [[...]] }
+    smooth = true                       # interpolate vertex normals (computed if the file has none)
+    two_sided = false                   # shade back faces as front faces
+
+    [[objects]]
+    type = "sphere"
+    center = [1.7, 0.55, 0.9]
+    radius = 0.55
+    material = "gold"
+
+    [[objects]]
+    type = "ground"                     # the plane y = height, a square of side size
+    height = 0.0
+    size = 100.0
+    material = "floor"
+
+    [[objects]]
+    type = "rectangle"                  # corner origin, edges edge_u and edge_v; normal = edge_u x edge_v
+    origin = [-1, 0, -1]
+    edge_u = [0, 0, 2]
+    edge_v = [2, 0, 0]
+    material = "floor"
+
+    [render]                            # optional defaults for `lightprobe render` (options override them)
+    spp = 64
+    strategy = "mis"
+    heuristic = "power"
+    bsdf_samples = 1
+    env_samples = 1
+    seed = 0
+
+Every mistake is a :class:`~lightprobe.errors.SceneError` naming the file and the table at fault.
+"""
+
+from __future__ import annotations
+
+import os
+import tomllib
+from pathlib import Path
+
+from ..bsdfs import GGXConductor, Lambert, Phong, RoughPlastic
+from ..emitters.envmap import EnvironmentMap
+from ..emitters.procedural import constant, sky_with_sun
+from ..errors import LightprobeError, SceneError
+from ..geometry.camera import Camera
+from ..geometry.mesh import TriangleMesh
+from ..geometry.scene import Scene
+from ..geometry.shapes import Rectangle, Sphere
+
+__all__ = ["RENDER_KEYS", "load_scene"]
+
+RENDER_KEYS = {"spp", "strategy", "heuristic", "bsdf_samples", "env_samples", "seed", "mis_compensation"}
+
+
+class _Table:
+    """A TOML table with checked access: unknown keys and wrong types are errors naming where they are."""
+
+    def __init__(self, data, where: str):
+        if not isinstance(data, dict):
+            raise SceneError(f"{where}: expected a table, got {type(data).__name__}")
+        self.data = data
+        self.where = where
+        self.used: set[str] = set()
+
+    def get(self, key, default=None, *, required: bool = False):
+        self.used.add(key)
+        if key not in self.data:
+            if required:
+                raise SceneError(f"{self.where}: missing required key {key!r}")
+            return default
+        return self.data[key]
+
+    def number(self, key, default=None, *, required: bool = False):
+        value = self.get(key, default, required=required)
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int | float)):
+            raise SceneError(f"{self.where}: {key} must be a number, got {value!r}")
+        return value
+
+    def string(self, key, default=None, *, required: bool = False):
+        value = self.get(key, default, required=required)
+        if value is not None and not isinstance(value, str):
+            raise SceneError(f"{self.where}: {key} must be a string, got {value!r}")
+        return value
+
+    def boolean(self, key, default=False):
+        value = self.get(key, default)
+        if not isinstance(value, bool):
+            raise SceneError(f"{self.where}: {key} must be true or false, got {value!r}")
+        return value
+
+    def done(self) -> None:
+        unknown = set(self.data) - self.used
+        if unknown:
+            raise SceneError(f"{self.where}: unknown key(s) {', '.join(sorted(unknown))}")
+
+
+def _path(base: Path, value: str, where: str) -> Path:
+    if not isinstance(value, str) or not value:
+        raise SceneError(f"{where}: file must be a non-empty string")
+    p = Path(value).expanduser()
+    return p if p.is_absolute() else base / p
+
+
+def _camera(t: _Table) -> Camera:
+    cam = Camera(
+        t.get("origin", required=True),
+        t.get("target", required=True),
+        t.get("up", (0.0, 1.0, 0.0)),
+        fov=t.number("fov", 40.0),
+        fov_axis=t.string("fov_axis", "y"),
+        resolution=t.get("resolution", (512, 512)),
+    )
+    t.done()
+    return cam
+
+
+def _environment(t: _Table, base: Path) -> EnvironmentMap:
+    sources = [k for k in ("file", "sky", "constant") if k in t.data]
+    if len(sources) != 1:
+        raise SceneError(f"{t.where}: give exactly one of file, sky or constant (got {sources or 'none'})")
+    options = {
+        "scale": t.number("scale", 1.0),
+        "rotation": t.number("rotation", 0.0),
+        "lookup": t.string("lookup", "bilinear"),
+        "pdf": t.string("pdf", "exact"),
+    }
+    if "pdf_blur" in t.data:
+        options["pdf_blur"] = t.boolean("pdf_blur")
+    mapping = t.string("mapping", "latlong")
+    if sources[0] == "file":
+        env = EnvironmentMap.load(_path(base, t.get("file"), t.where), mapping=mapping, **options)
+    elif sources[0] == "sky":
+        sky = _Table(t.get("sky"), f"{t.where}.sky")
+        image = sky_with_sun(
+            int(sky.number("width", 1024)),
+            int(sky.number("height", 512)),
+            sun_elevation_deg=sky.number("sun_elevation", 35.0),
+            sun_azimuth_deg=sky.number("sun_azimuth", 45.0),
+            sun_diameter_deg=sky.number("sun_diameter", 0.5),
+            sun_radiance=sky.get("sun_radiance", (40000.0, 38000.0, 34000.0)),
+        )
+        sky.done()
+        env = EnvironmentMap.from_array(image, source="procedural sky", **options)
+    else:
+        env = EnvironmentMap.from_array(constant(t.get("constant")), source="constant", **options)
+    t.done()
+    return env
+
+
+def _material(t: _Table):
+    kind = t.string("type", required=True)
+    if kind == "lambert":
+        bsdf = Lambert(t.get("albedo", 0.5))
+    elif kind == "phong":
+        bsdf = Phong(
+            t.get("rho_d", 0.5),
+            t.get("rho_s", 0.5),
+            t.number("exponent", 20.0),
+            estimator=t.string("estimator", "mixture"),
+        )
+    elif kind == "conductor":
+        bsdf = GGXConductor(
+            t.number("alpha", 0.1),
+            eta=t.get("eta"),
+            k=t.get("k"),
+            material=t.string("material"),
+            specular_reflectance=t.get("specular_reflectance", 1.0),
+            fresnel=t.boolean("fresnel", True),
+        )
+    elif kind == "plastic":
+        bsdf = RoughPlastic(t.get("diffuse", 0.5), t.number("alpha", 0.1), eta=t.number("eta", 1.49 / 1.000277))
+    else:
+        raise SceneError(f"{t.where}: unknown material type {kind!r}; use lambert, phong, conductor or plastic")
+    t.done()
+    return bsdf
+
+
+def _object(scene: Scene, t: _Table, base: Path) -> None:
+    kind = t.string("type", required=True)
+    material = t.string("material", required=True)
+    two_sided = t.boolean("two_sided", False)
+    name = t.string("name", t.where)
+    if kind == "mesh":
+        mesh = TriangleMesh.load(_path(base, t.get("file", required=True), t.where), smooth=t.boolean("smooth", True))
+        transform = t.get("transform")
+        if transform is not None and not isinstance(transform, dict):
+            raise SceneError(f"{t.where}: transform must be a table")
+        t.done()
+        scene.add(mesh, material, transform=transform, two_sided=two_sided, name=name)
+        return
+    if kind == "sphere":
+        shape = Sphere(t.get("center", required=True), t.number("radius", required=True))
+    elif kind == "ground":
+        shape = Rectangle.ground(height=t.number("height", 0.0), size=t.number("size", 100.0))
+    elif kind == "rectangle":
+        shape = Rectangle(
+            t.get("origin", required=True), t.get("edge_u", required=True), t.get("edge_v", required=True)
+        )
+    else:
+        raise SceneError(f"{t.where}: unknown object type {kind!r}; use mesh, sphere, ground or rectangle")
+    t.done()
+    scene.add(shape, material, two_sided=two_sided, name=name)
+
+
+def load_scene(path: str | os.PathLike) -> tuple[Scene, dict]:
+    """Read a scene file: returns the scene and its ``[render]`` defaults (possibly empty)."""
+    p = Path(path)
+    if not p.exists():
+        raise SceneError(f"{p}: no such file")
+    try:
+        data = tomllib.loads(p.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise SceneError(f"{p}: not valid TOML ({exc})") from None
+    except OSError as exc:
+        raise SceneError(f"{p}: cannot read ({exc.strerror})") from None
+    base = p.resolve().parent
+    root = _Table(data, str(p))
+    camera = _within(f"{p}: [camera]", lambda w: _camera(_Table(root.get("camera", required=True), w)))
+    env = _within(
+        f"{p}: [environment]", lambda w: _environment(_Table(root.get("environment", required=True), w), base)
+    )
+    scene = Scene(camera, env, name=p.stem)
+    materials = root.get("materials", {})
+    if not isinstance(materials, dict):
+        raise SceneError(f"{p}: [materials] must be a table of tables")
+    for name, spec in materials.items():
+        where = f"{p}: [materials.{name}]"
+        scene.add_material(name, _within(where, lambda w, spec=spec: _material(_Table(spec, w))))
+    objects = root.get("objects", [])
+    if not isinstance(objects, list) or not objects:
+        raise SceneError(f"{p}: the scene needs at least one [[objects]] entry")
+    for i, spec in enumerate(objects):
+        _within(f"{p}: objects[{i}]", lambda w, spec=spec: _object(scene, _Table(spec, w), base))
+    render = _Table(root.get("render", {}), f"{p}: [render]")
+    defaults = {k: render.get(k) for k in RENDER_KEYS if k in render.data}
+    render.done()
+    root.done()
+    return scene, defaults
+
+
+def _within(where: str, build):
+    """Run ``build(where)``; prefix any user error that does not name its place yet with ``where``."""
+    try:
+        return build(where)
+    except LightprobeError as exc:
+        message = str(exc)
+        if message.startswith(where.split(":")[0]):
+            raise
+        raise SceneError(f"{where}: {message}") from None
