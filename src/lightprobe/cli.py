@@ -57,10 +57,11 @@ def render_command(
 ) -> None:
     """Render a scene (or the built-in demo) with direct illumination from its environment map."""
     from .integrators.wavefront import RenderSettings, render
-    from .io.outputs import write_render
+    from .io.outputs import check_output, write_render
 
     if demo == (scene_file is not None):
         raise LightprobeError("give a SCENE file or --demo (one of them)")
+    check_output(output, variance=variance, png=png)
     if demo:
         from .demo import demo_scene
 
@@ -89,8 +90,7 @@ def render_command(
     settings.setdefault("spp", 16)
     settings = RenderSettings(time_limit=time_limit, threads=threads, **settings)
     settings.validate()
-    if not quiet:
-        typer.echo(scene.summary(), err=True)
+    typer.echo(scene.summary(), err=True)
     result = _render_with_progress(scene, settings, render, quiet=quiet)
     stats = result.stats
     files = write_render(output, result, variance=variance, exposure=exposure, png=png)

@@ -399,14 +399,15 @@ def render(
         _accumulate(direct, contrib, flags, m, spp_now, pixel_start, acc.mean, acc.m2, acc.count, acc.nonfinite)
         return shadow_rays
 
-    # warm up every kernel on one pixel (loads cached machine code) before the clock starts
-    run_pass(_Accumulator(n_pixels), 0, 1, 1, 0)
-    buffers.clear()
     embree_before = tracer.embree_rays
-    stats["setup_seconds"] = time.perf_counter() - t_setup
-
     start = time.perf_counter()
     try:
+        # warm up every kernel on one pixel (loads cached machine code) before the clock starts
+        run_pass(_Accumulator(n_pixels), 0, 1, 1, 0)
+        buffers.clear()
+        embree_before = tracer.embree_rays
+        stats["setup_seconds"] = time.perf_counter() - t_setup
+        start = time.perf_counter()
         for sample_start in range(0, settings.spp, spp_pass):
             spp_now = min(spp_pass, settings.spp - sample_start)
             for pixel_start in range(0, n_pixels, band):

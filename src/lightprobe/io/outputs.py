@@ -17,7 +17,7 @@ from .. import __version__
 from ..errors import ImageError
 from .images import LINEAR_FORMATS, write_image, write_png
 
-__all__ = ["write_render"]
+__all__ = ["check_output", "write_render"]
 
 VARIANCE_CHANNELS = ("R", "G", "B", "variance.R", "variance.G", "variance.B")
 
@@ -32,6 +32,21 @@ def _json_safe(value):
     if isinstance(value, float) and not np.isfinite(value):
         return None
     return value
+
+
+def check_output(path: str | os.PathLike, *, variance: bool = False, png: str | os.PathLike | None = None) -> None:
+    """Fail early (before a render) for an output that :func:`write_render` could not write."""
+    p = Path(path)
+    ext = p.suffix.lower()
+    if ext not in (*LINEAR_FORMATS, ".png"):
+        raise ImageError(f"{p}: unsupported output format {ext or '(none)'}; use .exr, .hdr, .pfm or .png")
+    if variance and ext != ".exr":
+        raise ImageError(f"{p}: a variance channel needs an .exr output")
+    if png is not None and Path(png).suffix.lower() != ".png":
+        raise ImageError(f"{png}: the preview must be a .png file")
+    for target in (p, Path(png) if png is not None else None):
+        if target is not None and target.exists() and target.is_dir():
+            raise ImageError(f"{target}: is a directory")
 
 
 def write_render(
@@ -50,6 +65,7 @@ def write_render(
     ``variance.R/G/B`` to an EXR); ``.png`` is tone mapped with ``exposure`` stops.  ``png`` writes an extra
     tone-mapped preview.  Returns the files written.
     """
+    check_output(path, variance=variance, png=png)
     p = Path(path)
     ext = p.suffix.lower()
     written = []
