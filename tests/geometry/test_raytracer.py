@@ -75,7 +75,7 @@ def test_intersect_agrees_with_brute_force(scene):
     arrays = scene.compile()
     tracer = RayTracer(arrays)
     o, d = random_rays(3000)
-    t, kind, index, prim, b1, b2 = tracer.intersect(o, d)
+    t, kind, index, prim, _, _ = tracer.intersect(o, d)
     mismatches = 0
     for i in range(len(o)):
         tb, kb, fb = brute_force(arrays, o[i], d[i])

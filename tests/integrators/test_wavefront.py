@@ -64,7 +64,7 @@ def reference():
     return render(small_scene(), RenderSettings(spp=4096, strategy="mis", seed=12345))
 
 
-@pytest.mark.parametrize(("strategy", "heuristic"), STRATEGIES + [("mis-compensated", "power")])
+@pytest.mark.parametrize(("strategy", "heuristic"), [*STRATEGIES, ("mis-compensated", "power")])
 def test_every_strategy_converges_to_the_reference(reference, strategy, heuristic):
     compensated = strategy == "mis-compensated"
     # Techniques that find the sun only by chance (hemisphere and BSDF sampling) have heavy-tailed estimates: at
