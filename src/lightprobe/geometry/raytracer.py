@@ -12,6 +12,7 @@ Closest-hit queries take a per-ray ``tfar`` (the nearest analytic hit), so Embre
 from __future__ import annotations
 
 import itertools
+import time
 from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
@@ -67,6 +68,9 @@ class RayTracer:
         self.threads = max(1, int(threads))
         self._pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
         self.embree_rays = 0
+        self.embree_seconds = 0.0
+        #: set to a list to keep a copy of every Embree batch: ("occluded" | "intersect", origins, dirs, tfar)
+        self.record: list | None = None
         self._scene = None
         if arrays.mesh_faces.shape[0]:
             from embreex import rtcore_scene
@@ -107,25 +111,36 @@ class RayTracer:
         n = origins.shape[0]
         if self._scene is None or n == 0:
             return np.zeros(n, dtype=bool)
-        self.embree_rays += n
+        if self.record is not None:
+            self.record.append(("occluded", origins.copy(), dirs.copy(), None if tfar is None else tfar.copy()))
+        start = time.perf_counter()
 
         def work(sl):
             dist = None if tfar is None else np.ascontiguousarray(tfar[sl], dtype=np.float32)
             return self._scene.run(origins[sl], dirs[sl], dists=dist, query="OCCLUDED") != -1
 
-        return np.concatenate(self._run(work, n))
+        result = np.concatenate(self._run(work, n))
+        self.embree_rays += n
+        self.embree_seconds += time.perf_counter() - start
+        return result
 
     def embree_intersect(self, origins: np.ndarray, dirs: np.ndarray, tfar: np.ndarray):
         """Closest mesh hit closer than tfar: (t, mesh index, face, b1, b2), mesh index -1 for none."""
         n = origins.shape[0]
-        self.embree_rays += n
+        if self.record is not None:
+            self.record.append(("intersect", origins.copy(), dirs.copy(), tfar.copy()))
+        start = time.perf_counter()
 
         def work(sl):
-            r = self._scene.run(origins[sl], dirs[sl], dists=np.ascontiguousarray(tfar[sl], dtype=np.float32), output=1)
+            dist = np.ascontiguousarray(tfar[sl], dtype=np.float32)
+            r = self._scene.run(origins[sl], dirs[sl], dists=dist, output=1)
             return r["tfar"], r["geomID"], r["primID"], r["u"], r["v"]
 
         parts = self._run(work, n)
-        return tuple(np.concatenate([p[k] for p in parts]) for k in range(5))
+        result = tuple(np.concatenate([p[k] for p in parts]) for k in range(5))
+        self.embree_rays += n
+        self.embree_seconds += time.perf_counter() - start
+        return result
 
     # --- full queries (NumPy in, NumPy out) ------------------------------------------------------------------------
     def intersect(self, origins, dirs):

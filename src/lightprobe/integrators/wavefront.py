@@ -400,12 +400,14 @@ def render(
         return shadow_rays
 
     embree_before = tracer.embree_rays
+    embree_seconds_before = tracer.embree_seconds
     start = time.perf_counter()
     try:
         # warm up every kernel on one pixel (loads cached machine code) before the clock starts
         run_pass(_Accumulator(n_pixels), 0, 1, 1, 0)
         buffers.clear()
         embree_before = tracer.embree_rays
+        embree_seconds_before = tracer.embree_seconds
         stats["setup_seconds"] = time.perf_counter() - t_setup
         start = time.perf_counter()
         for sample_start in range(0, settings.spp, spp_pass):
@@ -428,6 +430,7 @@ def render(
         stats["interrupted"] = True
     stats["seconds"] = time.perf_counter() - start
     stats["embree_rays"] = tracer.embree_rays - embree_before
+    stats["embree_seconds"] = tracer.embree_seconds - embree_seconds_before
     if own_tracer:
         tracer.close()
     return _finish(acc, stats, width, height)

@@ -1,0 +1,158 @@
+#!/usr/bin/env python3
+"""Benchmark: the peer scene of ../shared/peers (512x512, MIS with 1 env + 1 BSDF sample per camera sample).
+
+    python benchmarks/peer_scene.py                 # 16, 64 and 256 spp, one JSON line each (fresh process each)
+    python benchmarks/peer_scene.py --spp 64        # one configuration, one JSON line
+    python benchmarks/peer_scene.py --spp 64 --reference ref.exr --out mine.exr
+
+Each line has: seconds (render loop, after scene setup and kernel warm-up), samples_per_s (camera samples,
+res^2 * spp / seconds, Mitsuba's definition), rays_per_s (camera + shadow rays), embree_rays_per_s (rays through our
+Embree path / time in it), bare_embree_rays_per_s (the same recorded batches re-traced by a bare embreex loop on
+all cores), ray_tracing_share (time in Embree / render time), peak_mb (max resident memory of the process), cores,
+and relmse = mean over pixels and channels of (x - ref)^2 / (ref^2 + 0.01) when --reference is given (the peer
+kit's metric).  For comparison: Mitsuba 3's llvm variant renders this scene at about 10 M samples/s on this
+machine's 2 cores (../shared/peers/README.md).
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+import os
+import resource
+import subprocess
+import sys
+import time
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+
+
+def relmse(image: np.ndarray, reference: np.ndarray) -> float:
+    return float(np.mean((image - reference) ** 2 / (reference**2 + 0.01)))
+
+
+def bare_embree_rate(tracer, batches) -> float:
+    """Re-trace recorded Embree batches with nothing around the embreex calls (split over the same threads)."""
+    scene = tracer._scene
+    threads = tracer.threads
+    pool = ThreadPoolExecutor(threads)
+    prepared = []
+    for kind, o, d, tfar in batches:
+        edges = np.linspace(0, len(o), threads + 1).astype(int)
+        parts = [
+            (o[a:b], d[a:b], None if tfar is None else np.ascontiguousarray(tfar[a:b]))
+            for a, b in itertools.pairwise(edges)
+        ]
+        prepared.append((kind, parts))
+    total = sum(len(o) for _, o, _, _ in batches)
+
+    def run(kind, part):
+        o, d, tfar = part
+        if kind == "occluded":
+            return scene.run(o, d, dists=tfar, query="OCCLUDED")
+        return scene.run(o, d, dists=tfar, output=1)
+
+    start = time.perf_counter()
+    for kind, parts in prepared:
+        list(pool.map(lambda p, k=kind: run(k, p), parts))
+    seconds = time.perf_counter() - start
+    pool.shutdown()
+    return total / seconds if seconds > 0 else float("nan")
+
+
+def run_one(args) -> dict:
+    from lightprobe.geometry.raytracer import RayTracer
+    from lightprobe.integrators.wavefront import RenderSettings, render
+    from lightprobe.io.images import read_image, write_image
+    from lightprobe.peer import peer_scene
+
+    scene = peer_scene(resolution=(args.res, args.res))
+    settings = RenderSettings(
+        spp=args.spp, strategy=args.strategy, heuristic=args.heuristic, seed=args.seed, threads=args.threads
+    )
+    tracer = RayTracer(scene.compile(), threads=args.threads or os.cpu_count() or 1)
+    result = render(scene, settings, tracer=tracer)
+    stats = result.stats
+    # record one pass worth of Embree batches and re-trace them bare
+    tracer.record = []
+    render(scene, RenderSettings(spp=min(2, args.spp), strategy=args.strategy, seed=args.seed + 1), tracer=tracer)
+    bare = bare_embree_rate(tracer, tracer.record)
+    tracer.record = None
+    line = {
+        "renderer": "lightprobe",
+        "scene": "peer",
+        "res": args.res,
+        "spp": args.spp,
+        "strategy": args.strategy,
+        "heuristic": args.heuristic,
+        "seconds": round(stats["seconds"], 4),
+        "samples_per_s": round(stats["samples_per_s"]),
+        "rays_per_s": round(stats["rays_per_s"]),
+        "camera_rays": stats["camera_rays"],
+        "shadow_rays": stats["shadow_rays"],
+        "embree_rays": stats["embree_rays"],
+        "embree_rays_per_s": round(stats["embree_rays"] / max(stats["embree_seconds"], 1e-12)),
+        "bare_embree_rays_per_s": round(bare),
+        "ray_tracing_share": round(stats["embree_seconds"] / max(stats["seconds"], 1e-12), 4),
+        "setup_seconds": round(stats["setup_seconds"], 3),
+        "peak_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1),
+        "cores": os.cpu_count(),
+        "threads": stats["threads"],
+    }
+    if args.reference:
+        ref = read_image(args.reference)[:, :, :3]
+        line["relmse"] = relmse(result.image, ref)
+        line["reference"] = args.reference
+    if args.out:
+        write_image(args.out, result.image)
+        line["out"] = args.out
+    return line
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--spp", type=int, help="samples per pixel (default: 16, 64, 256 in separate processes)")
+    parser.add_argument("--res", type=int, default=512)
+    parser.add_argument("--strategy", default="mis")
+    parser.add_argument("--heuristic", default="power")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--threads", type=int)
+    parser.add_argument("--reference", help="EXR to compute relMSE against")
+    parser.add_argument("--out", help="write the render here")
+    args = parser.parse_args(argv)
+
+    from lightprobe.peer import find_peers
+
+    if find_peers() is None:
+        print(json.dumps({"skipped": "../shared/peers not found (set LIGHTPROBE_PEERS)"}))
+        return 0
+    if args.spp is not None:
+        print(json.dumps(run_one(args)), flush=True)
+        return 0
+    for spp in (16, 64, 256):
+        cmd = [
+            sys.executable,
+            __file__,
+            "--spp",
+            str(spp),
+            "--res",
+            str(args.res),
+            "--strategy",
+            args.strategy,
+            "--heuristic",
+            args.heuristic,
+            "--seed",
+            str(args.seed),
+        ]
+        if args.threads:
+            cmd += ["--threads", str(args.threads)]
+        if args.reference:
+            cmd += ["--reference", args.reference]
+        subprocess.run(cmd, check=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
