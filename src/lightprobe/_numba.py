@@ -1,27 +1,67 @@
 """Numba configuration shared by every compiled kernel.
 
 All kernels are compiled with ``cache=True`` so that a second process loads machine code from disk instead of
-recompiling.  Scalar kernels (one sample, returning tuples) are ``inline``-free ``njit`` functions; batch kernels
-loop over samples and are the only ones marked ``parallel``.
+recompiling.  Numba invalidates a cached function only when *its own* source file changes, not when a function it
+calls (and inlines) changes in another file; a stale kernel then silently runs old code.  So the cache lives in a
+directory named after a fingerprint of every source file of this package (``$XDG_CACHE_HOME/lightprobe/numba/``
+or ``~/.cache/...``): any edit starts a fresh cache, and older ones are removed.  Set ``NUMBA_CACHE_DIR`` to choose
+the location yourself.
+
+Scalar kernels (one sample, returning tuples) are plain ``njit`` functions; batch kernels loop over samples and
+are the only ones marked ``parallel``.
 """
 
 from __future__ import annotations
 
+import hashlib
 import os
+import shutil
+import tempfile
+from pathlib import Path
 
 # Numba's default OpenMP layer busy-waits between parallel regions, which slows down the Embree calls that
 # run between our kernels (measured in ../shared/notes/raytracing-measurements.md).  The workqueue layer has no
 # such spinning; it is also always available (TBB/OpenMP may not be).
 os.environ.setdefault("NUMBA_THREADING_LAYER", "workqueue")
 
-from numba import njit, prange
 
-__all__ = ["jit", "jit_parallel", "prange"]
+def _source_fingerprint() -> str:
+    package = Path(__file__).resolve().parent
+    h = hashlib.sha256()
+    for path in sorted(package.rglob("*.py")):
+        st = path.stat()
+        h.update(f"{path.relative_to(package)}:{st.st_size}:{st.st_mtime_ns}".encode())
+    return h.hexdigest()[:16]
 
 
-# Fast-math flags that keep IEEE semantics for NaN, infinities and signed zeros' meaning in comparisons:
-# contraction into FMA, reciprocal approximations and approximate library functions.  'nnan'/'ninf' are left
-# out on purpose: the renderer tests isfinite() to keep NaN and Inf out of images.
+def _cache_dir() -> str:
+    root = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "lightprobe" / "numba"
+    target = root / _source_fingerprint()
+    try:
+        target.mkdir(parents=True, exist_ok=True)
+        probe = target / ".writable"
+        probe.touch()
+        for old in root.iterdir():  # caches of older sources can never be used again
+            if old.is_dir() and old != target:
+                shutil.rmtree(old, ignore_errors=True)
+        return str(target)
+    except OSError:
+        return str(Path(tempfile.gettempdir()) / f"lightprobe-numba-{_source_fingerprint()}")
+
+
+if "NUMBA_CACHE_DIR" not in os.environ:
+    os.environ["NUMBA_CACHE_DIR"] = _cache_dir()
+
+from numba import config as _config  # noqa: E402
+from numba import njit, prange  # noqa: E402
+
+_config.CACHE_DIR = os.environ["NUMBA_CACHE_DIR"]  # in case Numba was imported (and configured) before us
+
+__all__ = ["FASTMATH", "jit", "jit_parallel", "prange"]
+
+# Fast-math flags that keep IEEE semantics for NaN and infinities: contraction into FMA, reciprocal approximations
+# and approximate library functions.  'nnan'/'ninf' are left out on purpose: the renderer tests isfinite() to keep
+# NaN and Inf out of images.
 FASTMATH = {"contract", "arcp", "afn"}
 
 

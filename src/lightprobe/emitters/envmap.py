@@ -20,11 +20,14 @@ pdf : {"exact", "pbrt"}
     cos theta uniform), so p(w) = luminance(texel) / integral of luminance: exactly proportional, no pixel-centre
     or half-texel bias.  ``pbrt``: texel probability = luminance x sin(theta at the row centre), (u, v) uniform
     inside the texel, and p(w) = p(u, v) W H / (2 pi^2 sin theta) with the direction's own theta.
-pdf_blur : bool
-    Build the PDF from the luminance blurred by a 3x3 binomial kernel ([1 2 1] x [1 2 1] / 16, wrapping in u).
-    Every texel whose 3x3 neighbourhood has light gets probability, so a direction with non-zero *bilinear*
-    radiance never has zero density (pbrt's reason for its slightly blurred PDF).  Default: on for bilinear
-    lookups, off for nearest (where the exact PDF already covers every lit direction).
+pdf_weights : {"bilinear", "texel", "blur"}
+    The luminance the PDF is built from, per texel.  ``texel``: the texel's own luminance (the function the
+    ``exact`` PDF is exactly proportional to with ``nearest`` lookups).  ``bilinear``: the mean over the texel of
+    the bilinear reconstruction (4 x 4 points), plus 1e-4 x the blurred luminance so that every direction with
+    non-zero radiance keeps non-zero density; this follows the bilinear radiance far more closely (measured on the
+    peer scene's sun: 2x less error on the sunlit ground at equal samples than the blur).  ``blur``: pbrt's
+    slightly blurred luminance, [1 2 1] x [1 2 1] / 16 (wrapping in u), whose reason is the same support
+    guarantee.  Default: ``bilinear`` for bilinear lookups, ``texel`` for nearest.
 
 Two distributions are built: the plain one, and the MIS-compensated one (Karlik et al. 2019, as pbrt-v4:
 subtract the solid-angle mean luminance, clamp at zero; falls back to the plain one for a constant map).  The
@@ -58,6 +61,7 @@ __all__ = ["EnvKernel", "EnvironmentMap"]
 
 LOOKUPS = {"nearest": 0, "bilinear": 1}
 PDF_MODES = {"exact": 0, "pbrt": 1}
+PDF_WEIGHTS = ("bilinear", "texel", "blur")
 EXACT, PBRT = 0, 1
 NEAREST, BILINEAR = 0, 1
 
@@ -70,7 +74,7 @@ class EnvKernel(NamedTuple):
     to_world: np.ndarray  # (3, 3) environment -> world frame
     lookup: int
     mode: int
-    cos_edges: np.ndarray  # (H + 1,) cos(theta) at the row boundaries
+    cos_edges: np.ndarray  # (rows + 1,) cos(theta) at the row boundaries of the PDF grid
     marginal_density: np.ndarray
     marginal_cdf: np.ndarray
     conditional_density: np.ndarray
@@ -104,7 +108,7 @@ def env_eval(k, x, y, z):
 @jit
 def _texel_pdf(k, joint_density, row, sin_theta):
     """Solid-angle density from the unit-square density of the texel (eqs. in the module docstring)."""
-    h = k.image.shape[0]
+    h = k.marginal_density.shape[0]
     if k.mode == EXACT:
         return joint_density / (TWO_PI * h * (k.cos_edges[row] - k.cos_edges[row + 1]))
     if sin_theta <= 0.0:
@@ -128,7 +132,7 @@ def env_sample(k, compensated, u0, u1):
         x, y, p, _, row = sample_2d(
             k.marginal_density, k.marginal_cdf, k.conditional_density, k.conditional_cdf, u0, u1
         )
-    h = k.image.shape[0]
+    h = k.marginal_density.shape[0]
     if k.mode == EXACT:
         # uniform in cos(theta) between the row's edges: uniform in solid angle inside the texel
         t = min(max(y * h - row, 0.0), 1.0)
@@ -148,7 +152,7 @@ def env_pdf(k, compensated, x, y, z):
     """Density per steradian of sampling world direction (x, y, z)."""
     ex, ey, ez = _mat_vec(k.to_env, x, y, z)
     u, v = direction_to_latlong(ex, ey, ez)
-    h = k.image.shape[0]
+    h = k.marginal_density.shape[0]
     row = min(int(v * h), h - 1)
     if compensated:
         p = pdf_2d(k.comp_marginal_density, k.comp_conditional_density, u, (row + 0.5) / h)
@@ -163,7 +167,7 @@ def env_to_square(k, compensated, x, y, z):
     """The (u0, u1) that ``env_sample`` maps to world direction (x, y, z)."""
     ex, ey, ez = _mat_vec(k.to_env, x, y, z)
     u, v = direction_to_latlong(ex, ey, ez)
-    h = k.image.shape[0]
+    h = k.marginal_density.shape[0]
     if k.mode == EXACT:
         row = min(int(v * h), h - 1)
         c0 = k.cos_edges[row]
@@ -229,6 +233,23 @@ def _rotation_matrix(rotation) -> np.ndarray:
     return m
 
 
+def _cos_edges(rows: int) -> np.ndarray:
+    edges = np.cos(np.pi * np.arange(rows + 1) / rows)
+    edges[0], edges[-1] = 1.0, -1.0
+    return edges
+
+
+def _row_solid_angles(rows: int, columns: int) -> np.ndarray:
+    """Solid angle of one cell in each row of a lat-long grid: dphi (cos theta0 - cos theta1)."""
+    edges = _cos_edges(rows)
+    return (TWO_PI / columns) * (edges[:-1] - edges[1:])
+
+
+def _refine(values: np.ndarray, f: int) -> np.ndarray:
+    """Each texel repeated f x f times."""
+    return np.repeat(np.repeat(values, f, axis=0), f, axis=1) if f > 1 else values
+
+
 def _binomial_blur(lum: np.ndarray) -> np.ndarray:
     """[1 2 1] x [1 2 1] / 16, periodic in u (columns), edge-replicated in v (rows)."""
     horizontal = 0.25 * np.roll(lum, 1, axis=1) + 0.5 * lum + 0.25 * np.roll(lum, -1, axis=1)
@@ -278,7 +299,8 @@ class EnvironmentMap:
         rotation=None,
         lookup: str = "bilinear",
         pdf: str = "exact",
-        pdf_blur: bool | None = None,
+        pdf_weights: str | None = None,
+        pdf_resolution: int = 2,
         source: str = "<array>",
         mapping: str = "latlong",
     ):
@@ -295,7 +317,11 @@ class EnvironmentMap:
         self.scale = scale
         self.lookup = lookup
         self.pdf_mode = pdf
-        self.pdf_blur = (lookup == "bilinear") if pdf_blur is None else bool(pdf_blur)
+        if pdf_weights is None:
+            pdf_weights = "bilinear" if lookup == "bilinear" else "texel"
+        if pdf_weights not in PDF_WEIGHTS:
+            raise ParameterError(f"pdf_weights must be one of {list(PDF_WEIGHTS)}, got {pdf_weights!r}")
+        self.pdf_weights = pdf_weights
         self.radiance = image  # unscaled, as read
         self.to_world = _rotation_matrix(rotation)
 
@@ -303,19 +329,27 @@ class EnvironmentMap:
         if not lum.max() > 0.0:
             raise ImageError(f"{source}: the environment map is black everywhere; nothing would be lit")
         h, w = lum.shape
-        self.cos_edges = np.cos(np.pi * np.arange(h + 1) / h)
-        self.cos_edges[0], self.cos_edges[-1] = 1.0, -1.0
-        # solid angle of each texel row: dphi (cos theta0 - cos theta1)
-        self.texel_solid_angle = (TWO_PI / w) * (self.cos_edges[:-1] - self.cos_edges[1:])
         self.luminance = lum
+        self.texel_solid_angle = _row_solid_angles(h, w)
         self.mean_luminance = float((lum * self.texel_solid_angle[:, None]).sum() / (4.0 * math.pi))
 
-        weights = _binomial_blur(lum) if self.pdf_blur else lum
-        compensated = np.maximum(weights - float((weights * self.texel_solid_angle[:, None]).sum()) / (4 * np.pi), 0)
+        f = int(pdf_resolution)
+        if f < 1 or f > 8 or f != pdf_resolution:
+            raise ParameterError(f"pdf_resolution must be an integer from 1 to 8, got {pdf_resolution!r}")
+        self.pdf_resolution = f
+        if pdf_weights == "bilinear":
+            weights = mappings.bilinear_cell_means(np.ascontiguousarray(lum), f, max(1, 4 // f))
+            weights += 1e-4 * _refine(_binomial_blur(lum), f)
+        else:
+            weights = _refine(_binomial_blur(lum) if pdf_weights == "blur" else lum, f)
+        cell_solid_angle = _row_solid_angles(h * f, w * f)
+        self.cos_edges = _cos_edges(h * f)
+        mean = float((weights * cell_solid_angle[:, None]).sum()) / (4 * np.pi)
+        compensated = np.maximum(weights - mean, 0.0)
         if not compensated.max() > 0.0:  # constant map: nothing above the mean
             compensated = weights
-        self.distribution = PiecewiseConstant2D(self._texel_weights(weights))
-        self.compensated_distribution = PiecewiseConstant2D(self._texel_weights(compensated))
+        self.distribution = PiecewiseConstant2D(self._cell_weights(weights))
+        self.compensated_distribution = PiecewiseConstant2D(self._cell_weights(compensated))
         self._kernel = EnvKernel(
             np.ascontiguousarray(image * np.float32(scale)),
             np.ascontiguousarray(self.to_world.T),
@@ -327,11 +361,13 @@ class EnvironmentMap:
             *self.compensated_distribution.kernel_arrays(),
         )
 
-    def _texel_weights(self, lum: np.ndarray) -> np.ndarray:
-        h = lum.shape[0]
+    def _cell_weights(self, lum: np.ndarray) -> np.ndarray:
+        """Probability weights of the PDF grid's cells (equal areas in (u, v)): luminance x solid angle for
+        ``exact``, luminance x sin(theta at the row centre) for ``pbrt``."""
+        rows = lum.shape[0]
         if self.pdf_mode == "exact":
             return lum * (self.cos_edges[:-1] - self.cos_edges[1:])[:, None]
-        return lum * np.sin(np.pi * (np.arange(h) + 0.5) / h)[:, None]
+        return lum * np.sin(np.pi * (np.arange(rows) + 0.5) / rows)[:, None]
 
     # --- construction ---------------------------------------------------------------------------------------------
     @classmethod
@@ -387,13 +423,19 @@ class EnvironmentMap:
         return 4.0 * math.pi * self.mean_luminance * self.scale
 
     def pdf_image(self, *, compensated: bool = False) -> np.ndarray:
-        """(H, W) sampling density per steradian at each texel (at the row centre for ``pdf='pbrt'``)."""
+        """Sampling density per steradian on the PDF grid (``pdf_resolution`` x the image in each dimension;
+        at the row centre for ``pdf='pbrt'``)."""
         dist = self.compensated_distribution if compensated else self.distribution
         joint = dist.marginal_density[:, None] * dist.conditional_density
         h = joint.shape[0]
         if self.pdf_mode == "exact":
             return joint / (TWO_PI * h * (self.cos_edges[:-1] - self.cos_edges[1:]))[:, None]
         return joint / (2 * math.pi**2 * np.sin(np.pi * (np.arange(h) + 0.5) / h))[:, None]
+
+    @property
+    def pdf_grid(self) -> tuple[int, int]:
+        """(columns, rows) of the piecewise-constant sampling PDF."""
+        return self.distribution.shape[1], self.distribution.shape[0]
 
     def to_array(self, *, mapping: str = "latlong", size: int | None = None) -> np.ndarray:
         """The radiance image (scale applied, rotation not) as lat-long, or resampled to an angular map."""
@@ -432,7 +474,7 @@ class EnvironmentMap:
         w, h = self.resolution
         return (
             f"EnvironmentMap({self.source!r}, {w}x{h}, scale={self.scale:g}, lookup={self.lookup!r}, "
-            f"pdf={self.pdf_mode!r}, pdf_blur={self.pdf_blur})"
+            f"pdf={self.pdf_mode!r}, pdf_weights={self.pdf_weights!r}, pdf_resolution={self.pdf_resolution})"
         )
 
 

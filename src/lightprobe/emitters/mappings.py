@@ -84,13 +84,12 @@ def _bilerp(image, y0, y1, x0, x1, ty, tx, c):
 
 
 @jit
-def bilinear_latlong(image, u, v):
-    """Bilinear lookup in a lat-long image with Mitsuba's texel placement.
+def bilinear_latlong_weights(h, w, u, v):
+    """Texels and weights of a bilinear lookup at (u, v) with Mitsuba's texel placement.
 
     Column i sits at u = (i + 0.5) / W (periodic in u); row j at v = j / (H - 1), so row 0 is exactly the zenith
-    and the last row exactly the nadir (corner-aligned in v, clamped).
+    and the last row exactly the nadir (corner-aligned in v, clamped).  Returns (y0, y1, x0, x1, ty, tx).
     """
-    h, w = image.shape[0], image.shape[1]
     fx = u * w - 0.5
     x0f = math.floor(fx)
     tx = fx - x0f
@@ -103,12 +102,40 @@ def bilinear_latlong(image, u, v):
     else:
         y0 = 0
         ty = 0.0
-    y1 = min(y0 + 1, h - 1)
+    return y0, min(y0 + 1, h - 1), x0, x1, ty, tx
+
+
+@jit
+def bilinear_latlong(image, u, v):
+    """Bilinear RGB lookup in a lat-long image (:func:`bilinear_latlong_weights`)."""
+    y0, y1, x0, x1, ty, tx = bilinear_latlong_weights(image.shape[0], image.shape[1], u, v)
     return (
         _bilerp(image, y0, y1, x0, x1, ty, tx, 0),
         _bilerp(image, y0, y1, x0, x1, ty, tx, 1),
         _bilerp(image, y0, y1, x0, x1, ty, tx, 2),
     )
+
+
+@jit_parallel
+def bilinear_cell_means(values, f, k):
+    """Mean of the bilinear reconstruction of a single-channel lat-long image (H, W) over each cell of a grid f
+    times finer (H f, W f), from k x k evenly spaced points per cell."""
+    h, w = values.shape
+    rows, cols = h * f, w * f
+    out = np.empty((rows, cols))
+    for j in prange(rows):
+        for i in range(cols):
+            acc = 0.0
+            for a in range(k):
+                v = (j + (a + 0.5) / k) / rows
+                for b in range(k):
+                    u = (i + (b + 0.5) / k) / cols
+                    y0, y1, x0, x1, ty, tx = bilinear_latlong_weights(h, w, u, v)
+                    top = (1.0 - tx) * values[y0, x0] + tx * values[y0, x1]
+                    bottom = (1.0 - tx) * values[y1, x0] + tx * values[y1, x1]
+                    acc += (1.0 - ty) * top + ty * bottom
+            out[j, i] = acc / (k * k)
+    return out
 
 
 @jit

@@ -17,6 +17,7 @@ Example (every key shown; optional ones have their default)::
     rotation = 0.0                      # degrees about +Y
     lookup = "bilinear"                 # or "nearest"
     pdf = "exact"                       # or "pbrt"
+    pdf_weights = "bilinear"            # or "texel", "blur" (default: bilinear for bilinear lookups)
     # sky = { sun_elevation = 35, sun_azimuth = 45, sun_diameter = 0.5, sun_radiance = [4e4, 3.8e4, 3.4e4],
     #         width = 1024, height = 512 }     # the procedural sky with a sun
     # constant = [1.0, 1.0, 1.0]              # a uniform white furnace
@@ -168,8 +169,8 @@ def _environment(t: _Table, base: Path) -> EnvironmentMap:
         "lookup": t.string("lookup", "bilinear"),
         "pdf": t.string("pdf", "exact"),
     }
-    if "pdf_blur" in t.data:
-        options["pdf_blur"] = t.boolean("pdf_blur")
+    if "pdf_weights" in t.data:
+        options["pdf_weights"] = t.string("pdf_weights")
     mapping = t.string("mapping", "latlong")
     if sources[0] == "file":
         env = EnvironmentMap.load(_path(base, t.get("file"), t.where), mapping=mapping, **options)
