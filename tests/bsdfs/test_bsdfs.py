@@ -144,6 +144,20 @@ def test_conductor_fresnel_at_normal_incidence_matches_the_peer_scene():
         assert fresnel_conductor(0.0, eta[0], k[0]) == pytest.approx(1.0)
 
 
+def test_conductor_fresnel_matches_the_complex_formula():
+    """The real-arithmetic form against the textbook complex one, at every angle."""
+    for eta, k in ((1.6575, 9.2238), (0.143, 3.983), (1.5, 0.0), (0.2, 0.5)):
+        n = complex(eta, k)
+        for c in np.linspace(0.0, 1.0, 101):
+            cos_t = np.sqrt(1 - (1 - c * c) / (n * n))
+            r_parl = (n * c - cos_t) / (n * c + cos_t)
+            r_perp = (c - n * cos_t) / (c + n * cos_t)
+            assert fresnel_conductor(c, eta, k) == pytest.approx(0.5 * (abs(r_parl) ** 2 + abs(r_perp) ** 2),
+                                                                 abs=1e-12)
+    # a dielectric is a conductor with k = 0
+    assert fresnel_conductor(0.7, 1.5, 0.0) == pytest.approx(fresnel_dielectric(0.7, 1.5), abs=1e-12)
+
+
 def test_dielectric_fresnel():
     assert fresnel_dielectric(1.0, 1.5) == pytest.approx(0.04)
     assert fresnel_dielectric(0.0, 1.5) == pytest.approx(1.0)

@@ -75,13 +75,9 @@ class EnvKernel(NamedTuple):
     lookup: int
     mode: int
     cos_edges: np.ndarray  # (rows + 1,) cos(theta) at the row boundaries of the PDF grid
-    marginal_density: np.ndarray
-    marginal_cdf: np.ndarray
-    conditional_density: np.ndarray
-    conditional_cdf: np.ndarray
-    comp_marginal_density: np.ndarray
+    marginal_cdf: np.ndarray  # (rows + 1,)
+    conditional_cdf: np.ndarray  # (rows, columns + 1)
     comp_marginal_cdf: np.ndarray
-    comp_conditional_density: np.ndarray
     comp_conditional_cdf: np.ndarray
 
 
@@ -96,19 +92,31 @@ def _mat_vec(m, x, y, z):
 
 
 @jit
-def env_eval(k, x, y, z):
-    """Radiance (r, g, b) arriving from world direction (x, y, z)."""
-    ex, ey, ez = _mat_vec(k.to_env, x, y, z)
-    u, v = direction_to_latlong(ex, ey, ez)
+def _lookup(k, u, v):
     if k.lookup == BILINEAR:
         return bilinear_latlong(k.image, u, v)
     return nearest_latlong(k.image, u, v)
 
 
 @jit
-def _texel_pdf(k, joint_density, row, sin_theta):
-    """Solid-angle density from the unit-square density of the texel (eqs. in the module docstring)."""
-    h = k.marginal_density.shape[0]
+def env_eval(k, x, y, z):
+    """Radiance (r, g, b) arriving from world direction (x, y, z)."""
+    ex, ey, ez = _mat_vec(k.to_env, x, y, z)
+    u, v = direction_to_latlong(ex, ey, ez)
+    return _lookup(k, u, v)
+
+
+@jit
+def _cdfs(k, compensated):
+    if compensated:
+        return k.comp_marginal_cdf, k.comp_conditional_cdf
+    return k.marginal_cdf, k.conditional_cdf
+
+
+@jit
+def _cell_pdf(k, joint_density, row, sin_theta):
+    """Solid-angle density from the unit-square density of a PDF cell (eqs. in the module docstring)."""
+    h = k.marginal_cdf.shape[0] - 1
     if k.mode == EXACT:
         return joint_density / (TWO_PI * h * (k.cos_edges[row] - k.cos_edges[row + 1]))
     if sin_theta <= 0.0:
@@ -117,24 +125,14 @@ def _texel_pdf(k, joint_density, row, sin_theta):
 
 
 @jit
-def env_sample(k, compensated, u0, u1):
-    """Sample a world direction: returns (x, y, z, pdf per steradian)."""
-    if compensated:
-        x, y, p, _, row = sample_2d(
-            k.comp_marginal_density,
-            k.comp_marginal_cdf,
-            k.comp_conditional_density,
-            k.comp_conditional_cdf,
-            u0,
-            u1,
-        )
-    else:
-        x, y, p, _, row = sample_2d(
-            k.marginal_density, k.marginal_cdf, k.conditional_density, k.conditional_cdf, u0, u1
-        )
-    h = k.marginal_density.shape[0]
+def env_sample_full(k, compensated, u0, u1):
+    """Sample a world direction: (x, y, z, pdf, u, y_cell, cos_theta), the last three being what
+    :func:`env_radiance_at_sample` needs to look the radiance up without converting the direction back."""
+    mc, cc = _cdfs(k, compensated)
+    x, y, p, _, row = sample_2d(mc, cc, u0, u1)
+    h = mc.shape[0] - 1
     if k.mode == EXACT:
-        # uniform in cos(theta) between the row's edges: uniform in solid angle inside the texel
+        # uniform in cos(theta) between the row's edges: uniform in solid angle inside the cell
         t = min(max(y * h - row, 0.0), 1.0)
         c0 = k.cos_edges[row]
         cos_theta = c0 - t * (c0 - k.cos_edges[row + 1])
@@ -144,7 +142,30 @@ def env_sample(k, compensated, u0, u1):
     phi = TWO_PI * x
     ex, ey, ez = math.sin(phi) * sin_theta, cos_theta, -math.cos(phi) * sin_theta
     wx, wy, wz = _mat_vec(k.to_world, ex, ey, ez)
-    return wx, wy, wz, _texel_pdf(k, p, row, sin_theta)
+    return wx, wy, wz, _cell_pdf(k, p, row, sin_theta), x, y, cos_theta
+
+
+@jit
+def env_sample(k, compensated, u0, u1):
+    """Sample a world direction: returns (x, y, z, pdf per steradian)."""
+    wx, wy, wz, pdf, _, _, _ = env_sample_full(k, compensated, u0, u1)
+    return wx, wy, wz, pdf
+
+
+@jit
+def env_radiance_at_sample(k, u, y, cos_theta):
+    """Radiance in the direction :func:`env_sample_full` returned with (u, y, cos_theta)."""
+    v = y if k.mode == PBRT else math.acos(min(1.0, max(-1.0, cos_theta))) / math.pi
+    return _lookup(k, u, v)
+
+
+@jit
+def _pdf_at(k, compensated, u, v, ey):
+    mc, cc = _cdfs(k, compensated)
+    h = mc.shape[0] - 1
+    row = min(int(v * h), h - 1)
+    p = pdf_2d(mc, cc, u, (row + 0.5) / h)
+    return _cell_pdf(k, p, row, math.sqrt(max(0.0, (1.0 - ey) * (1.0 + ey))))
 
 
 @jit
@@ -152,14 +173,15 @@ def env_pdf(k, compensated, x, y, z):
     """Density per steradian of sampling world direction (x, y, z)."""
     ex, ey, ez = _mat_vec(k.to_env, x, y, z)
     u, v = direction_to_latlong(ex, ey, ez)
-    h = k.marginal_density.shape[0]
-    row = min(int(v * h), h - 1)
-    if compensated:
-        p = pdf_2d(k.comp_marginal_density, k.comp_conditional_density, u, (row + 0.5) / h)
-    else:
-        p = pdf_2d(k.marginal_density, k.conditional_density, u, (row + 0.5) / h)
-    sin_theta = math.sqrt(max(0.0, (1.0 - ey) * (1.0 + ey)))
-    return _texel_pdf(k, p, row, sin_theta)
+    return _pdf_at(k, compensated, u, v, ey)
+
+
+@jit
+def env_eval_pdf(k, compensated, x, y, z):
+    """env_eval and env_pdf in one: ((r, g, b), pdf), converting the direction once."""
+    ex, ey, ez = _mat_vec(k.to_env, x, y, z)
+    u, v = direction_to_latlong(ex, ey, ez)
+    return _lookup(k, u, v), _pdf_at(k, compensated, u, v, ey)
 
 
 @jit
@@ -167,15 +189,14 @@ def env_to_square(k, compensated, x, y, z):
     """The (u0, u1) that ``env_sample`` maps to world direction (x, y, z)."""
     ex, ey, ez = _mat_vec(k.to_env, x, y, z)
     u, v = direction_to_latlong(ex, ey, ez)
-    h = k.marginal_density.shape[0]
+    mc, cc = _cdfs(k, compensated)
+    h = mc.shape[0] - 1
     if k.mode == EXACT:
         row = min(int(v * h), h - 1)
         c0 = k.cos_edges[row]
         t = min(max((c0 - ey) / (c0 - k.cos_edges[row + 1]), 0.0), 1.0 - 1e-12)
         v = (row + t) / h
-    if compensated:
-        return invert_2d(k.comp_marginal_cdf, k.comp_conditional_cdf, u, v)
-    return invert_2d(k.marginal_cdf, k.conditional_cdf, u, v)
+    return invert_2d(mc, cc, u, v)
 
 
 @jit_parallel

@@ -33,7 +33,7 @@ import numpy as np
 from .._numba import jit_parallel, prange
 from ..bsdfs.dispatch import bsdf_eval, bsdf_pdf, bsdf_sample
 from ..bsdfs.phong import PHONG
-from ..emitters.envmap import env_eval, env_pdf, env_sample
+from ..emitters.envmap import env_eval, env_eval_pdf, env_radiance_at_sample, env_sample_full
 from ..errors import ParameterError
 from ..geometry.camera import camera_ray
 from ..geometry.frame import coordinate_system, to_local, to_world
@@ -187,15 +187,16 @@ def _shade(
                 if pdf_b <= 0.0 or (w[0] == 0.0 and w[1] == 0.0 and w[2] == 0.0):
                     continue
                 wx, wy, wz = to_world(ts, tt, ns, wi[0], wi[1], wi[2])
-                scale = inv_m
                 if strategy == MIS:
-                    pe = env_pdf(env, compensated, wx, wy, wz)
+                    (lr, lg, lb), pe = env_eval_pdf(env, compensated, wx, wy, wz)
                     scale = mis_weight(n_bsdf, pdf_b, n_env, pe, beta) / n_bsdf
-                lr, lg, lb = env_eval(env, wx, wy, wz)
+                else:
+                    lr, lg, lb = env_eval(env, wx, wy, wz)
+                    scale = inv_m
                 cr, cg, cb = w[0] * lr * scale, w[1] * lg * scale, w[2] * lb * scale
             else:
                 if technique == ENV:
-                    wx, wy, wz, pdf = env_sample(env, compensated, u0, u1)
+                    wx, wy, wz, pdf, su, sy, sc = env_sample_full(env, compensated, u0, u1)
                     wi = to_local(ts, tt, ns, wx, wy, wz)
                 else:
                     if technique == UNIFORM:
@@ -214,7 +215,10 @@ def _shade(
                 if strategy == MIS:
                     pb = bsdf_pdf(mk, mp, wo, wi)
                     scale = wi[2] / pdf * mis_weight(n_env, pdf, n_bsdf, pb, beta) / n_env
-                lr, lg, lb = env_eval(env, wx, wy, wz)
+                if technique == ENV:
+                    lr, lg, lb = env_radiance_at_sample(env, su, sy, sc)
+                else:
+                    lr, lg, lb = env_eval(env, wx, wy, wz)
                 cr, cg, cb = f[0] * lr * scale, f[1] * lg * scale, f[2] * lb * scale
             if cr == 0.0 and cg == 0.0 and cb == 0.0:
                 continue

@@ -3,7 +3,8 @@
 A 1D distribution over [0, 1) is given by ``n`` non-negative bin values.  Sampling picks a bin with probability
 proportional to its value (inverting the CDF by bisection) and then places the sample *continuously* inside the bin,
 using the remainder of ``u`` as the offset.  That makes the map from ``u`` to ``x`` monotonic and invertible, so
-stratified and quasi-random ``u`` stay stratified, and the density is exactly the normalised bin value.
+stratified and quasi-random ``u`` stay stratified, and the density is exactly the normalised bin value.  Only the
+CDFs are stored: a bin's density is n (cdf[i+1] - cdf[i]), the probability the sampler actually gives it.
 
 The 2D distribution over [0, 1)^2 is a marginal over rows (``y``) and one conditional per row (``x``), the seed's
 construction: ``p(x, y) = p_rows(y) * p(x | row)``.
@@ -31,8 +32,8 @@ __all__ = ["PiecewiseConstant1D", "PiecewiseConstant2D"]
 ONE_MINUS_EPSILON = 1.0 - 2.0**-53
 
 
-def _density_and_cdf(func: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
-    """Normalised densities and CDFs along the last axis; all-zero rows become uniform."""
+def _normalized_cdf(func: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """CDFs along the last axis (all-zero rows become uniform) and the integrals (means) of the rows."""
     n = func.shape[-1]
     integral = func.mean(axis=-1)
     zero = integral <= 0.0
@@ -41,7 +42,7 @@ def _density_and_cdf(func: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     cdf = np.zeros((*func.shape[:-1], n + 1))
     cdf[..., 1:] = np.cumsum(density, axis=-1) / n
     cdf[..., -1] = 1.0  # exact, so that u < 1 never selects a trailing empty bin
-    return density, cdf, integral
+    return cdf, integral
 
 
 def _check_function(func, ndim: int, name: str) -> np.ndarray:
@@ -56,6 +57,8 @@ def _check_function(func, ndim: int, name: str) -> np.ndarray:
 
 
 # --- scalar kernels (used by the environment map) ---------------------------------------------------------------
+# The density of bin i is n (cdf[i+1] - cdf[i]): exactly the probability the sampler gives the bin, and no second
+# array to read (the search has already loaded cdf[i] and cdf[i+1]).
 @jit
 def find_interval(cdf, u):
     """Largest i in [0, len(cdf) - 2] with cdf[i] <= u (bisection)."""
@@ -71,9 +74,9 @@ def find_interval(cdf, u):
 
 
 @jit
-def sample_1d(density, cdf, u):
+def sample_1d(cdf, u):
     """Sample x in [0, 1) from a row: returns (x, density at x, bin index)."""
-    n = density.shape[0]
+    n = cdf.shape[0] - 1
     u = min(max(u, 0.0), ONE_MINUS_EPSILON)
     i = find_interval(cdf, u)
     width = cdf[i + 1] - cdf[i]
@@ -81,15 +84,16 @@ def sample_1d(density, cdf, u):
     x = (i + offset) / n
     if x >= 1.0:  # rounding at the top of the last bin
         x = ONE_MINUS_EPSILON
-    return x, density[i], i
+    return x, width * n, i
 
 
 @jit
-def pdf_1d(density, x):
-    n = density.shape[0]
+def pdf_1d(cdf, x):
+    n = cdf.shape[0] - 1
     if not (x >= 0.0 and x <= 1.0):  # also rejects NaN
         return 0.0
-    return density[min(int(x * n), n - 1)]
+    i = min(int(x * n), n - 1)
+    return (cdf[i + 1] - cdf[i]) * n
 
 
 @jit
@@ -101,23 +105,23 @@ def invert_1d(cdf, x):
 
 
 @jit
-def sample_2d(marginal_density, marginal_cdf, conditional_density, conditional_cdf, u0, u1):
+def sample_2d(marginal_cdf, conditional_cdf, u0, u1):
     """Sample (x, y) in [0, 1)^2: the row from the marginal with u1, the column from that row with u0.
 
     Returns (x, y, joint density, column index, row index).
     """
-    y, p_row, row = sample_1d(marginal_density, marginal_cdf, u1)
-    x, p_col, col = sample_1d(conditional_density[row], conditional_cdf[row], u0)
+    y, p_row, row = sample_1d(marginal_cdf, u1)
+    x, p_col, col = sample_1d(conditional_cdf[row], u0)
     return x, y, p_row * p_col, col, row
 
 
 @jit
-def pdf_2d(marginal_density, conditional_density, x, y):
-    ny = marginal_density.shape[0]
+def pdf_2d(marginal_cdf, conditional_cdf, x, y):
+    ny = marginal_cdf.shape[0] - 1
     if not (y >= 0.0 and y <= 1.0):
         return 0.0
     row = min(int(y * ny), ny - 1)
-    return marginal_density[row] * pdf_1d(conditional_density[row], x)
+    return (marginal_cdf[row + 1] - marginal_cdf[row]) * ny * pdf_1d(conditional_cdf[row], x)
 
 
 @jit
@@ -129,20 +133,20 @@ def invert_2d(marginal_cdf, conditional_cdf, x, y):
 
 # --- batch kernels ----------------------------------------------------------------------------------------------
 @jit_parallel
-def _sample_1d_batch(density, cdf, u):
+def _sample_1d_batch(cdf, u):
     x = np.empty(u.shape[0])
     pdf = np.empty(u.shape[0])
     index = np.empty(u.shape[0], dtype=np.int64)
     for i in prange(u.shape[0]):
-        x[i], pdf[i], index[i] = sample_1d(density, cdf, u[i])
+        x[i], pdf[i], index[i] = sample_1d(cdf, u[i])
     return x, pdf, index
 
 
 @jit_parallel
-def _pdf_1d_batch(density, x):
+def _pdf_1d_batch(cdf, x):
     out = np.empty(x.shape[0])
     for i in prange(x.shape[0]):
-        out[i] = pdf_1d(density, x[i])
+        out[i] = pdf_1d(cdf, x[i])
     return out
 
 
@@ -155,11 +159,11 @@ def _invert_1d_batch(cdf, x):
 
 
 @jit_parallel
-def _sample_2d_batch(md, mc, cd, cc, u):
+def _sample_2d_batch(mc, cc, u):
     pts = np.empty((u.shape[0], 2))
     pdf = np.empty(u.shape[0])
     for i in prange(u.shape[0]):
-        x, y, p, _, _ = sample_2d(md, mc, cd, cc, u[i, 0], u[i, 1])
+        x, y, p, _, _ = sample_2d(mc, cc, u[i, 0], u[i, 1])
         pts[i, 0] = x
         pts[i, 1] = y
         pdf[i] = p
@@ -167,10 +171,10 @@ def _sample_2d_batch(md, mc, cd, cc, u):
 
 
 @jit_parallel
-def _pdf_2d_batch(md, cd, pts):
+def _pdf_2d_batch(mc, cc, pts):
     out = np.empty(pts.shape[0])
     for i in prange(pts.shape[0]):
-        out[i] = pdf_2d(md, cd, pts[i, 0], pts[i, 1])
+        out[i] = pdf_2d(mc, cc, pts[i, 0], pts[i, 1])
     return out
 
 
@@ -216,22 +220,27 @@ class PiecewiseConstant1D:
             raise ValueError(f"domain must be a finite interval (lo, hi) with hi > lo, got {domain}")
         self.func = values
         self.domain = (lo, hi)
-        self.density, self.cdf, mean = _density_and_cdf(values)
+        self.cdf, mean = _normalized_cdf(values)
         self.integral = float(mean) * (hi - lo)
 
     @property
     def size(self) -> int:
         return self.func.shape[0]
 
+    @property
+    def density(self) -> np.ndarray:
+        """Density of each bin over [0, 1): n (cdf[i+1] - cdf[i])."""
+        return np.diff(self.cdf) * self.size
+
     def sample(self, u):
         """Map ``u`` (N,) in [0, 1) to ``(x, pdf, bin_index)``; ``pdf`` is the density at ``x`` over ``domain``."""
         lo, hi = self.domain
-        x, pdf, index = _sample_1d_batch(self.density, self.cdf, _column(u))
+        x, pdf, index = _sample_1d_batch(self.cdf, _column(u))
         return lo + (hi - lo) * x, pdf / (hi - lo), index
 
     def pdf(self, x):
         lo, hi = self.domain
-        return _pdf_1d_batch(self.density, (_column(x) - lo) / (hi - lo)) / (hi - lo)
+        return _pdf_1d_batch(self.cdf, (_column(x) - lo) / (hi - lo)) / (hi - lo)
 
     def invert(self, x):
         """The ``u`` that ``sample`` maps to ``x`` (the CDF at ``x``)."""
@@ -254,24 +263,32 @@ class PiecewiseConstant2D:
     def __init__(self, func):
         values = _check_function(func, 2, "func")
         self.func = values
-        self.conditional_density, self.conditional_cdf, row_means = _density_and_cdf(values)
-        self.marginal_density, self.marginal_cdf, total = _density_and_cdf(row_means)
+        self.conditional_cdf, row_means = _normalized_cdf(values)
+        self.marginal_cdf, total = _normalized_cdf(row_means)
         self.integral = float(total)
 
     @property
     def shape(self) -> tuple[int, int]:
         return self.func.shape
 
+    @property
+    def marginal_density(self) -> np.ndarray:
+        return np.diff(self.marginal_cdf) * (self.marginal_cdf.shape[0] - 1)
+
+    @property
+    def conditional_density(self) -> np.ndarray:
+        return np.diff(self.conditional_cdf, axis=1) * (self.conditional_cdf.shape[1] - 1)
+
     def kernel_arrays(self):
-        """(marginal_density, marginal_cdf, conditional_density, conditional_cdf) for the Numba kernels."""
-        return self.marginal_density, self.marginal_cdf, self.conditional_density, self.conditional_cdf
+        """(marginal_cdf, conditional_cdf) for the Numba kernels."""
+        return self.marginal_cdf, self.conditional_cdf
 
     def sample(self, u):
         """Map ``u`` (N, 2) to ``(points (N, 2), pdf (N,))``."""
         return _sample_2d_batch(*self.kernel_arrays(), _pairs(u, "u"))
 
     def pdf(self, points):
-        return _pdf_2d_batch(self.marginal_density, self.conditional_density, _pairs(points, "points"))
+        return _pdf_2d_batch(self.marginal_cdf, self.conditional_cdf, _pairs(points, "points"))
 
     def invert(self, points):
         return _invert_2d_batch(self.marginal_cdf, self.conditional_cdf, _pairs(points, "points"))
