@@ -152,8 +152,7 @@ def test_conductor_fresnel_matches_the_complex_formula():
             cos_t = np.sqrt(1 - (1 - c * c) / (n * n))
             r_parl = (n * c - cos_t) / (n * c + cos_t)
             r_perp = (c - n * cos_t) / (c + n * cos_t)
-            assert fresnel_conductor(c, eta, k) == pytest.approx(0.5 * (abs(r_parl) ** 2 + abs(r_perp) ** 2),
-                                                                 abs=1e-12)
+            assert fresnel_conductor(c, eta, k) == pytest.approx(0.5 * (abs(r_parl) ** 2 + abs(r_perp) ** 2), abs=1e-12)
     # a dielectric is a conductor with k = 0
     assert fresnel_conductor(0.7, 1.5, 0.0) == pytest.approx(fresnel_dielectric(0.7, 1.5), abs=1e-12)
 

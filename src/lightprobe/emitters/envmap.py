@@ -155,8 +155,7 @@ def env_sample(k, compensated, u0, u1):
 @jit
 def env_radiance_at_sample(k, u, y, cos_theta):
     """Radiance in the direction :func:`env_sample_full` returned with (u, y, cos_theta)."""
-    v = y if k.mode == PBRT else math.acos(min(1.0, max(-1.0, cos_theta))) / math.pi
-    return _lookup(k, u, v)
+    return _lookup(k, u, env_sample_coords(k, y, cos_theta))
 
 
 @jit
@@ -174,6 +173,33 @@ def env_pdf(k, compensated, x, y, z):
     ex, ey, ez = _mat_vec(k.to_env, x, y, z)
     u, v = direction_to_latlong(ex, ey, ez)
     return _pdf_at(k, compensated, u, v, ey)
+
+
+@jit
+def env_coords(k, x, y, z):
+    """(u, v, cos theta in the env frame) of a world direction: what :func:`env_lookup` and
+    :func:`env_pdf_at` take."""
+    ex, ey, ez = _mat_vec(k.to_env, x, y, z)
+    u, v = direction_to_latlong(ex, ey, ez)
+    return u, v, ey
+
+
+@jit
+def env_lookup(k, u, v):
+    """Radiance at lat-long coordinates (u, v)."""
+    return _lookup(k, u, v)
+
+
+@jit
+def env_pdf_at(k, compensated, u, v, cos_theta):
+    """Density per steradian at lat-long coordinates (u, v) (with the direction's cos theta)."""
+    return _pdf_at(k, compensated, u, v, cos_theta)
+
+
+@jit
+def env_sample_coords(k, y, cos_theta):
+    """Lat-long v of a sample from :func:`env_sample_full` (y and cos theta as it returned them)."""
+    return y if k.mode == PBRT else math.acos(min(1.0, max(-1.0, cos_theta))) / math.pi
 
 
 @jit
