@@ -3,16 +3,20 @@
 The public API (see the README and each module's docstring):
 
 * lights: :class:`EnvironmentMap` (``load``, ``from_array``, ``eval``, ``sample``, ``pdf``);
-* materials: :class:`Lambert`, :class:`Phong`, :class:`GGXConductor` (``eval``, ``sample``, ``pdf``);
+* materials: :class:`Lambert`, :class:`Phong`, :class:`GGXConductor`, :class:`RoughPlastic` (``eval``,
+  ``sample``, ``pdf``);
 * estimators at one shading point: :func:`estimate`;
+* scenes and rendering: :class:`Scene`, :class:`Camera`, :class:`TriangleMesh`, :class:`Sphere`,
+  :class:`Rectangle`, :func:`render` with :class:`RenderSettings`;
 * sampling building blocks: :mod:`lightprobe.sampling` (warps, distributions, MIS heuristics);
 * verification: :mod:`lightprobe.analysis.chi2`.
 """
 
-from .bsdfs import BSDF, GGXConductor, Lambert, Phong
+from .bsdfs import BSDF, GGXConductor, Lambert, Phong, RoughPlastic
 from .emitters.envmap import EnvironmentMap
 from .errors import ImageError, LightprobeError, LightprobeWarning, ParameterError, SceneError
-from .integrators.shading_point import Estimate, estimate
+from .geometry import Camera, Rectangle, Scene, Sphere, TriangleMesh
+from .integrators import Estimate, RenderResult, RenderSettings, estimate, render
 
 __version__ = "0.1.0"
 
@@ -27,7 +31,15 @@ __all__ = [
     "LightprobeWarning",
     "ParameterError",
     "Phong",
+    "Rectangle",
+    "RenderResult",
+    "RenderSettings",
+    "RoughPlastic",
+    "Scene",
     "SceneError",
+    "Sphere",
+    "TriangleMesh",
     "__version__",
     "estimate",
+    "render",
 ]

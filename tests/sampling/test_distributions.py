@@ -86,8 +86,8 @@ def test_2d_chi2_and_pdf(name):
     cell = np.outer(np.diff(ey), np.diff(ex))
     density = dist.pdf(np.stack([gx.ravel(), gy.ravel()], axis=1)).reshape(gx.shape)
     assert np.sum(density * cell) == pytest.approx(1.0, abs=1e-12)
-    # the density is exactly func / integral
-    np.testing.assert_allclose(density[::4, ::4], func / func.mean(), rtol=1e-12)
+    # the density is func / integral, up to the rounding of CDF differences: |error| <= a few n eps absolute
+    np.testing.assert_allclose(density[::4, ::4], func / func.mean(), rtol=1e-9, atol=8 * nx * ny * 2.3e-16)
     result = goodness_of_fit(counts, N * density * cell, test_count=len(FUNCS_2D))
     assert result.passed, str(result)
 

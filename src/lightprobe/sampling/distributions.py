@@ -37,11 +37,12 @@ def _normalized_cdf(func: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     n = func.shape[-1]
     integral = func.mean(axis=-1)
     zero = integral <= 0.0
-    safe = np.where(zero, 1.0, integral)
-    density = np.where(zero[..., None], 1.0, func / safe[..., None])
+    values = np.where(zero[..., None], 1.0, func)
+    sums = np.cumsum(values, axis=-1)
     cdf = np.zeros((*func.shape[:-1], n + 1))
-    cdf[..., 1:] = np.cumsum(density, axis=-1) / n
-    cdf[..., -1] = 1.0  # exact, so that u < 1 never selects a trailing empty bin
+    # dividing the running sums by their own total keeps the CDF non-decreasing, <= 1, and exactly 1 at the end
+    # (so u < 1 never selects a trailing empty bin and no bin gets a negative width)
+    cdf[..., 1:] = sums / sums[..., -1:]
     return cdf, integral
 
 
