@@ -75,6 +75,7 @@ def run_one(args) -> dict:
     tracer = RayTracer(scene.compile(), threads=args.threads or os.cpu_count() or 1)
     result = render(scene, settings, tracer=tracer)
     stats = result.stats
+    peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # before the recording below
     # record one pass worth of Embree batches and re-trace them bare
     tracer.record = []
     render(scene, RenderSettings(spp=min(2, args.spp), strategy=args.strategy, seed=args.seed + 1), tracer=tracer)
@@ -97,7 +98,7 @@ def run_one(args) -> dict:
         "bare_embree_rays_per_s": round(bare),
         "ray_tracing_share": round(stats["embree_seconds"] / max(stats["seconds"], 1e-12), 4),
         "setup_seconds": round(stats["setup_seconds"], 3),
-        "peak_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1),
+        "peak_mb": round(peak_mb, 1),
         "cores": os.cpu_count(),
         "threads": stats["threads"],
     }

@@ -34,9 +34,9 @@ def blob_mesh(subdivisions: int = 5) -> TriangleMesh:
 
 def demo_scene(resolution: tuple[int, int] = (640, 400)) -> Scene:
     env = EnvironmentMap.from_array(sky_with_sun(1024, 512), source="procedural sky with sun")
-    camera = Camera([0.0, 2.4, 6.6], [0.0, 0.6, 0.0], fov=32.0, resolution=resolution)
+    camera = Camera([0.0, 1.7, 6.8], [0.0, 0.85, 0.0], fov=32.0, resolution=resolution)
     scene = Scene(camera, env, name="demo")
-    scene.add(Rectangle.ground(size=100.0), Lambert(0.5), name="ground")
+    scene.add(Rectangle.ground(size=1000.0), Lambert(0.5), name="ground")
     scene.add(
         blob_mesh(),
         RoughPlastic([0.6, 0.15, 0.1], 0.3),
