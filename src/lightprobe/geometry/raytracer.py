@@ -156,20 +156,34 @@ class RayTracer:
         prim = np.full(n, -1, dtype=np.int64)
         b1 = np.zeros(n)
         b2 = np.zeros(n)
-        sel = np.nonzero(needs)[0]
-        if sel.size and self._scene is not None:
-            tfar = np.where(np.isfinite(t[sel]), t[sel], np.float32(3e38)).astype(np.float32)
-            mt, geom, face, u, v = self.embree_intersect(o[sel].astype(np.float32), d[sel].astype(np.float32), tfar)
-            hit = geom != -1
-            rows = sel[hit]
-            t[rows] = mt[hit]
-            kind[rows] = MESH
-            index[rows] = geom[hit]
-            prim[rows] = face[hit]
-            b1[rows] = u[hit]
-            b2[rows] = v[hit]
+        self.add_mesh_hits(o, d, needs, t, kind, index, prim, b1, b2)
         kind[~np.isfinite(t)] = MISS
         return t, kind, index, prim, b1, b2
+
+    def add_mesh_hits(self, origins, dirs, needs, t, kind, index, prim, b1, b2) -> None:
+        """Trace the rays flagged in ``needs`` against the meshes, closer than their current ``t`` (the nearest
+        analytic hit), and write the mesh hits found into the hit arrays in place.
+
+        ``origins`` is (N, 3), or one (3,) origin shared by every ray (a pinhole camera).
+        """
+        sel = np.nonzero(needs)[0]
+        if sel.size == 0 or self._scene is None:
+            return
+        tfar = np.where(np.isfinite(t[sel]), t[sel], 3e38).astype(np.float32)
+        o = np.asarray(origins)
+        if o.ndim == 1:
+            o32 = np.ascontiguousarray(np.broadcast_to(o.astype(np.float32), (sel.size, 3)))
+        else:
+            o32 = o[sel].astype(np.float32)
+        mt, geom, face, u, v = self.embree_intersect(o32, dirs[sel].astype(np.float32), tfar)
+        hit = geom != -1
+        rows = sel[hit]
+        t[rows] = mt[hit]
+        kind[rows] = MESH
+        index[rows] = geom[hit]
+        prim[rows] = face[hit]
+        b1[rows] = u[hit]
+        b2[rows] = v[hit]
 
     def occluded(self, origins, dirs, tmax=None) -> np.ndarray:
         """Boolean (N,): is anything hit on the segment (0, tmax) (default: to infinity)?"""

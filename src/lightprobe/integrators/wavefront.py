@@ -37,7 +37,7 @@ from ..emitters.envmap import env_coords, env_eval, env_lookup, env_pdf_at, env_
 from ..errors import ParameterError
 from ..geometry.camera import camera_ray
 from ..geometry.frame import coordinate_system, to_local, to_world
-from ..geometry.intersect import MESH, MISS, closest_analytic, may_hit_mesh, occluded_analytic, ray_offset, surface
+from ..geometry.intersect import MISS, closest_analytic, may_hit_mesh, occluded_analytic, ray_offset, surface
 from ..geometry.raytracer import RayTracer
 from ..geometry.scene import Scene
 from ..sampling.kernels import (
@@ -485,19 +485,7 @@ def render(
         prim = np.zeros(n, np.int64)
         b1 = np.zeros(n)
         b2 = np.zeros(n)
-        sel = np.nonzero(needs)[0]
-        if sel.size and arrays.mesh_faces.shape[0]:
-            tfar = np.where(np.isfinite(t[sel]), t[sel], 3e38).astype(np.float32)
-            origin = np.ascontiguousarray(np.broadcast_to(cam[:3].astype(np.float32), (sel.size, 3)))
-            mt, geom, face, u, v = tracer.embree_intersect(origin, dirs[sel].astype(np.float32), tfar)
-            hit = geom != -1
-            rows = sel[hit]
-            t[rows] = mt[hit]
-            kind[rows] = MESH
-            index[rows] = geom[hit]
-            prim[rows] = face[hit]
-            b1[rows] = u[hit]
-            b2[rows] = v[hit]
+        tracer.add_mesh_hits(cam[:3], dirs, needs, t, kind, index, prim, b1, b2)
         strategy, n_bsdf, n_env, beta, compensated = args
         _shade_setup(
             arrays,
