@@ -11,17 +11,10 @@ from lightprobe.emitters.procedural import constant, sky_with_sun
 from lightprobe.errors import ParameterError
 from lightprobe.integrators.shading_point import estimate
 
-ALL = [
-    ("uniform", "balance"),
-    ("cosine", "balance"),
-    ("brdf", "balance"),
-    ("env", "balance"),
-    ("mis", "balance"),
-    ("mis", "power"),
-]
+from . import STRATEGY_CASES
 
 
-@pytest.mark.parametrize(("strategy", "heuristic"), ALL)
+@pytest.mark.parametrize(("strategy", "heuristic"), STRATEGY_CASES)
 def test_white_furnace(strategy, heuristic):
     """Constant environment L on a Lambertian albedo rho reflects rho L, whatever the strategy."""
     radiance, albedo = 1.5, 0.6  # both exact in float32 (maps are stored as float32)
@@ -63,7 +56,7 @@ def test_every_strategy_converges_to_the_same_value(material):
     bsdf = MATERIALS[material]
     wo = (0.4, 0.6, 0.69)
     ref = estimate(env, bsdf, strategy="mis", heuristic="power", n=2_000_000, wo=wo, seed=99)
-    for strategy, heuristic in ALL:
+    for strategy, heuristic in STRATEGY_CASES:
         for compensated in (False, True) if strategy == "mis" else (False,):
             est = estimate(
                 env,

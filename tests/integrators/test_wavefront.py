@@ -19,17 +19,10 @@ from lightprobe.geometry.shapes import Rectangle, Sphere
 from lightprobe.integrators.wavefront import RenderSettings, render
 from lightprobe.peer import find_peers, peer_scene
 
-STRATEGIES = [
-    ("uniform", "balance"),
-    ("cosine", "balance"),
-    ("brdf", "balance"),
-    ("env", "balance"),
-    ("mis", "balance"),
-    ("mis", "power"),
-]
+from . import STRATEGY_CASES
 
 
-@pytest.mark.parametrize(("strategy", "heuristic"), STRATEGIES)
+@pytest.mark.parametrize(("strategy", "heuristic"), STRATEGY_CASES)
 def test_white_furnace(strategy, heuristic):
     """A Lambertian sphere alone under constant radiance L: every pixel on it is rho L, every other pixel L."""
     radiance, albedo = 1.5, 0.6
@@ -64,7 +57,7 @@ def reference():
     return render(small_scene(), RenderSettings(spp=4096, strategy="mis", seed=12345))
 
 
-@pytest.mark.parametrize(("strategy", "heuristic"), [*STRATEGIES, ("mis-compensated", "power")])
+@pytest.mark.parametrize(("strategy", "heuristic"), [*STRATEGY_CASES, ("mis-compensated", "power")])
 def test_every_strategy_converges_to_the_reference(reference, strategy, heuristic):
     compensated = strategy == "mis-compensated"
     # Techniques that find the sun only by chance (hemisphere and BSDF sampling) have heavy-tailed estimates: at

@@ -389,6 +389,48 @@ def _check_material_strategy(scene: Scene, settings: RenderSettings) -> None:
                 raise ParameterError(f"material {name!r}: MIS needs Phong's mixture estimator (seed eq. 19)")
 
 
+def _pass_buffers(n: int, m: int) -> dict[str, np.ndarray]:
+    """Arrays of one pass: ``n`` camera samples, ``m`` shading slots each, keyed by kernel parameter name."""
+    nm = n * m
+    return {
+        # camera samples
+        "dirs": np.empty((n, 3)),  # camera ray directions
+        "t": np.empty(n),  # hit distance (inf: miss)
+        "kind": np.empty(n, np.int64),  # MISS / MESH / SPHERE / RECT
+        "index": np.empty(n, np.int64),  # which mesh, sphere or rectangle
+        "needs_mesh": np.empty(n, np.bool_),  # the ray may reach a mesh before t
+        "prim": np.empty(n, np.int64),  # mesh face
+        "b1": np.empty(n),  # barycentrics of a mesh hit
+        "b2": np.empty(n),
+        "direct": np.empty((n, 3)),  # radiance seen directly (the environment, for misses)
+        "point": np.empty((n, 3)),  # hit point
+        "gnormal": np.empty((n, 3)),  # geometric normal
+        "frame": np.empty((n, 9)),  # shading frame s, t, n
+        "wo_local": np.empty((n, 3)),  # direction to the viewer, local
+        "material": np.empty(n, np.int64),  # -1: nothing to shade
+        # shading slots, r = k m + j
+        "state": np.empty(nm, np.int8),  # SLOT_*: which technique made the direction
+        "wdir": np.empty((nm, 3)),  # direction, world
+        "wloc": np.empty((nm, 3)),  # direction, local
+        "tpdf": np.empty(nm),  # density of the technique that made it
+        "bweight": np.empty((nm, 3)),  # BSDF sample weight
+        "env_u": np.empty((nm, 2)),  # random numbers of environment samples
+        "uv": np.empty((nm, 2)),  # lat-long coordinates of environment samples
+        "radiance": np.empty((nm, 3)),  # environment radiance along the direction
+        "epdf": np.empty(nm),  # environment density of BSDF samples (MIS)
+        "contrib": np.empty((nm, 3)),  # unoccluded contribution
+        "flags": np.empty(nm, np.int8),  # NONE / VISIBLE / TEST_MESH / BLOCKED
+        "shadow_o": np.empty((nm, 3), np.float32),  # shadow rays left for Embree
+        "shadow_d": np.empty((nm, 3), np.float32),
+    }
+
+
+def _launch(kernel, values: dict) -> None:
+    """Call a kernel with its arguments taken by parameter name from ``values``."""
+    code = kernel.py_func.__code__
+    kernel(*[values[name] for name in code.co_varnames[: code.co_argcount]])
+
+
 def render(
     scene: Scene,
     settings: RenderSettings | None = None,
@@ -418,13 +460,6 @@ def render(
     band = max(1, min(n_pixels, settings.pass_samples // spp_pass))
     acc = _Accumulator(n_pixels)
     env = scene.environment.kernel
-    args = (
-        STRATEGIES[settings.strategy],
-        settings.n_bsdf,
-        settings.n_env,
-        HEURISTICS[settings.heuristic],
-        bool(settings.mis_compensation),
-    )
     stats = {
         "width": width,
         "height": height,
@@ -445,109 +480,44 @@ def render(
         "stopped_by_time_limit": False,
         "triangles": scene.triangle_count,
     }
-    buffers: dict[int, tuple] = {}
+    buffers: dict[int, dict[str, np.ndarray]] = {}
+    strategy = STRATEGIES[settings.strategy]
+    constants = {
+        "s": arrays,
+        "env": env,
+        "cam": cam,
+        "seed": settings.seed,
+        "strategy": strategy,
+        "n_bsdf": settings.n_bsdf,
+        "n_env": settings.n_env,
+        "m": m,
+        "beta": HEURISTICS[settings.heuristic],
+        "compensated": bool(settings.mis_compensation),
+        "mis": strategy == MIS,
+    }
 
     def run_pass(acc: _Accumulator, pixel_start: int, count: int, spp_now: int, sample_start: int) -> int:
         """One pass over ``count`` pixels x ``spp_now`` samples; returns the number of shadow rays traced."""
         n = count * spp_now
         if n not in buffers:
-            nm = n * m
-            buffers[n] = {
-                "dirs": np.empty((n, 3)),
-                "t": np.empty(n),
-                "kind": np.empty(n, np.int64),
-                "index": np.empty(n, np.int64),
-                "needs": np.empty(n, np.bool_),
-                "direct": np.empty((n, 3)),
-                "point": np.empty((n, 3)),
-                "gnormal": np.empty((n, 3)),
-                "frame": np.empty((n, 9)),
-                "wo": np.empty((n, 3)),
-                "material": np.empty(n, np.int64),
-                "state": np.empty(nm, np.int8),
-                "wdir": np.empty((nm, 3)),
-                "wloc": np.empty((nm, 3)),
-                "tpdf": np.empty(nm),
-                "bweight": np.empty((nm, 3)),
-                "env_u": np.empty((nm, 2)),
-                "uv": np.empty((nm, 2)),
-                "radiance": np.empty((nm, 3)),
-                "epdf": np.empty(nm),
-                "contrib": np.empty((nm, 3)),
-                "flags": np.empty(nm, np.int8),
-                "so": np.empty((nm, 3), np.float32),
-                "sd": np.empty((nm, 3), np.float32),
-            }
+            buffers[n] = _pass_buffers(n, m)
         b = buffers[n]
-        dirs, t, kind, index, needs = b["dirs"], b["t"], b["kind"], b["index"], b["needs"]
-        flags, so, sd = b["flags"], b["so"], b["sd"]
-        _camera_pass(arrays, cam, settings.seed, pixel_start, spp_now, sample_start, dirs, t, kind, index, needs)
-        prim = np.zeros(n, np.int64)
-        b1 = np.zeros(n)
-        b2 = np.zeros(n)
-        tracer.add_mesh_hits(cam[:3], dirs, needs, t, kind, index, prim, b1, b2)
-        strategy, n_bsdf, n_env, beta, compensated = args
-        _shade_setup(
-            arrays,
-            env,
-            cam,
-            settings.seed,
-            pixel_start,
-            spp_now,
-            sample_start,
-            dirs,
-            t,
-            kind,
-            index,
-            prim,
-            b1,
-            b2,
-            strategy,
-            n_bsdf,
-            n_env,
-            b["direct"],
-            b["point"],
-            b["gnormal"],
-            b["frame"],
-            b["wo"],
-            b["material"],
-            b["state"],
-            b["wdir"],
-            b["wloc"],
-            b["tpdf"],
-            b["bweight"],
-            b["env_u"],
+        values = {**constants, **b, "pixel_start": pixel_start, "spp_pass": spp_now, "sample_start": sample_start}
+        _launch(_camera_pass, values)
+        b["prim"].fill(0)
+        b["b1"].fill(0.0)
+        b["b2"].fill(0.0)
+        tracer.add_mesh_hits(
+            cam[:3], b["dirs"], b["needs_mesh"], b["t"], b["kind"], b["index"], b["prim"], b["b1"], b["b2"]
         )
-        _env_sample_stage(env, compensated, m, b["frame"], b["state"], b["env_u"], b["wdir"], b["tpdf"], b["uv"])
-        _env_lookup_stage(env, compensated, strategy == MIS, b["state"], b["wdir"], b["uv"], b["radiance"], b["epdf"])
-        _shade_finish(
-            arrays,
-            strategy,
-            n_bsdf,
-            n_env,
-            beta,
-            b["point"],
-            b["gnormal"],
-            b["frame"],
-            b["wo"],
-            b["material"],
-            b["state"],
-            b["wdir"],
-            b["wloc"],
-            b["tpdf"],
-            b["bweight"],
-            b["radiance"],
-            b["epdf"],
-            b["contrib"],
-            flags,
-            so,
-            sd,
-        )
+        for kernel in (_shade_setup, _env_sample_stage, _env_lookup_stage, _shade_finish):
+            _launch(kernel, values)
+        flags = b["flags"]
         direct, contrib = b["direct"], b["contrib"]
         shadow_rays = int(np.count_nonzero(flags))
         test = np.nonzero(flags == TEST_MESH)[0]
         if test.size:
-            blocked = tracer.embree_occluded(so[test], sd[test])
+            blocked = tracer.embree_occluded(b["shadow_o"][test], b["shadow_d"][test])
             flags[test] = np.where(blocked, BLOCKED, VISIBLE).astype(np.int8)
         _accumulate(direct, contrib, flags, m, spp_now, pixel_start, acc.mean, acc.m2, acc.count, acc.nonfinite)
         return shadow_rays
