@@ -112,7 +112,7 @@ class RenderResult:
 
 # --- kernels ------------------------------------------------------------------------------------------------------
 @jit_parallel
-def _camera_pass(s, cam, seed, pixel_start, spp_pass, sample_start, dirs, t, kind, index, needs_mesh):
+def _camera_pass(s, cam, seed, pixel_start, spp_pass, sample_start, dirs, t, kind, index, needs_mesh, prim, b1, b2):
     ox, oy, oz = cam[0], cam[1], cam[2]
     for k in prange(dirs.shape[0]):
         pixel = pixel_start + k // spp_pass
@@ -121,6 +121,9 @@ def _camera_pass(s, cam, seed, pixel_start, spp_pass, sample_start, dirs, t, kin
         dirs[k, 0], dirs[k, 1], dirs[k, 2] = dx, dy, dz
         t[k], kind[k], index[k] = closest_analytic(s, ox, oy, oz, dx, dy, dz, np.inf)
         needs_mesh[k] = may_hit_mesh(s, ox, oy, oz, dx, dy, dz, t[k])
+        prim[k] = 0  # mesh hits are filled in by the ray tracer
+        b1[k] = 0.0
+        b2[k] = 0.0
 
 
 # Shading runs as four kernels rather than one: the environment lookups are cache misses (the map and its CDFs
@@ -504,9 +507,6 @@ def render(
         b = buffers[n]
         values = {**constants, **b, "pixel_start": pixel_start, "spp_pass": spp_now, "sample_start": sample_start}
         _launch(_camera_pass, values)
-        b["prim"].fill(0)
-        b["b1"].fill(0.0)
-        b["b2"].fill(0.0)
         tracer.add_mesh_hits(
             cam[:3], b["dirs"], b["needs_mesh"], b["t"], b["kind"], b["index"], b["prim"], b["b1"], b["b2"]
         )
