@@ -56,7 +56,7 @@ def render_command(
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
 ) -> None:
     """Render a scene (or the built-in demo) with direct illumination from its environment map."""
-    from .integrators.wavefront import RenderSettings, render
+    from .integrators.wavefront import render
     from .io.outputs import check_output, write_render
 
     if demo == (scene_file is not None):
@@ -83,13 +83,11 @@ def render_command(
         "n_env": env_samples,
         "seed": seed,
         "mis_compensation": mis_compensation,
+        "time_limit": time_limit,
+        "threads": threads,
     }
-    from_file = {"bsdf_samples": "n_bsdf", "env_samples": "n_env"}
-    settings = {from_file.get(k, k): v for k, v in defaults.items()}
-    settings.update({k: v for k, v in chosen.items() if v is not None})
-    settings.setdefault("spp", 16)
-    settings = RenderSettings(time_limit=time_limit, threads=threads, **settings)
-    settings.validate()
+    settings = _render_settings(defaults, chosen)
+    check_output(output, variance=variance, png=png, resolution=scene.camera.resolution)
     typer.echo(scene.summary(), err=True)
     result = _render_with_progress(scene, settings, render, quiet=quiet)
     stats = result.stats
@@ -108,6 +106,20 @@ def render_command(
     )
     if stats["nonfinite_samples"]:
         warnings.warn(f"{stats['nonfinite_samples']} samples were NaN or infinite and counted as 0", stacklevel=1)
+
+
+def _render_settings(defaults: dict, chosen: dict):
+    """Settings from a scene file's ``[render]`` table, overridden by the options given (None: not given), checked
+    (a :class:`~lightprobe.errors.LightprobeError` naming the setting if one is of the wrong type or range)."""
+    from .integrators.wavefront import RenderSettings
+
+    from_file = {"bsdf_samples": "n_bsdf", "env_samples": "n_env"}
+    settings = {from_file.get(k, k): v for k, v in defaults.items()}
+    settings.update({k: v for k, v in chosen.items() if v is not None})
+    settings.setdefault("spp", 16)
+    settings = RenderSettings(**settings)
+    settings.validate()
+    return settings
 
 
 def _render_with_progress(scene, settings, render, *, quiet: bool):

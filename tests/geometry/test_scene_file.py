@@ -104,7 +104,7 @@ def test_full_scene(scene_dir):
         ("exponent = 200", "exponent = 200\ncolour = 1", "unknown key(s) colour"),
         ("rotate = [0, 1, 0, 30]", "rotate = [0, 1, 0]", "rotate entries"),
         ("[render]", "[render]\nturbo = true", "[render]: unknown key(s) turbo"),
-        ("scale = 2.0", 'scale = "big"', "scale must be a number"),
+        ("scale = 2.0", 'scale = "big"', "scale must be a finite number"),
         ("[camera]", "[camera\n", "not valid TOML"),
     ],
 )
@@ -122,3 +122,73 @@ def test_errors_name_file_and_place(scene_dir, old, new, message):
 def test_missing_file(tmp_path):
     with pytest.raises(SceneError, match="no such file"):
         load_scene(tmp_path / "nope.toml")
+
+
+# --- every key, every wrong type: one SceneError naming the key -----------------------------------------------------
+EXTRA_RENDER_KEYS = 'heuristic = "power"\nbsdf_samples = 1\nenv_samples = 1\nseed = 3\nmis_compensation = false\n'
+SKY = '[environment]\nsky = { sun_elevation = 35, sun_azimuth = 45, sun_diameter = 2.0, width = 64, height = 32 }\n'
+STRING_KEYS = {"type", "material", "file", "strategy", "heuristic", "mapping", "fov_axis", "lookup", "pdf", "name"}
+WRONG_VALUES = ['"x"', '[1, "a"]', "true", "{ a = 1 }", "-1", "nan", "[]"]
+
+
+def _key_lines(text):
+    """(line index, key, value) of every `key = value`, including the keys of one-line inline tables."""
+    import re
+
+    found = []
+    for i, line in enumerate(text.splitlines()):
+        m = re.fullmatch(r"(\w+) = (.+)", line)
+        if not m:
+            continue
+        key, value = m.groups()
+        if value.startswith("{"):
+            for inner in re.finditer(r"(\w+) = (\[[^\]]*\]|[^,}]+)", value[1:-1]):
+                found.append((i, f"{key}.{inner.group(1)}", inner.group(2).strip()))
+        else:
+            found.append((i, key, value))
+    return found
+
+
+def _scene_texts():
+    full = SCENE + EXTRA_RENDER_KEYS
+    sky = full.replace('[environment]\nfile = "sky.exr"\n', SKY)
+    return {"file-env": full, "sky-env": sky}
+
+
+def _cases():
+    cases = []
+    for variant, text in _scene_texts().items():
+        for i, key, value in _key_lines(text):
+            leaf = key.split(".")[-1]
+            for wrong in WRONG_VALUES:
+                if wrong == '"x"' and leaf in STRING_KEYS:
+                    continue
+                cases.append(pytest.param(variant, i, key, value, wrong, id=f"{variant}-{key}={wrong}"))
+    return cases
+
+
+@pytest.mark.parametrize(("variant", "line", "key", "value", "wrong"), _cases())
+def test_every_key_of_the_wrong_type_is_one_error_naming_it(scene_dir, variant, line, key, value, wrong):
+    """Any value of the wrong type or range is a SceneError naming the key (never a TypeError traceback), and a
+    value that loads must also pass the render settings' validation."""
+    from lightprobe.cli import _render_settings
+
+    lines = _scene_texts()[variant].splitlines()
+    leaf = key.split(".")[-1]
+    if "." in key:
+        lines[line] = lines[line].replace(f"{leaf} = {value}", f"{leaf} = {wrong}", 1)
+    else:
+        lines[line] = f"{key} = {wrong}"
+    path = scene_dir / "scene.toml"
+    path.write_text("\n".join(lines) + "\n")
+    try:
+        scene, defaults = load_scene(path)
+        _render_settings(defaults, {})
+    except SceneError as exc:
+        text = str(exc)
+        assert "\n" not in text and "scene.toml" in text, text
+        assert leaf in text or (leaf == "type" and "unknown" in text), text
+        return
+    # it loaded: only a value of the right type can (a negative angle, a string for a string key, ...)
+    assert wrong in ("-1", "true", '"x"'), f"{key} = {wrong} was accepted"
+    assert wrong != '"x"' or leaf in STRING_KEYS

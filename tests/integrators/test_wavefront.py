@@ -138,7 +138,7 @@ def test_bad_settings():
         (RenderSettings(spp=0), "spp"),
         (RenderSettings(n_bsdf=0, n_env=0), "sample counts"),
         (RenderSettings(strategy="env", mis_compensation=True), "compensation"),
-        (RenderSettings(time_limit=-1.0), "time limit"),
+        (RenderSettings(time_limit=-1.0), "time_limit"),
     ]:
         with pytest.raises(ParameterError, match=match):
             render(scene, settings)

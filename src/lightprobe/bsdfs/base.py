@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import ParameterError
+from ..errors import ParameterError, numeric_array
 
 __all__ = ["BSDF", "PARAM_SIZE", "rgb_param"]
 
@@ -26,7 +26,7 @@ PARAM_SIZE = 80
 
 def rgb_param(value, name: str, *, upper: float | None = None) -> np.ndarray:
     """A scalar or RGB triple as a float64 (3,) array, checked finite, >= 0 and <= ``upper``."""
-    arr = np.asarray(value, dtype=np.float64).reshape(-1)
+    arr = numeric_array(value, name).reshape(-1)
     if arr.size == 1:
         arr = np.repeat(arr, 3)
     if arr.size != 3 or not np.all(np.isfinite(arr)):

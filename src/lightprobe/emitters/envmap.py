@@ -43,7 +43,6 @@ from __future__ import annotations
 
 import math
 import os
-import warnings
 from pathlib import Path
 from typing import NamedTuple
 
@@ -51,7 +50,7 @@ import numpy as np
 
 from .._numba import jit, jit_parallel, prange
 from ..color import luminance
-from ..errors import ImageError, LightprobeWarning, ParameterError
+from ..errors import ImageError, ParameterError, warn_once
 from ..sampling.distributions import PiecewiseConstant2D, invert_2d, pdf_2d, sample_2d
 from ..sampling.kernels import TWO_PI
 from . import mappings
@@ -322,11 +321,7 @@ def _as_rgb(pixels, source: str) -> np.ndarray:
         raise ImageError(f"{source}: {int(bad.any(axis=2).sum())} texels are NaN or infinite; repair the image first")
     negative = data < 0.0
     if negative.any():
-        warnings.warn(
-            f"{source}: clamped {int(negative.sum())} negative values (min {float(data.min()):.3g}) to 0",
-            LightprobeWarning,
-            stacklevel=3,
-        )
+        warn_once(f"{source}: clamped {int(negative.sum())} negative values (min {float(data.min()):.3g}) to 0")
         data = np.maximum(data, 0.0)
     return np.ascontiguousarray(data)
 
@@ -434,10 +429,24 @@ class EnvironmentMap:
 
     @classmethod
     def load(cls, path: str | os.PathLike, *, mapping: str = "latlong", **options) -> EnvironmentMap:
-        """Read an .exr, .hdr or .pfm file (see the class for ``options``: scale, rotation, lookup, pdf, ...)."""
-        from ..io.images import read_image
+        """Read a map (see the class for ``options``: scale, rotation, lookup, pdf, ...).
 
-        return cls.from_array(read_image(path), mapping=mapping, source=str(Path(path)), **options)
+        .exr, .hdr and .pfm hold linear radiance; an 8-bit PNG/JPEG is decoded to linear with a warning (see
+        :func:`~lightprobe.io.images.read_radiance`).  A lat-long map that is not 2:1 loads with a warning (a crop,
+        a cube cross or a mirror ball is the usual cause); an angular map must be square.
+        """
+        from ..io.images import read_radiance
+
+        source = str(Path(path))
+        pixels = read_radiance(path)
+        if mapping == "latlong":
+            height, width = pixels.shape[:2]
+            if abs(width - 2 * height) > max(1, 0.01 * width):
+                warn_once(
+                    f"{source}: a lat-long map should be twice as wide as it is high, this one is {width}x{height} "
+                    f"({width / height:.3g}:1); is it a crop, a cube map or an angular probe (--mapping angular)?"
+                )
+        return cls.from_array(pixels, mapping=mapping, source=source, **options)
 
     # --- queries --------------------------------------------------------------------------------------------------
     @property

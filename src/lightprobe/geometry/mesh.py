@@ -14,13 +14,12 @@ from __future__ import annotations
 
 import gzip
 import os
-import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import LightprobeWarning, SceneError
+from ..errors import SceneError, warn_once
 
 __all__ = ["TriangleMesh", "angle_weighted_normals"]
 
@@ -77,11 +76,7 @@ class TriangleMesh:
         if degenerate.all():
             raise SceneError(f"{name}: all {f.shape[0]} triangles are degenerate (zero area)")
         if degenerate.any():
-            warnings.warn(
-                f"{name}: dropped {int(degenerate.sum())} degenerate triangles of {f.shape[0]}",
-                LightprobeWarning,
-                stacklevel=2,
-            )
+            warn_once(f"{name}: dropped {int(degenerate.sum())} degenerate triangles of {f.shape[0]}")
             f = f[~degenerate]
         n = None
         if normals is not None:
@@ -95,10 +90,8 @@ class TriangleMesh:
                 used = np.zeros(v.shape[0], dtype=bool)
                 used[f.reshape(-1)] = True
                 if (bad & used).any():
-                    warnings.warn(
-                        f"{name}: replaced {int((bad & used).sum())} zero or invalid vertex normals by computed ones",
-                        LightprobeWarning,
-                        stacklevel=2,
+                    warn_once(
+                        f"{name}: replaced {int((bad & used).sum())} zero or invalid vertex normals by computed ones"
                     )
                     n[bad] = angle_weighted_normals(v, f)[bad]
         elif smooth:

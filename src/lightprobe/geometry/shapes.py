@@ -11,16 +11,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import SceneError
+from ..errors import SceneError, numeric_array
 
 __all__ = ["Rectangle", "Sphere"]
 
 
 def _vec3(value, name: str) -> np.ndarray:
-    try:
-        v = np.asarray(value, dtype=np.float64).reshape(-1)
-    except (TypeError, ValueError):
-        v = np.zeros(0)
+    v = numeric_array(value, name, SceneError).reshape(-1)
     if v.size != 3 or not np.all(np.isfinite(v)):
         raise SceneError(f"{name} must be 3 finite numbers, got {value!r}")
     return v

@@ -12,7 +12,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from ..errors import SceneError
+from ..errors import SceneError, numeric_array
 
 __all__ = ["make_transform", "rotation_matrix"]
 
@@ -48,10 +48,7 @@ def make_transform(spec: Mapping | None) -> np.ndarray:
     if "matrix" in spec:
         if len(spec) > 1:
             raise SceneError("give either matrix or scale/rotate/translate, not both")
-        try:
-            given = np.asarray(spec["matrix"], dtype=np.float64)
-        except (TypeError, ValueError):
-            given = np.zeros(0)
+        given = numeric_array(spec["matrix"], "transform matrix", SceneError)
         if given.shape not in ((4, 4), (3, 4)) or not np.all(np.isfinite(given)):
             raise SceneError("transform matrix must be 4x4 (or 3x4) finite numbers")
         m[: given.shape[0]] = given
@@ -59,24 +56,24 @@ def make_transform(spec: Mapping | None) -> np.ndarray:
             raise SceneError("transform matrix is singular")
         return m
     if "scale" in spec:
-        s = np.asarray(spec["scale"], dtype=np.float64).reshape(-1)
+        s = numeric_array(spec["scale"], "scale", SceneError).reshape(-1)
         if s.size == 1:
             s = np.repeat(s, 3)
         if s.size != 3 or not np.all(np.isfinite(s)) or np.any(s == 0):
             raise SceneError(f"scale must be one or three finite non-zero numbers, got {spec['scale']!r}")
         m = np.diag([*s, 1.0]) @ m
     if "rotate" in spec:
-        rotations = spec["rotate"]
-        if rotations and not isinstance(rotations[0], list | tuple):
-            rotations = [rotations]
+        rotations = numeric_array(spec["rotate"], "rotate", SceneError)
+        if rotations.ndim == 1:
+            rotations = rotations[None]
+        if rotations.ndim != 2 or rotations.shape[1] != 4 or rotations.shape[0] < 1:
+            raise SceneError(f"rotate entries are [axis_x, axis_y, axis_z, angle_degrees], got {spec['rotate']!r}")
         for r in rotations:
-            if len(r) != 4:
-                raise SceneError(f"rotate entries are [axis_x, axis_y, axis_z, angle_degrees], got {r!r}")
             rot = np.eye(4)
             rot[:3, :3] = rotation_matrix(r[:3], r[3])
             m = rot @ m
     if "translate" in spec:
-        t = np.asarray(spec["translate"], dtype=np.float64).reshape(-1)
+        t = numeric_array(spec["translate"], "translate", SceneError).reshape(-1)
         if t.size != 3 or not np.all(np.isfinite(t)):
             raise SceneError(f"translate must be three finite numbers, got {spec['translate']!r}")
         tr = np.eye(4)

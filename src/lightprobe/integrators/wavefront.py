@@ -24,6 +24,7 @@ or power heuristic on sample-count-weighted densities.
 from __future__ import annotations
 
 import math
+import numbers
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -74,23 +75,36 @@ class RenderSettings:
     pass_samples: int = 1 << 19
 
     def validate(self) -> None:
+        """Raise :class:`ParameterError` naming the first setting of the wrong type or out of range."""
+        for name in ("spp", "n_bsdf", "n_env", "seed", "pass_samples"):
+            _require(name, getattr(self, name), "integer")
+        for name in ("strategy", "heuristic"):
+            _require(name, getattr(self, name), "string")
+        _require("mis_compensation", self.mis_compensation, "true or false")
+        if self.time_limit is not None:
+            _require("time_limit", self.time_limit, "number")
+        if self.threads is not None:
+            _require("threads", self.threads, "integer")
         if self.strategy not in STRATEGIES:
             raise ParameterError(f"strategy must be one of {list(STRATEGIES)}, got {self.strategy!r}")
         if self.heuristic not in HEURISTICS:
             raise ParameterError(f"heuristic must be one of {list(HEURISTICS)}, got {self.heuristic!r}")
-        if not (isinstance(self.spp, int) and self.spp >= 1):
+        if self.spp < 1:
             raise ParameterError(f"spp must be an integer >= 1, got {self.spp!r}")
         if self.n_bsdf < 0 or self.n_env < 0 or self.n_bsdf + self.n_env < 1 or self.n_bsdf + self.n_env > 64:
             raise ParameterError(
-                f"bsdf and env sample counts must be >= 0 with 1 to 64 in all, got {self.n_bsdf} and {self.n_env}"
+                f"bsdf and env sample counts (n_bsdf, n_env) must be >= 0 with 1 to 64 in all, got {self.n_bsdf} "
+                f"and {self.n_env}"
             )
         if self.mis_compensation and self.strategy != "mis":
-            raise ParameterError("MIS compensation needs strategy 'mis' (the compensated PDF is zero on dim texels)")
-        if self.time_limit is not None and not (self.time_limit > 0):
-            raise ParameterError(f"time limit must be > 0 seconds, got {self.time_limit!r}")
+            raise ParameterError(
+                "mis_compensation needs strategy 'mis' (the compensated PDF is zero on dim texels)"
+            )
+        if self.time_limit is not None and not (self.time_limit > 0 and math.isfinite(self.time_limit)):
+            raise ParameterError(f"time_limit must be > 0 seconds, got {self.time_limit!r}")
         if self.threads is not None and not (1 <= self.threads <= 256):
             raise ParameterError(f"threads must be between 1 and 256, got {self.threads!r}")
-        if not 1 <= self.seed < 2**63 and self.seed != 0:
+        if not 0 <= self.seed < 2**63:
             raise ParameterError(f"seed must be in [0, 2^63), got {self.seed!r}")
         if self.pass_samples < 1:
             raise ParameterError(f"pass_samples must be >= 1, got {self.pass_samples!r}")
@@ -98,6 +112,17 @@ class RenderSettings:
     @property
     def shading_samples(self) -> int:
         return self.n_bsdf + self.n_env
+
+
+_KINDS = {"integer": numbers.Integral, "number": numbers.Real, "string": str, "true or false": bool}
+
+
+def _require(name: str, value, kind: str) -> None:
+    """``value`` is an "integer", "number", "string" or "true or false" (a bool is not a number here)."""
+    ok = isinstance(value, _KINDS[kind]) and not (kind in ("integer", "number") and isinstance(value, bool))
+    if not ok:
+        article = "" if kind == "true or false" else "an " if kind == "integer" else "a "
+        raise ParameterError(f"{name} must be {article}{kind}, got {value!r}")
 
 
 @dataclass

@@ -8,16 +8,26 @@ it never sees NaN or infinity (they are written as 0 and reported).
 
 from __future__ import annotations
 
+import contextlib
 import math
 import os
+import re
 from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import ImageError, ParameterError
+from ..errors import ImageError, ParameterError, warn_once
 
-__all__ = ["LINEAR_FORMATS", "linear_to_srgb", "read_image", "srgb_to_linear", "write_image", "write_png"]
+__all__ = [
+    "LINEAR_FORMATS",
+    "linear_to_srgb",
+    "read_image",
+    "read_radiance",
+    "srgb_to_linear",
+    "write_image",
+    "write_png",
+]
 
 LINEAR_FORMATS = (".exr", ".hdr", ".pfm")
 _DISPLAY_FORMATS = (".png", ".jpg", ".jpeg")
@@ -30,20 +40,68 @@ def _oiio():
 
 
 def read_image(path: str | os.PathLike) -> np.ndarray:
-    """Read an image as float32 (H, W, C).  Raises :class:`ImageError` naming the file if it cannot."""
+    """Read an image's stored values as float32 (H, W, C), without colour conversion (an 8-bit PNG gives its
+    code values / 255).  Raises :class:`ImageError` naming the file if it cannot.  For radiance, use
+    :func:`read_radiance`."""
+    return _read(Path(path))[0]
+
+
+def read_radiance(path: str | os.PathLike) -> np.ndarray:
+    """Read an image as *linear* float32 (H, W, C) radiance.
+
+    Linear formats (EXR, HDR, PFM, float TIFF) are returned as stored.  A display-encoded image (an 8- or 16-bit
+    PNG/JPEG/TIFF, or any file OpenImageIO tags as sRGB or gamma-encoded) is decoded with the sRGB transfer
+    function (IEC 61966-2-1; not a 2.2 power), or with the power its tag names (``Gamma1.8``), and a warning says
+    that such a file cannot hold the dynamic range of the sun, so the lighting is only an approximation.
+    """
     p = Path(path)
+    pixels, encoding = _read(p)
+    if encoding == "linear":
+        return pixels
+    if encoding == "srgb":
+        decoded, how = srgb_to_linear(pixels), "the sRGB curve"
+    else:
+        gamma = float(encoding)
+        decoded, how = np.power(np.clip(pixels, 0.0, None), gamma), f"a {gamma:g} power"
+    warn_once(
+        f"{p}: a display-encoded (low dynamic range) image, decoded to linear radiance with {how}; it cannot "
+        "hold the range of the sun or bright lights (use an .exr or .hdr map for real lighting)"
+    )
+    return np.ascontiguousarray(decoded, dtype=np.float32)
+
+
+def _encoding(colorspace: str, integer_data: bool) -> str:
+    """'linear', 'srgb', or a gamma as text, from OpenImageIO's ``oiio:ColorSpace`` tag (names of OIIO 2.x
+    and 3.x: 'sRGB', 'srgb_rec709_scene', 'Gamma2.2', 'g22_rec709_scene', 'linear', 'lin_rec709_scene')."""
+    name = colorspace.strip().lower()
+    if "srgb" in name:
+        return "srgb"
+    match = re.fullmatch(r"(?:gamma(?:corrected)?)\s*([0-9.]+)|g(\d)(\d)_.*", name)
+    if match:
+        return match.group(1) if match.group(1) else f"{match.group(2)}.{match.group(3)}"
+    if name.startswith("lin") or name in ("raw", "acescg", "aces2065-1", "scene_linear"):
+        return "linear"
+    # untagged: integer pixels are display-encoded in practice (an 8-bit TIFF), floats are linear
+    return "srgb" if integer_data else "linear"
+
+
+def _read(p: Path) -> tuple[np.ndarray, str]:
+    """Pixels as stored (float32 H x W x C) and their encoding (see :func:`_encoding`)."""
     if not p.exists():
         raise ImageError(f"{p}: no such file")
     if p.is_dir():
         raise ImageError(f"{p}: is a directory, not an image")
     if p.suffix.lower() == ".pfm":
-        return _read_pfm(p)
+        return _read_pfm(p), "linear"
     oiio = _oiio()
     inp = oiio.ImageInput.open(str(p))
     if inp is None:
         msg = oiio.geterror().strip().splitlines()
         raise ImageError(f"{p}: cannot read image ({msg[-1] if msg else 'unknown format'})")
     try:
+        spec = inp.spec()
+        stored = str(spec.format)
+        encoding = _encoding(str(spec.getattribute("oiio:ColorSpace") or ""), stored.startswith(("uint", "int")))
         pixels = inp.read_image(oiio.FLOAT)
         err = inp.geterror()
     finally:
@@ -52,7 +110,7 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
         raise ImageError(f"{p}: cannot read image data ({err.strip() or 'corrupt or truncated file'})")
     if pixels.ndim == 2:
         pixels = pixels[:, :, None]
-    return np.ascontiguousarray(pixels, dtype=np.float32)
+    return np.ascontiguousarray(pixels, dtype=np.float32), encoding
 
 
 def write_image(
@@ -89,17 +147,7 @@ def write_image(
         spec.channelnames = tuple(channel_names)
     if ext == ".exr":
         spec.attribute("compression", "zip")
-    p.parent.mkdir(parents=True, exist_ok=True)
-    out = oiio.ImageOutput.create(str(p))
-    if out is None or not out.open(str(p), spec):
-        raise ImageError(f"{p}: cannot write ({oiio.geterror().strip() or 'open failed'})")
-    try:
-        ok = out.write_image(np.ascontiguousarray(data))
-        err = out.geterror()
-    finally:
-        out.close()
-    if not ok:
-        raise ImageError(f"{p}: cannot write ({err.strip()})")
+    _write_oiio(p, spec, np.ascontiguousarray(data))
     return p
 
 
@@ -121,15 +169,46 @@ def _read_pfm(p: Path) -> np.ndarray:
 
 
 def _write_pfm(p: Path, data: np.ndarray) -> Path:
-    p.parent.mkdir(parents=True, exist_ok=True)
     height, width = data.shape[:2]
-    try:
-        with open(p, "wb") as f:
+    with _replaced_atomically(p) as tmp:
+        with open(tmp, "wb") as f:
             f.write(f"PF\n{width} {height}\n-1.0\n".encode())
             f.write(np.ascontiguousarray(data[::-1, :, :3], dtype="<f4").tobytes())
-    except OSError as exc:
-        raise ImageError(f"{p}: cannot write ({exc.strerror})") from None
     return p
+
+
+@contextlib.contextmanager
+def _replaced_atomically(p: Path):
+    """Yield a temporary path beside ``p`` (same extension, so writers pick the same format); on success it
+    replaces ``p`` in one rename, on failure it is removed: a failed write (a full disk) never leaves a truncated
+    file or destroys an older one.  ``OSError`` becomes an :class:`ImageError` naming ``p``."""
+    try:
+        p.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ImageError(f"{p}: cannot write ({exc.strerror or exc})") from None
+    tmp = p.with_name(f".{p.stem}.partial-{os.getpid()}{p.suffix}")
+    try:
+        yield tmp
+        os.replace(tmp, p)
+    except OSError as exc:
+        raise ImageError(f"{p}: cannot write ({exc.strerror or exc})") from None
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def _write_oiio(p: Path, spec, pixels: np.ndarray) -> None:
+    oiio = _oiio()
+    with _replaced_atomically(p) as tmp:
+        out = oiio.ImageOutput.create(str(tmp))
+        if out is None or not out.open(str(tmp), spec):
+            raise ImageError(f"{p}: cannot write ({oiio.geterror().strip() or 'open failed'})")
+        try:
+            ok = out.write_image(pixels)
+            err = out.geterror()
+        finally:
+            out.close()
+        if not ok:
+            raise ImageError(f"{p}: cannot write ({err.strip() or 'write failed'})")
 
 
 def linear_to_srgb(x: np.ndarray) -> np.ndarray:
@@ -155,15 +234,5 @@ def write_png(path: str | os.PathLike, linear_rgb: np.ndarray, *, exposure: floa
     encoded = np.round(linear_to_srgb(data) * 255.0).astype(np.uint8)
     p = Path(path)
     oiio = _oiio()
-    spec = oiio.ImageSpec(encoded.shape[1], encoded.shape[0], 3, oiio.UINT8)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    out = oiio.ImageOutput.create(str(p))
-    if out is None or not out.open(str(p), spec):
-        raise ImageError(f"{p}: cannot write ({oiio.geterror().strip() or 'open failed'})")
-    try:
-        ok = out.write_image(np.ascontiguousarray(encoded))
-    finally:
-        out.close()
-    if not ok:
-        raise ImageError(f"{p}: cannot write PNG")
+    _write_oiio(p, oiio.ImageSpec(encoded.shape[1], encoded.shape[0], 3, oiio.UINT8), np.ascontiguousarray(encoded))
     return p

@@ -79,14 +79,17 @@ Every mistake is a :class:`~lightprobe.errors.SceneError` naming the file and th
 
 from __future__ import annotations
 
+import math
 import os
 import tomllib
 from pathlib import Path
 
+import numpy as np
+
 from ..bsdfs import GGXConductor, Lambert, Phong, RoughPlastic
 from ..emitters.envmap import EnvironmentMap
 from ..emitters.procedural import constant, sky_with_sun
-from ..errors import LightprobeError, SceneError
+from ..errors import LightprobeError, SceneError, numeric_array
 from ..geometry.camera import Camera
 from ..geometry.mesh import TriangleMesh
 from ..geometry.scene import Scene
@@ -117,9 +120,35 @@ class _Table:
 
     def number(self, key, default=None, *, required: bool = False):
         value = self.get(key, default, required=required)
-        if value is not None and (isinstance(value, bool) or not isinstance(value, int | float)):
-            raise SceneError(f"{self.where}: {key} must be a number, got {value!r}")
+        if value is not None and (
+            isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value)
+        ):
+            raise SceneError(f"{self.where}: {key} must be a finite number, got {value!r}")
         return value
+
+    def integer(self, key, default=None, *, minimum: int | None = None):
+        value = self.get(key, default)
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int)):
+            raise SceneError(f"{self.where}: {key} must be an integer, got {value!r}")
+        if value is not None and minimum is not None and value < minimum:
+            raise SceneError(f"{self.where}: {key} must be >= {minimum}, got {value!r}")
+        return value
+
+    def choice(self, key, choices, default=None):
+        value = self.string(key, default)
+        if value is not None and value not in choices:
+            raise SceneError(f"{self.where}: {key} must be one of {', '.join(map(repr, choices))}, got {value!r}")
+        return value
+
+    def rgb(self, key, default=None):
+        """A finite, non-negative number or [r, g, b]."""
+        value = self.get(key, default)
+        if value is None:
+            return None
+        arr = numeric_array(value, f"{self.where}: {key}", SceneError).reshape(-1)
+        if arr.size not in (1, 3) or not np.all(np.isfinite(arr)) or np.any(arr < 0):
+            raise SceneError(f"{self.where}: {key} must be a number >= 0 or [r, g, b] of them, got {value!r}")
+        return np.repeat(arr, 3) if arr.size == 1 else arr
 
     def string(self, key, default=None, *, required: bool = False):
         value = self.get(key, default, required=required)
@@ -176,18 +205,21 @@ def _environment(t: _Table, base: Path) -> EnvironmentMap:
         env = EnvironmentMap.load(_path(base, t.get("file"), t.where), mapping=mapping, **options)
     elif sources[0] == "sky":
         sky = _Table(t.get("sky"), f"{t.where}.sky")
+        diameter = sky.number("sun_diameter", 0.5)
+        if not 0.0 < diameter < 90.0:
+            raise SceneError(f"{sky.where}: sun_diameter must be in (0, 90) degrees, got {diameter!r}")
         image = sky_with_sun(
-            int(sky.number("width", 1024)),
-            int(sky.number("height", 512)),
+            sky.integer("width", 1024, minimum=2),
+            sky.integer("height", 512, minimum=1),
             sun_elevation_deg=sky.number("sun_elevation", 35.0),
             sun_azimuth_deg=sky.number("sun_azimuth", 45.0),
-            sun_diameter_deg=sky.number("sun_diameter", 0.5),
-            sun_radiance=sky.get("sun_radiance", (40000.0, 38000.0, 34000.0)),
+            sun_diameter_deg=diameter,
+            sun_radiance=sky.rgb("sun_radiance", (40000.0, 38000.0, 34000.0)),
         )
         sky.done()
         env = EnvironmentMap.from_array(image, source="procedural sky", **options)
     else:
-        env = EnvironmentMap.from_array(constant(t.get("constant")), source="constant", **options)
+        env = EnvironmentMap.from_array(constant(t.rgb("constant")), source="constant", **options)
     t.done()
     return env
 
@@ -276,11 +308,34 @@ def load_scene(path: str | os.PathLike) -> tuple[Scene, dict]:
         raise SceneError(f"{p}: the scene needs at least one [[objects]] entry")
     for i, spec in enumerate(objects):
         _within(f"{p}: objects[{i}]", lambda w, spec=spec: _object(scene, _Table(spec, w), base))
-    render = _Table(root.get("render", {}), f"{p}: [render]")
-    defaults = {k: render.get(k) for k in RENDER_KEYS if k in render.data}
-    render.done()
+    defaults = _render_defaults(_Table(root.get("render", {}), f"{p}: [render]"))
     root.done()
     return scene, defaults
+
+
+def _render_defaults(t: _Table) -> dict:
+    """The ``[render]`` table, checked key by key (type and range), then as a whole (e.g. compensation needs
+    strategy 'mis'); returns the keys given."""
+    from ..integrators.wavefront import HEURISTICS, STRATEGIES, RenderSettings
+
+    readers = {
+        "spp": lambda: t.integer("spp", minimum=1),
+        "strategy": lambda: t.choice("strategy", list(STRATEGIES)),
+        "heuristic": lambda: t.choice("heuristic", list(HEURISTICS)),
+        "bsdf_samples": lambda: t.integer("bsdf_samples", minimum=0),
+        "env_samples": lambda: t.integer("env_samples", minimum=0),
+        "seed": lambda: t.integer("seed", minimum=0),
+        "mis_compensation": lambda: t.boolean("mis_compensation"),
+    }
+    assert set(readers) == RENDER_KEYS
+    defaults = {key: read() for key, read in readers.items() if key in t.data}
+    t.done()
+    names = {"bsdf_samples": "n_bsdf", "env_samples": "n_env"}
+    try:
+        RenderSettings(**{names.get(k, k): v for k, v in defaults.items()}).validate()
+    except LightprobeError as exc:
+        raise SceneError(f"{t.where}: {exc}") from None
+    return defaults
 
 
 def _within(where: str, build):
