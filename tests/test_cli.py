@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -190,10 +191,152 @@ def test_ctrl_c_writes_what_was_accumulated(tmp_path):
     )
     line = proc.stderr.readline()  # the scene summary, printed once the scene is built
     assert "demo" in line
-    time.sleep(2.0)
+    # early, possibly before the first pass (while kernels load or compile): the render still stops only once
+    # every pixel holds a sample
+    time.sleep(0.5)
     proc.send_signal(signal.SIGINT)
-    _, err = proc.communicate(timeout=60)
+    _, err = proc.communicate(timeout=120)
     assert proc.returncode == 0, err
     assert "interrupted" in err and out.exists()
     meta = json.loads((tmp_path / "partial.exr.json").read_text())
-    assert meta["interrupted"] is True and meta["spp_done"] < 1000000
+    assert meta["interrupted"] is True and 1 <= meta["spp_done"] < 1000000
+    image = read_image(out)
+    assert np.all(np.isfinite(image)) and image.mean() > 0.01
+
+
+def _scene_file(tmp_path, render_table: str = "") -> Path:
+    path = tmp_path / "s.toml"
+    path.write_text(
+        "[camera]\norigin = [0, 0, 4]\ntarget = [0, 0, 0]\nresolution = [16, 12]\n"
+        "[environment]\nconstant = [1.0, 1.0, 1.0]\n"
+        '[materials.white]\ntype = "lambert"\nalbedo = 0.5\n'
+        '[[objects]]\ntype = "sphere"\ncenter = [0, 0, 0]\nradius = 1\nmaterial = "white"\n'
+        f"[render]\n{render_table}\n"
+    )
+    return path
+
+
+@pytest.mark.parametrize(
+    ("entry", "message"),
+    [
+        ('seed = "1"', "seed must be an integer"),
+        ('bsdf_samples = "2"', "bsdf_samples must be an integer"),
+        ("spp = 2.5", "spp must be an integer"),
+        ("spp = 0", "spp must be >= 1"),
+        ('strategy = "best"', "strategy must be one of"),
+        ("mis_compensation = 1", "mis_compensation must be true or false"),
+        ("env_samples = -1", "env_samples must be >= 0"),
+    ],
+)
+def test_wrong_typed_render_keys_are_one_line(capsys, tmp_path, entry, message):
+    path = _scene_file(tmp_path, entry)
+    assert main(["render", str(path), "-o", str(tmp_path / "o.exr"), "-q"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("lightprobe: error:") and message in err[0], err
+    assert "[render]" in err[0] and "s.toml" in err[0]
+    assert not (tmp_path / "o.exr").exists()
+
+
+def _unwritable_folder(tmp_path):
+    """A folder no new file can be made in, even by root: a read-only folder, else sysfs."""
+    import os
+
+    if os.geteuid() != 0:
+        folder = tmp_path / "read-only"
+        folder.mkdir()
+        folder.chmod(0o555)
+        return folder
+    return Path("/sys")
+
+
+@pytest.mark.parametrize("case", ["parent-is-a-file", "read-only-folder", "disk-full", "extension"])
+def test_an_unwritable_output_fails_before_rendering(capsys, tmp_path, monkeypatch, case):
+    """One line naming the path, exit status 2, and no render: the error comes before the first pass."""
+    import lightprobe.integrators.wavefront as wavefront
+
+    rendered = []
+    monkeypatch.setattr(wavefront, "render", lambda *a, **k: rendered.append(1))
+    if case == "parent-is-a-file":
+        (tmp_path / "file").write_text("x")
+        out = tmp_path / "file" / "out.exr"
+        message = "is a file, not a folder"
+    elif case == "read-only-folder":
+        folder = _unwritable_folder(tmp_path)
+        out = folder / "lightprobe-out.exr"
+        try:
+            out.with_name("lightprobe-probe").write_text("x")
+            pytest.skip(f"{folder} accepts new files here")
+        except OSError:
+            pass
+        message = "cannot write"
+    elif case == "disk-full":
+        import shutil
+
+        import lightprobe.io.outputs as outputs
+
+        out = tmp_path / "out.exr"
+        monkeypatch.setattr(outputs.shutil, "disk_usage", lambda p: shutil._ntuple_diskusage(10**9, 10**9, 1000))
+        message = "not enough free space"
+    else:
+        out = tmp_path / "out.tiff"
+        message = "unsupported output format"
+    path = _scene_file(tmp_path)
+    assert main(["render", str(path), "-o", str(out), "-q"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("lightprobe: error:") and str(out) in err[0] and message in err[0], err
+    assert not rendered
+
+
+def test_a_render_that_cannot_be_written_is_rescued(capsys, tmp_path, monkeypatch):
+    """The disk fills up during the render: the image goes to a rescue EXR in the current folder (mean and
+    variance), and the one-line error says where."""
+    import lightprobe.io.outputs as outputs
+
+    real_write = outputs.write_image
+    target = tmp_path / "out" / "render.exr"
+
+    def disk_full(path, *args, **kwargs):
+        if Path(path) == target:
+            raise outputs.ImageError(f"{path}: cannot write (No space left on device)")
+        return real_write(path, *args, **kwargs)
+
+    monkeypatch.setattr(outputs, "write_image", disk_full)
+    monkeypatch.chdir(tmp_path)
+    path = _scene_file(tmp_path, 'spp = 4\nstrategy = "mis"')
+    assert main(["render", str(path), "-o", str(target), "-q"]) == 2
+    err = [line for line in capsys.readouterr().err.strip().splitlines() if "error" in line or "Traceback" in line]
+    assert len(err) == 1 and "No space left on device" in err[0] and str(target) in err[0], err
+    rescued = sorted(tmp_path.glob("lightprobe-rescued-render-*.exr"))
+    assert len(rescued) == 1 and rescued[0].name in err[0]
+    image = read_image(rescued[0])
+    # a furnace (rho L = 0.5 on the sphere), with the variance of the mean in channels 3-5
+    z = (image[6, 8, :3] - 0.5) / np.sqrt(image[6, 8, 3:])
+    assert image.shape == (12, 16, 6) and np.all(np.abs(z) < 5) and image[6, 8, 3:].min() > 0, image[6, 8]
+    meta = json.loads(rescued[0].with_name(rescued[0].name + ".json").read_text())
+    assert meta["intended_output"] == str(target) and meta["spp_done"] == 4
+
+
+def test_compiling_is_announced(capsys, tmp_path, monkeypatch):
+    """When the kernels are not in the cache, the render says it is compiling and how long it took."""
+    import lightprobe.integrators.wavefront as wavefront
+
+    monkeypatch.setattr(wavefront, "kernels_cached", lambda: False)
+    assert main(["render", str(_scene_file(tmp_path)), "-o", str(tmp_path / "o.exr"), "--spp", "1", "-q"]) == 0
+    err = capsys.readouterr().err
+    assert "compiling kernels (first run only" in err and "compiled kernels in" in err
+    monkeypatch.setattr(wavefront, "kernels_cached", lambda: True)
+    assert main(["render", str(_scene_file(tmp_path)), "-o", str(tmp_path / "o.exr"), "--spp", "1", "-q"]) == 0
+    assert "compiling kernels" not in capsys.readouterr().err
+
+
+def test_kernels_report_whether_they_are_cached():
+    from lightprobe._numba import is_cached, jit
+    from lightprobe.integrators.wavefront import kernels_cached
+
+    assert kernels_cached()  # earlier renders in this session put them there
+
+    @jit
+    def never_called(x):
+        return x + 1
+
+    assert not is_cached(never_called)

@@ -57,7 +57,7 @@ from numba import njit, prange  # noqa: E402
 
 _config.CACHE_DIR = os.environ["NUMBA_CACHE_DIR"]  # in case Numba was imported (and configured) before us
 
-__all__ = ["FASTMATH", "jit", "jit_parallel", "prange"]
+__all__ = ["FASTMATH", "is_cached", "jit", "jit_parallel", "prange"]
 
 # Fast-math flags that keep IEEE semantics for NaN and infinities: contraction into FMA, reciprocal approximations
 # and approximate library functions.  'nnan'/'ninf' are left out on purpose: the renderer tests isfinite() to keep
@@ -73,3 +73,13 @@ def jit(func):
 def jit_parallel(func):
     """Compile a batch kernel that splits its ``prange`` loop over all cores (cached on disk)."""
     return njit(cache=True, nogil=True, parallel=True, error_model="numpy", fastmath=FASTMATH)(func)
+
+
+def is_cached(*kernels) -> bool:
+    """Whether every one of ``kernels`` (compiled functions) has machine code in the on-disk cache, i.e. whether
+    calling them will load rather than compile (a first run compiles for about half a minute).  Looks at Numba's
+    index file, an internal detail: when it cannot be found, says False (the cost is a needless notice)."""
+    try:
+        return all(os.path.exists(k._cache._cache_file._index_path) for k in kernels)
+    except AttributeError:
+        return False

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import sys
+import time
 import warnings
 from pathlib import Path
 from typing import Annotated
@@ -91,6 +92,8 @@ def render_command(
     typer.echo(scene.summary(), err=True)
     result = _render_with_progress(scene, settings, render, quiet=quiet)
     stats = result.stats
+    if not result.counts.any():
+        raise LightprobeError(f"interrupted before the first sample was taken; {output} was not written")
     files = write_render(output, result, variance=variance, exposure=exposure, png=png)
     note = ""
     if stats["interrupted"]:
@@ -123,13 +126,33 @@ def _render_settings(defaults: dict, chosen: dict):
 
 
 def _render_with_progress(scene, settings, render, *, quiet: bool):
-    if quiet:
-        return render(scene, settings)
-    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+    """Render with a progress bar (unless ``quiet``).  The first run compiles the kernels for about half a minute
+    before the first pass: that is announced (a spinner with the elapsed time on a terminal, one line elsewhere,
+    and the time it took), since a silent half minute looks like a hang."""
+    from .integrators.wavefront import kernels_cached
+
+    compiling = not kernels_cached()
+    started = time.perf_counter()
+    interactive = not quiet and sys.stderr.isatty()
+    if compiling and not interactive:
+        _echo_err("lightprobe: compiling kernels (first run only; later runs load them from the cache) ...")
+
+    def compiled(echo) -> None:
+        nonlocal compiling
+        if compiling:
+            compiling = False
+            echo(f"lightprobe: compiled kernels in {time.perf_counter() - started:.0f} s (first run only)")
+
+    if not interactive:  # no bar to draw: --quiet, or stderr is a file or a pipe
+        result = render(scene, settings, progress=lambda stats: compiled(_echo_err))
+        compiled(_echo_err)
+        return result
+    from rich.progress import BarColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
     w, h = scene.camera.resolution
     total = settings.spp * w * h
     columns = (
+        SpinnerColumn(),
         TextColumn("[progress.description]{task.description}"),
         BarColumn(),
         TextColumn("{task.fields[spp]} spp"),
@@ -139,10 +162,17 @@ def _render_with_progress(scene, settings, render, *, quiet: bool):
         TextColumn("ETA"),
         TimeRemainingColumn(),
     )
-    with Progress(*columns, transient=True) as bar:
-        task = bar.add_task("rendering", total=total, spp=0, passes=0, rate="")
+    with Progress(*columns, transient=True, console=_stderr_console()) as bar:
+        compile_task = None
+        if compiling:
+            compile_task = bar.add_task("compiling kernels (first run only)", total=None, spp="-", passes="-", rate="")
+        task = bar.add_task("rendering", total=total, spp=0, passes=0, rate="", visible=not compiling)
 
         def update(stats):
+            if compile_task is not None and compiling:
+                bar.remove_task(compile_task)
+                bar.reset(task, visible=True)
+            compiled(bar.console.print)
             rate = stats["camera_rays"] / max(stats["seconds"], 1e-9)
             bar.update(
                 task,
@@ -152,7 +182,19 @@ def _render_with_progress(scene, settings, render, *, quiet: bool):
                 rate=f"{rate / 1e6:.2f} M samples/s",
             )
 
-        return render(scene, settings, progress=update)
+        result = render(scene, settings, progress=update)
+    compiled(_echo_err)
+    return result
+
+
+def _echo_err(text: str) -> None:
+    print(text, file=sys.stderr)
+
+
+def _stderr_console():
+    from rich.console import Console
+
+    return Console(stderr=True)
 
 
 @experiment_app.command("shading-point")

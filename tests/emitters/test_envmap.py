@@ -341,3 +341,83 @@ def test_stats_match_the_data_notes():
     assert stats["mean_luminance"] == pytest.approx(0.649, abs=0.001)
     assert stats["top_0.1%_energy_fraction"] == pytest.approx(0.58, abs=0.01)
     assert stats["dynamic_range_stops"] == pytest.approx(21.5, abs=0.1)
+
+
+# --- what a file can get wrong -------------------------------------------------------------------------------------
+def _loud_load(path, **options):
+    import warnings
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        env = EnvironmentMap.load(path, **options)
+    return env, [str(w.message) for w in caught]
+
+
+@pytest.mark.parametrize(
+    ("width", "height", "warns"), [(96, 32, True), (64, 64, True), (64, 32, False), (65, 32, False)]
+)
+def test_a_latlong_map_that_is_not_two_to_one_warns(tmp_path, width, height, warns):
+    from lightprobe.io.images import write_image
+
+    path = write_image(tmp_path / f"map{width}x{height}.exr", np.ones((height, width, 3), np.float32))
+    _, messages = _loud_load(path)
+    aspect = [m for m in messages if "twice as wide" in m]
+    assert bool(aspect) == warns, messages
+    if warns:
+        assert aspect[0].startswith(str(path)) and f"{width}x{height}" in aspect[0] and len(aspect) == 1
+        assert _loud_load(path)[1] == []  # once per file
+
+
+def test_a_non_square_angular_map_is_an_error_naming_the_file(tmp_path):
+    from lightprobe.errors import ImageError
+    from lightprobe.io.images import write_image
+
+    path = write_image(tmp_path / "probe.exr", np.ones((32, 48, 3), np.float32))
+    with pytest.raises(ImageError, match=r"probe.exr: an angular .* must be square .*, this one is 48x32"):
+        EnvironmentMap.load(path, mapping="angular")
+
+
+def test_an_srgb_png_map_is_linear_radiance_in_the_renderer_and_in_envmap_info(tmp_path, capsys):
+    import json
+
+    import OpenImageIO as oiio
+
+    from lightprobe.cli import main
+
+    codes = np.zeros((16, 32, 3), np.uint8)
+    codes[:, :, 0], codes[:, :, 1], codes[:, :, 2] = 128, 255, 10
+    path = tmp_path / "sky.png"
+    out = oiio.ImageOutput.create(str(path))
+    out.open(str(path), oiio.ImageSpec(32, 16, 3, oiio.UINT8))
+    out.write_image(codes)
+    out.close()
+    env, messages = _loud_load(path)
+    assert len(messages) == 1 and "display-encoded" in messages[0] and "sRGB curve" in messages[0]
+    linear = np.array([0.2158605, 1.0, 0.0030353])  # sRGB decoding of 128, 255, 10
+    np.testing.assert_allclose(env.eval(np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0]])), [linear, linear], rtol=1e-5)
+    assert main(["envmap", "info", str(path), "--json"]) == 0
+    stats = json.loads(capsys.readouterr().out)
+    assert stats["max_luminance"] == pytest.approx(env.stats()["max_luminance"], rel=1e-12)
+    assert stats["max_luminance"] == pytest.approx(0.212671 * linear[0] + 0.715160 * linear[1] + 0.072169 * linear[2])
+
+
+def test_each_warning_is_printed_once_per_file():
+    """`envmap pdf` of a map with negative texels (and an odd aspect): each warning once, in a fresh process."""
+    import subprocess
+    import sys
+    import tempfile
+    from pathlib import Path
+
+    from lightprobe.io.images import write_image
+
+    with tempfile.TemporaryDirectory() as folder:
+        img = np.ones((32, 96, 3), np.float32)
+        img[3, 3, 0] = -1.0
+        path = write_image(Path(folder) / "neg.exr", img)
+        for command in (["envmap", "pdf", str(path), "-o", str(Path(folder) / "p.png")], ["envmap", "info", str(path)]):
+            run = subprocess.run([sys.executable, "-m", "lightprobe", *command], capture_output=True, text=True)
+            assert run.returncode == 0, run.stderr
+            lines = run.stderr.strip().splitlines()
+            assert sum("negative values" in line for line in lines) == 1, lines
+            assert sum("twice as wide" in line for line in lines) == 1, lines
+            assert all(line.startswith("lightprobe: warning:") for line in lines), lines

@@ -182,7 +182,7 @@ def test_every_key_of_the_wrong_type_is_one_error_naming_it(scene_dir, variant, 
     path = scene_dir / "scene.toml"
     path.write_text("\n".join(lines) + "\n")
     try:
-        scene, defaults = load_scene(path)
+        _, defaults = load_scene(path)
         _render_settings(defaults, {})
     except SceneError as exc:
         text = str(exc)

@@ -39,6 +39,35 @@ def test_white_furnace(strategy, heuristic):
     assert np.all((z < 5) | (np.abs(img[on] - albedo * radiance) < 1e-6)), z.max()
     corners = img[[0, 0, -1, -1], [0, -1, 0, -1]]
     np.testing.assert_allclose(corners, radiance, rtol=1e-6)
+    # the mean over the sphere's pixels: a small bias hides in every pixel's noise, not in the mean of 432 values
+    standard_error = np.sqrt(var[on].sum()) / var[on].size
+    assert abs(img[on].mean() - albedo * radiance) < 4 * standard_error + 1e-6 * radiance, (
+        img[on].mean(),
+        standard_error,
+    )
+
+
+@pytest.mark.parametrize("strategy", ["cosine", "env", "mis"])
+def test_a_mesh_casts_the_closed_form_shadow(strategy):
+    """A triangle-mesh sphere (radius r, centre at height d) over a Lambert ground under a constant sky L: the
+    ground point straight below sees the sky except a cap of half-angle asin(r/d), so it reflects
+    rho L (1 - (r/d)^2).  Fails if shadow rays miss meshes."""
+    import trimesh
+
+    from lightprobe.geometry.mesh import TriangleMesh
+
+    radiance, albedo, r, d = 1.0, 0.5, 1.0, 2.0
+    ico = trimesh.creation.icosphere(subdivisions=5)  # 20480 triangles: the inscribed polyhedron is 2e-4 smaller
+    ball = TriangleMesh.from_arrays(np.asarray(ico.vertices) * r + [0.0, d, 0.0], np.asarray(ico.faces))
+    scene = Scene(
+        Camera([0, 1, 6], [0, 0, 0], fov=0.5, resolution=(3, 3)), EnvironmentMap.from_array(constant(radiance))
+    )
+    scene.add(Rectangle.ground(size=40), Lambert(albedo))
+    scene.add(ball, Lambert(0.5))
+    result = render(scene, RenderSettings(spp=4096, strategy=strategy, seed=5))
+    expected = albedo * radiance * (1 - (r / d) ** 2)
+    standard_error = np.sqrt(result.variance.sum()) / result.variance.size
+    assert abs(result.image.mean() - expected) < 4 * standard_error + 2e-4, (result.image.mean(), standard_error)
 
 
 def small_scene(resolution=(32, 24)):
@@ -57,15 +86,28 @@ def reference():
     return render(small_scene(), RenderSettings(spp=4096, strategy="mis", seed=12345))
 
 
-@pytest.mark.parametrize(("strategy", "heuristic"), [*STRATEGY_CASES, ("mis-compensated", "power")])
+@pytest.mark.parametrize(
+    ("strategy", "heuristic"),
+    [*STRATEGY_CASES, ("mis-compensated", "power"), ("mis-1bsdf-3env", "power"), ("mis-3bsdf-1env", "balance")],
+)
 def test_every_strategy_converges_to_the_reference(reference, strategy, heuristic):
+    """Unequal BSDF and environment sample counts check that the MIS weights use them (sample-count-weighted
+    densities, Veach's n_i p_i)."""
     compensated = strategy == "mis-compensated"
+    counts = {"mis-1bsdf-3env": (1, 3), "mis-3bsdf-1env": (3, 1)}.get(strategy, (1, 1))
+    strategy = "mis" if strategy in ("mis-1bsdf-3env", "mis-3bsdf-1env") else strategy
     # Techniques that find the sun only by chance (hemisphere and BSDF sampling) have heavy-tailed estimates: at
     # 1024 spp their sample variance underestimates the true one where the sun was rarely hit (uniform: max |z| 11,
     # brdf: 14, mean z -0.09 and -0.17); at 8192 spp they pass (max |z| 3.1 and 3.2, mean z -0.008 and -0.03).
     spp = 8192 if strategy in ("uniform", "cosine", "brdf") else 1024
     settings = RenderSettings(
-        spp=spp, strategy="mis" if compensated else strategy, heuristic=heuristic, mis_compensation=compensated, seed=7
+        spp=spp,
+        strategy="mis" if compensated else strategy,
+        heuristic=heuristic,
+        mis_compensation=compensated,
+        n_bsdf=counts[0],
+        n_env=counts[1],
+        seed=7,
     )
     result = render(small_scene(), settings)
     z = (result.image - reference.image) / np.sqrt(result.variance + reference.variance + 1e-12)
@@ -117,9 +159,36 @@ def test_interruption_keeps_what_was_accumulated():
             raise KeyboardInterrupt
 
     result = render(scene, RenderSettings(spp=64, pass_samples=16 * 12 * 2), progress=interrupt)
-    assert result.stats["interrupted"] and result.stats["spp_done"] == 6
-    full = render(scene, RenderSettings(spp=6))
+    # rounds of 1, 2, 2 samples per pixel (the first round is always one sample)
+    assert result.stats["interrupted"] and result.stats["spp_done"] == 5
+    full = render(scene, RenderSettings(spp=5))
     np.testing.assert_array_equal(result.image, full.image)
+
+
+def test_ctrl_c_stops_at_the_end_of_a_pass_and_never_before_every_pixel_has_a_sample():
+    """A real SIGINT during the first pass of the first round (4 bands of 48 pixels) stops the render only once
+    every pixel holds one sample; a second SIGINT stops it at once."""
+    import os
+    import signal
+
+    scene = small_scene((16, 12))
+    settings = RenderSettings(spp=64, pass_samples=48)
+
+    def ctrl_c(times):
+        def progress(stats):
+            if stats["passes"] == 1:
+                for _ in range(times):
+                    os.kill(os.getpid(), signal.SIGINT)
+
+        return progress
+
+    once = render(scene, settings, progress=ctrl_c(1))
+    assert once.stats["interrupted"] and once.stats["passes"] == 4
+    assert once.counts.min() == once.counts.max() == 1 and once.image.mean() > 0
+    np.testing.assert_array_equal(once.image, render(scene, RenderSettings(spp=1)).image)
+    twice = render(scene, settings, progress=ctrl_c(2))
+    assert twice.stats["interrupted"] and twice.stats["passes"] == 1
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # the render's handler is gone
 
 
 def test_outputs_are_finite_and_stats_complete():

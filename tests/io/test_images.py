@@ -54,3 +54,89 @@ def test_errors(tmp_path):
         read_image(tmp_path / "short.pfm")
     with pytest.raises(ImageError, match="unsupported"):
         write_image(tmp_path / "x.tiff", np.zeros((2, 2, 3)))
+
+
+def _write_8bit(path, codes):
+    import OpenImageIO as oiio
+
+    codes = np.asarray(codes, dtype=np.uint8)
+    out = oiio.ImageOutput.create(str(path))
+    assert out.open(str(path), oiio.ImageSpec(codes.shape[1], codes.shape[0], codes.shape[2], oiio.UINT8))
+    out.write_image(np.ascontiguousarray(codes))
+    out.close()
+    return path
+
+
+@pytest.mark.parametrize("ext", [".png", ".jpg", ".tif"])
+def test_display_encoded_images_are_decoded_to_linear_with_the_srgb_curve(tmp_path, ext):
+    import warnings
+
+    from lightprobe.errors import LightprobeWarning
+    from lightprobe.io.images import read_radiance
+
+    codes = np.tile(np.array([0, 10, 64, 128, 200, 255], np.uint8)[None, :, None], (2, 1, 3))
+    path = _write_8bit(tmp_path / f"ldr{ext}", codes)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        linear = read_radiance(path)
+        read_radiance(path)  # a second read says nothing new
+    assert [str(w.message).startswith(f"{path}: a display-encoded") for w in caught] == [True]
+    assert caught[0].category is LightprobeWarning
+    c = read_image(path)[0, :, 0].astype(np.float64)  # stored code values / 255 (JPEG: after its lossy coding)
+    # IEC 61966-2-1, written out by hand: linear below 0.04045, a 2.4 power with an offset above
+    expected = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+    np.testing.assert_allclose(linear[0, :, 0], expected, rtol=1e-6, atol=1e-7)
+    if ext == ".png":  # the exact codes: 128 -> 0.21586 (a 2.2 power would give 0.21953)
+        assert linear[0, 3, 0] == pytest.approx(0.2158605, abs=2e-7)
+
+
+@pytest.mark.parametrize("ext", [".exr", ".hdr", ".pfm"])
+def test_linear_formats_are_read_as_stored(tmp_path, ext):
+    import warnings
+
+    from lightprobe.io.images import read_radiance
+
+    img = np.array([[[0.25, 0.5, 4.0], [1e3, 0.0, 0.125]]], np.float32)
+    path = write_image(tmp_path / f"lin{ext}", img)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        np.testing.assert_array_equal(read_radiance(path), read_image(path))
+
+
+def test_png_output_is_the_srgb_encoding_of_the_linear_values(tmp_path):
+    linear = np.array([[[0.0, 0.002, 0.0031308], [0.18, 0.5, 1.0], [2.0, -1.0, np.nan]]], np.float32)
+    codes = read_image(write_png(tmp_path / "o.png", linear)) * 255.0
+    x = np.clip(np.nan_to_num(linear.astype(np.float64)), 0, 1)
+    expected = np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055) * 255.0
+    np.testing.assert_allclose(codes, np.round(expected), atol=1e-3)
+
+
+def test_a_failed_write_leaves_the_old_file_and_no_partial_file(tmp_path, monkeypatch):
+    import OpenImageIO as oiio
+
+    path = write_image(tmp_path / "keep.exr", np.ones((2, 2, 3), np.float32))
+    before = path.read_bytes()
+
+    class Broken:
+        @staticmethod
+        def create(name):
+            class Out:
+                def open(self, *args):
+                    return True
+
+                def write_image(self, pixels):
+                    return False
+
+                def geterror(self):
+                    return "No space left on device"
+
+                def close(self):
+                    pass
+
+            return Out()
+
+    monkeypatch.setattr(oiio, "ImageOutput", Broken)
+    with pytest.raises(ImageError, match=r"keep.exr: cannot write \(No space left on device\)"):
+        write_image(path, np.zeros((2, 2, 3), np.float32))
+    assert path.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["keep.exr"]

@@ -421,7 +421,10 @@ class EnvironmentMap:
             data = _as_rgb(rgb, source)
             size = data.shape[0]
             if data.shape[1] != size or size < 2:
-                raise ImageError(f"{source}: an angular map must be square (at least 2x2), got {data.shape[:2]}")
+                raise ImageError(
+                    f"{source}: an angular (light probe) map must be square (at least 2x2), this one is "
+                    f"{data.shape[1]}x{data.shape[0]}"
+                )
             height = max(1, size // 2)
             latlong = mappings.angular_to_latlong_image(data, height, 2 * height, 4)
             return cls(latlong, source=source, mapping=mapping, **options)

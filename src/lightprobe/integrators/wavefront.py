@@ -50,7 +50,7 @@ from ..sampling.kernels import (
 from ..sampling.mis import mis_weight
 from ..sampling.rng import random_uniform, sample_key
 
-__all__ = ["STRATEGIES", "RenderResult", "RenderSettings", "render"]
+__all__ = ["STRATEGIES", "RenderResult", "RenderSettings", "kernels_cached", "render"]
 
 STRATEGIES = {"uniform": 0, "cosine": 1, "brdf": 2, "env": 3, "mis": 4}
 UNIFORM, COSINE, BRDF, ENV, MIS = range(5)
@@ -508,7 +508,8 @@ def render(
         "stopped_by_time_limit": False,
         "triangles": scene.triangle_count,
     }
-    buffers: dict[int, dict[str, np.ndarray]] = {}
+    largest_pass = max(1, band * spp_pass)
+    buffers = _pass_buffers(largest_pass, m)  # every pass uses leading views of these: memory bounded by one pass
     strategy = STRATEGIES[settings.strategy]
     constants = {
         "s": arrays,
@@ -527,9 +528,7 @@ def render(
     def run_pass(acc: _Accumulator, pixel_start: int, count: int, spp_now: int, sample_start: int) -> int:
         """One pass over ``count`` pixels x ``spp_now`` samples; returns the number of shadow rays traced."""
         n = count * spp_now
-        if n not in buffers:
-            buffers[n] = _pass_buffers(n, m)
-        b = buffers[n]
+        b = {k: v[: n * m] if v.shape[0] == largest_pass * m else v[:n] for k, v in buffers.items()}
         values = {**constants, **b, "pixel_start": pixel_start, "spp_pass": spp_now, "sample_start": sample_start}
         _launch(_camera_pass, values)
         tracer.add_mesh_hits(
@@ -550,32 +549,35 @@ def render(
     embree_before = tracer.embree_rays
     embree_seconds_before = tracer.embree_seconds
     start = time.perf_counter()
-    try:
-        # warm up every kernel on one pixel (loads cached machine code) before the clock starts
-        run_pass(_Accumulator(n_pixels), 0, 1, 1, 0)
-        buffers.clear()
-        embree_before = tracer.embree_rays
-        embree_seconds_before = tracer.embree_seconds
-        stats["setup_seconds"] = time.perf_counter() - t_setup
-        start = time.perf_counter()
-        for sample_start in range(0, settings.spp, spp_pass):
-            spp_now = min(spp_pass, settings.spp - sample_start)
-            for pixel_start in range(0, n_pixels, band):
-                count = min(band, n_pixels - pixel_start)
-                stats["shadow_rays"] += run_pass(acc, pixel_start, count, spp_now, sample_start)
-                stats["camera_rays"] += count * spp_now
-                stats["passes"] += 1
-                stats["seconds"] = time.perf_counter() - start
-                stats["spp_done"] = int(acc.count.min())
-                if progress is not None:
-                    progress(dict(stats, spp_target=settings.spp, pixels_done=pixel_start + count))
-                if settings.time_limit is not None and stats["seconds"] >= settings.time_limit:
-                    stats["stopped_by_time_limit"] = True
-                    raise _Stop
-    except _Stop:
-        pass  # pixels of the unfinished pass have one pass fewer: their counts say so
-    except KeyboardInterrupt:
-        stats["interrupted"] = True
+    with _InterruptAtPassEnd() as interrupt:
+        try:
+            # warm up every kernel on one pixel (loads cached machine code) before the clock starts
+            run_pass(_Accumulator(n_pixels), 0, 1, 1, 0)
+            embree_before = tracer.embree_rays
+            embree_seconds_before = tracer.embree_seconds
+            stats["setup_seconds"] = time.perf_counter() - t_setup
+            start = time.perf_counter()
+            for sample_start, spp_now in _sample_rounds(settings.spp, spp_pass):
+                for pixel_start in range(0, n_pixels, band):
+                    count = min(band, n_pixels - pixel_start)
+                    stats["shadow_rays"] += run_pass(acc, pixel_start, count, spp_now, sample_start)
+                    stats["camera_rays"] += count * spp_now
+                    stats["passes"] += 1
+                    stats["seconds"] = time.perf_counter() - start
+                    stats["spp_done"] = int(acc.count.min())
+                    if progress is not None:
+                        progress(dict(stats, spp_target=settings.spp, pixels_done=pixel_start + count))
+                    if stats["spp_done"] < 1:
+                        continue  # a stop waits until every pixel holds a sample (the first round is 1 spp)
+                    if interrupt.requested:
+                        raise KeyboardInterrupt
+                    if settings.time_limit is not None and stats["seconds"] >= settings.time_limit:
+                        stats["stopped_by_time_limit"] = True
+                        raise _Stop
+        except _Stop:
+            pass  # pixels of the unfinished pass have one pass fewer: their counts say so
+        except KeyboardInterrupt:
+            stats["interrupted"] = True
     stats["seconds"] = time.perf_counter() - start
     stats["embree_rays"] = tracer.embree_rays - embree_before
     stats["embree_seconds"] = tracer.embree_seconds - embree_seconds_before
@@ -584,8 +586,54 @@ def render(
     return _finish(acc, stats, width, height)
 
 
+def kernels_cached() -> bool:
+    """Whether the render kernels are in the on-disk cache (else the first render compiles them, ~20-45 s)."""
+    from .._numba import is_cached
+
+    return is_cached(_camera_pass, _shade_setup, _env_sample_stage, _env_lookup_stage, _shade_finish, _accumulate)
+
+
 class _Stop(Exception):
     """The time limit was reached."""
+
+
+def _sample_rounds(spp: int, spp_pass: int):
+    """(first sample index, samples per pixel) of each round over the image: one sample first, so that a stop
+    (Ctrl-C, a time limit) soon after the start still leaves every pixel with a sample, then ``spp_pass`` at a
+    time.  The rounds change nothing in the image: each sample's random numbers depend on its index alone."""
+    yield 0, 1
+    for start in range(1, spp, spp_pass):
+        yield start, min(spp_pass, spp - start)
+
+
+class _InterruptAtPassEnd:
+    """While rendering in the main thread, the first Ctrl-C asks the render to stop at the end of the pass in
+    flight (no finished work is thrown away, and never before every pixel has a sample); a second Ctrl-C
+    interrupts at once, keeping what has been accumulated.  Elsewhere (a worker thread) Ctrl-C is left alone."""
+
+    def __init__(self):
+        self.requested = False
+        self._previous = None
+
+    def _handler(self, signum, frame):
+        if self.requested:
+            raise KeyboardInterrupt
+        self.requested = True
+
+    def __enter__(self):
+        import signal
+        import threading
+
+        if threading.current_thread() is threading.main_thread():
+            self._previous = signal.signal(signal.SIGINT, self._handler)
+        return self
+
+    def __exit__(self, *exc):
+        import signal
+
+        if self._previous is not None:
+            signal.signal(signal.SIGINT, self._previous)
+        return False
 
 
 def _finish(acc: _Accumulator, stats: dict, width: int, height: int) -> RenderResult:
