@@ -127,8 +127,21 @@ def test_missing_file(tmp_path):
 # --- every key, every wrong type: one SceneError naming the key -----------------------------------------------------
 EXTRA_RENDER_KEYS = 'heuristic = "power"\nbsdf_samples = 1\nenv_samples = 1\nseed = 3\nmis_compensation = false\n'
 SKY = '[environment]\nsky = { sun_elevation = 35, sun_azimuth = 45, sun_diameter = 2.0, width = 64, height = 32 }\n'
-STRING_KEYS = {"type", "material", "file", "strategy", "heuristic", "mapping", "fov_axis", "lookup", "pdf", "name"}
-WRONG_VALUES = ['"x"', '[1, "a"]', "true", "{ a = 1 }", "-1", "nan", "[]"]
+STRING_KEYS = {
+    "type",
+    "material",
+    "file",
+    "strategy",
+    "heuristic",
+    "mapping",
+    "fov_axis",
+    "lookup",
+    "pdf",
+    "pdf_weights",
+    "estimator",
+    "name",
+}
+WRONG_VALUES = ['"x"', '[1, "a"]', "true", "{ a = 1 }", "-1", "nan"]
 
 
 def _key_lines(text):
@@ -150,15 +163,31 @@ def _key_lines(text):
 
 
 def _scene_texts():
-    full = SCENE + EXTRA_RENDER_KEYS
+    """The example scene with every optional key written out, and variants for the other environment sources."""
+    full = (
+        (SCENE + EXTRA_RENDER_KEYS)
+        .replace("fov = 35\n", 'fov = 35\nup = [0.0, 1.0, 0.0]\nfov_axis = "y"\n')
+        .replace(
+            "rotation = 30.0\n",
+            'rotation = 30.0\nmapping = "latlong"\nlookup = "bilinear"\npdf = "exact"\npdf_weights = "bilinear"\n',
+        )
+        .replace('file = "meshes/box.obj"\n', 'file = "meshes/box.obj"\nsmooth = true\n')
+        .replace('type = "ground"\n', 'type = "ground"\nheight = 0.0\n')
+        .replace("exponent = 200\n", 'exponent = 200\nestimator = "mixture"\n')
+        + '[materials.metal]\ntype = "conductor"\nalpha = 0.2\neta = [0.2, 0.9, 1.1]\nk = [3.9, 2.4, 2.2]\n'
+        "specular_reflectance = 0.9\nfresnel = true\n"
+    )
     sky = full.replace('[environment]\nfile = "sky.exr"\n', SKY)
-    return {"file-env": full, "sky-env": sky}
+    white = full.replace('[environment]\nfile = "sky.exr"\n', "[environment]\nconstant = [1.0, 0.5, 0.25]\n")
+    return {"file-env": full, "sky-env": sky, "constant-env": white}
 
 
 def _cases():
     cases = []
     for variant, text in _scene_texts().items():
         for i, key, value in _key_lines(text):
+            if variant != "file-env" and not key.startswith(("sky", "constant")):
+                continue  # the other variants differ only in the environment's source
             leaf = key.split(".")[-1]
             for wrong in WRONG_VALUES:
                 if wrong == '"x"' and leaf in STRING_KEYS:
