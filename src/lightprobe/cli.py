@@ -37,16 +37,34 @@ def _split(text: str) -> list[str]:
 def render_command(
     scene_file: Annotated[Path | None, typer.Argument(metavar="SCENE", help="Scene file (TOML).")] = None,
     output: Annotated[Path, typer.Option("--output", "-o", help=".exr, .hdr, .pfm or .png.")] = Path("render.exr"),
-    demo: Annotated[bool, typer.Option("--demo", help="Render the built-in demo scene (no files needed).")] = False,
+    demo: Annotated[
+        bool,
+        typer.Option(
+            "--demo", help="Render a built-in scene (no files needed): the default one, or `--demo many-lights`."
+        ),
+    ] = False,
     spp: Annotated[int | None, typer.Option(help="Camera samples per pixel [scene or 16].")] = None,
-    strategy: Annotated[str | None, typer.Option(help="uniform, cosine, brdf, env or mis [mis].")] = None,
+    strategy: Annotated[
+        str | None, typer.Option(help="uniform, cosine, brdf, env (light sampling) or mis [mis].")
+    ] = None,
     heuristic: Annotated[str | None, typer.Option(help="MIS heuristic: balance or power [power].")] = None,
     bsdf_samples: Annotated[int | None, typer.Option(help="BSDF samples per camera sample [1].")] = None,
-    env_samples: Annotated[int | None, typer.Option(help="Environment samples per camera sample [1].")] = None,
+    env_samples: Annotated[
+        int | None, typer.Option("--env-samples", "--light-samples", help="Samples per picked light, N [1].")
+    ] = None,
     seed: Annotated[int | None, typer.Option(help="Random seed [0].")] = None,
     mis_compensation: Annotated[
         bool | None,
         typer.Option("--mis-compensation/--no-mis-compensation", help="Sample the MIS-compensated env PDF."),
+    ] = None,
+    light_sampler: Annotated[
+        str | None, typer.Option(help="How a light is picked: uniform, power or bvh [power].")
+    ] = None,
+    lights_per_sample: Annotated[
+        int | None, typer.Option(help="Lights picked per camera sample, K (each gets --env-samples samples) [1].")
+    ] = None,
+    light_strategy: Annotated[
+        str | None, typer.Option(help="How an area light is sampled: area, solid-angle, hemisphere, cosine.")
     ] = None,
     time_limit: Annotated[float | None, typer.Option(help="Stop after this many seconds (keeps the result).")] = None,
     threads: Annotated[int | None, typer.Option(help="Threads [all cores].")] = None,
@@ -56,17 +74,20 @@ def render_command(
     png: Annotated[Path | None, typer.Option(help="Also write a tone-mapped PNG preview here.")] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
 ) -> None:
-    """Render a scene (or the built-in demo) with direct illumination from its environment map."""
+    """Render a scene (or a built-in demo) with direct illumination from its environment map and area lights."""
     from .integrators.wavefront import render
     from .io.outputs import check_output, write_render
 
-    if demo == (scene_file is not None):
-        raise LightprobeError("give a SCENE file or --demo (one of them)")
+    if not demo and scene_file is None:
+        raise LightprobeError("give a SCENE file or --demo [NAME]")
     check_output(output, variance=variance, png=png)
     if demo:
-        from .demo import demo_scene
+        from .demo import DEMOS
 
-        scene, defaults = demo_scene(), {}
+        name = "default" if scene_file is None else str(scene_file)
+        if name not in DEMOS:
+            raise LightprobeError(f"unknown demo {name!r}; the demos are {', '.join(DEMOS)}")
+        scene, defaults = DEMOS[name](), {}
     else:
         from .io.scene_file import load_scene
 
@@ -84,6 +105,9 @@ def render_command(
         "n_env": env_samples,
         "seed": seed,
         "mis_compensation": mis_compensation,
+        "light_sampler": light_sampler,
+        "lights_per_sample": lights_per_sample,
+        "light_strategy": light_strategy,
         "time_limit": time_limit,
         "threads": threads,
     }
@@ -226,6 +250,67 @@ def experiment_shading_point(
     typer.echo(table)
     if output is not None:
         output.write_text(header + "\n\n" + table + "\n")
+
+
+def _lecture_experiment(name: str, run, as_json: bool, output: Path, options: dict) -> None:
+    from .experiments.lecture import to_json_lines, to_markdown
+
+    rows = run(out_dir=output, **options)
+    if as_json:
+        typer.echo(to_json_lines(rows))
+    else:
+        typer.echo(to_markdown(rows))
+    (output / f"{name}.json").write_text(to_json_lines(rows) + "\n")
+    typer.echo(f"wrote the images and {output / (name + '.json')}", err=True)
+
+
+@experiment_app.command("lecture-area-sampling")
+def experiment_lecture_area_sampling(
+    spp: Annotated[int, typer.Option(help="Camera samples per pixel.")] = 4,
+    reference_spp: Annotated[int, typer.Option(help="Samples per pixel of the MIS reference.")] = 1024,
+    width: Annotated[int, typer.Option(help="Image width (height 3/4 of it).")] = 320,
+    seed: Annotated[int, typer.Option(help="Random seed.")] = 1,
+    as_json: Annotated[bool, typer.Option("--json", help="Print JSON rows instead of a table.")] = False,
+    output: Annotated[Path, typer.Option("--output", "-o", help="Folder for the images.")] = Path(
+        "lecture-area-sampling"
+    ),
+) -> None:
+    """Hemisphere vs area vs solid-angle sampling of a rectangular light, 1 and 16 shadow rays (the lecture)."""
+    from .experiments.lecture import area_sampling
+
+    if spp < 1 or reference_spp < 1 or width < 4:
+        raise LightprobeError("--spp and --reference-spp must be >= 1 and --width >= 4")
+    options = {"spp": spp, "reference_spp": reference_spp, "seed": seed, "resolution": (width, max(1, width * 3 // 4))}
+    _lecture_experiment("lecture-area-sampling", area_sampling, as_json, output, options)
+
+
+@experiment_app.command("lecture-many-lights")
+def experiment_lecture_many_lights(
+    lights: Annotated[int, typer.Option(help="Number of emissive triangles.")] = 4000,
+    k: Annotated[int, typer.Option("--k", help="Lights picked per camera sample (N = 1 sample each).")] = 16,
+    spp: Annotated[int, typer.Option(help="Camera samples per pixel.")] = 1,
+    reference_spp: Annotated[int, typer.Option(help="Samples per pixel of the MIS reference.")] = 256,
+    width: Annotated[int, typer.Option(help="Image width (height 2/3 of it).")] = 320,
+    seed: Annotated[int, typer.Option(help="Random seed.")] = 1,
+    as_json: Annotated[bool, typer.Option("--json", help="Print JSON rows instead of a table.")] = False,
+    output: Annotated[Path, typer.Option("--output", "-o", help="Folder for the images.")] = Path(
+        "lecture-many-lights"
+    ),
+) -> None:
+    """Uniform vs power vs BVH light selection on the many-light demo, K = 16, N = 1 (the lecture's 12.4x)."""
+    from .experiments.lecture import many_lights
+
+    if lights < 2 or k < 1 or k > 64 or spp < 1 or reference_spp < 1 or width < 4:
+        raise LightprobeError("--lights >= 2, 1 <= --k <= 64, --spp, --reference-spp >= 1 and --width >= 4")
+    options = {
+        "n_lights": lights,
+        "k": k,
+        "spp": spp,
+        "reference_spp": reference_spp,
+        "seed": seed,
+        "resolution": (width, max(1, width * 2 // 3)),
+    }
+    _lecture_experiment("lecture-many-lights", many_lights, as_json, output, options)
 
 
 @envmap_app.command("info")

@@ -39,6 +39,7 @@ class SceneObject:
     material: str
     two_sided: bool
     name: str
+    emission: np.ndarray | None = None  # RGB radiance emitted (uniformly, on the front or both sides), or None
 
 
 class SceneArrays(NamedTuple):
@@ -58,6 +59,9 @@ class SceneArrays(NamedTuple):
     rects: np.ndarray  # (R, 12) float64: origin, edge_u, edge_v, unit normal
     rect_material: np.ndarray
     rect_two_sided: np.ndarray
+    sphere_light: np.ndarray  # (S,) int64: the sphere's row in the light table, -1 if it does not emit
+    rect_light: np.ndarray  # (R,) int64
+    mesh_light_start: np.ndarray  # (M,) int64: the light of face f of mesh g is start[g] + f; -1: no emission
     material_kind: np.ndarray  # (K,) int64
     material_params: np.ndarray  # (K, PARAM_SIZE) float64
 
@@ -65,11 +69,11 @@ class SceneArrays(NamedTuple):
 class Scene:
     """Camera + environment + objects.  See the module docstring."""
 
-    def __init__(self, camera: Camera, environment: EnvironmentMap, *, name: str = "scene"):
+    def __init__(self, camera: Camera, environment: EnvironmentMap | None = None, *, name: str = "scene"):
         if not isinstance(camera, Camera):
             raise SceneError("camera must be a lightprobe Camera")
-        if not isinstance(environment, EnvironmentMap):
-            raise SceneError("environment must be a lightprobe EnvironmentMap")
+        if environment is not None and not isinstance(environment, EnvironmentMap):
+            raise SceneError("environment must be a lightprobe EnvironmentMap (or None: area lights only)")
         self.camera = camera
         self.environment = environment
         self.name = name
@@ -83,10 +87,32 @@ class Scene:
         return name
 
     def add(
-        self, shape: Shape, material: str | BSDF, *, transform=None, two_sided: bool = False, name: str | None = None
+        self,
+        shape: Shape,
+        material: str | BSDF | None = None,
+        *,
+        transform=None,
+        two_sided: bool = False,
+        name: str | None = None,
+        emission=None,
     ) -> SceneObject:
-        """Add a shape with a material (a name registered with :meth:`add_material`, or a BSDF)."""
+        """Add a shape with a material (a name registered with :meth:`add_material`, or a BSDF).
+
+        ``emission`` (a number or RGB radiance) makes the object an area light: uniform radiance leaving its front
+        side (both sides if ``two_sided``); an emitter needs no material (it then reflects nothing).  Every
+        triangle of an emissive mesh is a light of its own.
+        """
         label = name or f"object {len(self.objects)}"
+        if emission is not None:
+            emission = _emission(emission, shape, label)
+        if material is None:
+            if emission is None:
+                raise SceneError(f"{label}: needs a material (or an emission)")
+            from ..bsdfs import Lambert
+
+            if "black" not in self.materials:
+                self.add_material("black", Lambert(0.0))
+            material = "black"
         if isinstance(material, BSDF):
             material = self.add_material(f"{label} material", material)
         if material not in self.materials:
@@ -99,7 +125,7 @@ class Scene:
                 raise SceneError(f"{label}: transforms apply to meshes; place spheres and rectangles directly")
         if not isinstance(shape, TriangleMesh | Sphere | Rectangle):
             raise SceneError(f"{label}: unsupported shape {type(shape).__name__}")
-        obj = SceneObject(shape, material, bool(two_sided), label)
+        obj = SceneObject(shape, material, bool(two_sided), label, emission)
         self.objects.append(obj)
         return obj
 
@@ -145,6 +171,17 @@ class Scene:
         def ints(values):
             return np.asarray(values, dtype=np.int64).reshape(-1)
 
+        # rows of the light table, in the order of light_table(): spheres, rectangles, then mesh faces
+        row = 0
+        sphere_light, rect_light, mesh_light = [], [], []
+        for group, out in ((spheres, sphere_light), (rects, rect_light), (meshes, mesh_light)):
+            for o in group:
+                if o.emission is None:
+                    out.append(-1)
+                    continue
+                out.append(row)
+                row += o.shape.triangle_count if isinstance(o.shape, TriangleMesh) else 1
+
         return SceneArrays(
             np.ascontiguousarray(np.concatenate(vertices)) if vertices else np.zeros((0, 3)),
             np.ascontiguousarray(np.concatenate(normals)) if normals else np.zeros((0, 3)),
@@ -162,13 +199,91 @@ class Scene:
             ),
             ints([index[o.material] for o in rects]),
             ints([o.two_sided for o in rects]),
+            ints(sphere_light),
+            ints(rect_light),
+            ints(mesh_light),
             kinds,
             np.ascontiguousarray(params),
         )
 
+    @property
+    def emitters(self) -> list[SceneObject]:
+        return [o for o in self.objects if o.emission is not None]
+
+    def light_table(self):
+        """The :class:`~lightprobe.emitters.area.LightArrays` of every emissive object (world space): spheres,
+        rectangles, then each face of each emissive mesh, in the order :meth:`compile` numbers them."""
+        from ..emitters.area import AreaLight, LightArrays, light_arrays
+
+        single, meshes = [], []
+        for kind in (Sphere, Rectangle):
+            for o in self.emitters:
+                if isinstance(o.shape, Sphere) and kind is Sphere:
+                    single.append(AreaLight.sphere(o.shape.center, o.shape.radius, o.emission, two_sided=o.two_sided))
+                elif isinstance(o.shape, Rectangle) and kind is Rectangle:
+                    r = o.shape
+                    single.append(AreaLight.rectangle(r.origin, r.edge_u, r.edge_v, o.emission, two_sided=o.two_sided))
+        for o in self.emitters:
+            if isinstance(o.shape, TriangleMesh):
+                meshes.append(_triangle_lights(o.shape, o.emission, o.two_sided))
+        parts = [light_arrays(single), *meshes]
+        return LightArrays(*(np.concatenate([getattr(t, f) for t in parts]) for f in LightArrays._fields))
+
+    def environment_power(self) -> float:
+        """pi R^2 x the integral of the map's luminance over the sphere (R: the scene's bounding radius), the
+        environment's share in power-proportional light selection (pbrt-v4's ImageInfiniteLight::Phi); 0 without
+        an environment."""
+        if self.environment is None:
+            return 0.0
+        lo, hi = self.bounds()
+        radius = max(0.5 * float(np.linalg.norm(hi - lo)), 1e-3)
+        return float(np.pi * radius**2 * self.environment.integral())
+
     def summary(self) -> str:
         w, h = self.camera.resolution
+        lights = []
+        if self.environment is not None:
+            lights.append(self.environment.source)
+        if self.emitters:
+            n = sum(o.shape.triangle_count if isinstance(o.shape, TriangleMesh) else 1 for o in self.emitters)
+            lights.append(f"{n} area lights")
         return (
             f"{self.name}: {len(self.objects)} objects ({self.triangle_count} triangles), "
-            f"{len(self.materials)} materials, {w}x{h}, light {self.environment.source}"
+            f"{len(self.materials)} materials, {w}x{h}, light {' + '.join(lights) or 'none'}"
         )
+
+
+def _emission(value, shape, label: str) -> np.ndarray | None:
+    """RGB radiance (3,), or for a mesh also one per face (F, 3); None when it is black everywhere."""
+    from ..bsdfs.base import rgb_param
+    from ..errors import LightprobeError, numeric_array
+
+    arr = numeric_array(value, f"{label}: emission", SceneError)
+    if arr.ndim == 2 and isinstance(shape, TriangleMesh):
+        if arr.shape != (shape.triangle_count, 3) or not np.all(np.isfinite(arr)) or np.any(arr < 0):
+            raise SceneError(
+                f"{label}: per-face emission must be ({shape.triangle_count}, 3) finite values >= 0, got {arr.shape}"
+            )
+        return arr if arr.max() > 0 else None
+    try:
+        rgb = rgb_param(arr, "emission")
+    except LightprobeError as exc:
+        raise SceneError(f"{label}: {exc}") from None
+    return rgb if rgb.max() > 0 else None
+
+
+def _triangle_lights(mesh: TriangleMesh, emission, two_sided: bool):
+    """The light table rows of an emissive mesh, one per face."""
+    from ..emitters.area import LIGHT_TRIANGLE, LightArrays
+
+    v = mesh.vertices[mesh.faces]  # (F, 3, 3)
+    cross = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+    length = np.linalg.norm(cross, axis=1)
+    f = v.shape[0]
+    return LightArrays(
+        np.full(f, LIGHT_TRIANGLE, np.int64),
+        np.ascontiguousarray(np.concatenate([v.reshape(-1, 9), cross / length[:, None]], axis=1)),
+        np.ascontiguousarray(np.broadcast_to(np.asarray(emission, dtype=np.float64), (f, 3))),
+        np.full(f, int(two_sided), np.int64),
+        0.5 * length,
+    )

@@ -34,6 +34,8 @@ import numpy as np
 from .._numba import jit_parallel, prange
 from ..bsdfs.dispatch import bsdf_eval, bsdf_pdf, bsdf_sample
 from ..bsdfs.phong import PHONG
+from ..emitters.area import STRATEGIES as LIGHT_STRATEGIES
+from ..emitters.selection import SELECTORS, build_selector
 from ..emitters.envmap import env_coords, env_eval, env_lookup, env_pdf_at, env_sample_coords, env_sample_full
 from ..errors import ParameterError
 from ..geometry.camera import camera_ray
@@ -70,15 +72,18 @@ class RenderSettings:
     n_env: int = 1
     seed: int = 0
     mis_compensation: bool = False
+    light_sampler: str = "power"
+    lights_per_sample: int = 1
+    light_strategy: str = "solid-angle"
     time_limit: float | None = None
     threads: int | None = None
     pass_samples: int = 1 << 19
 
     def validate(self) -> None:
         """Raise :class:`ParameterError` naming the first setting of the wrong type or out of range."""
-        for name in ("spp", "n_bsdf", "n_env", "seed", "pass_samples"):
+        for name in ("spp", "n_bsdf", "n_env", "seed", "pass_samples", "lights_per_sample"):
             _require(name, getattr(self, name), "integer")
-        for name in ("strategy", "heuristic"):
+        for name in ("strategy", "heuristic", "light_sampler", "light_strategy"):
             _require(name, getattr(self, name), "string")
         _require("mis_compensation", self.mis_compensation, "true or false")
         if self.time_limit is not None:
@@ -96,6 +101,17 @@ class RenderSettings:
                 f"bsdf and env sample counts (n_bsdf, n_env) must be >= 0 with 1 to 64 in all, got {self.n_bsdf} "
                 f"and {self.n_env}"
             )
+        if self.light_sampler not in SELECTORS:
+            raise ParameterError(f"light_sampler must be one of {list(SELECTORS)}, got {self.light_sampler!r}")
+        if self.light_strategy not in LIGHT_STRATEGIES:
+            raise ParameterError(
+                f"light_strategy must be one of {list(LIGHT_STRATEGIES)}, got {self.light_strategy!r}"
+            )
+        if not 1 <= self.lights_per_sample <= 64 or self.shading_samples > 64:
+            raise ParameterError(
+                f"lights_per_sample must be >= 1 with at most 64 shading samples in all (n_bsdf + lights_per_sample "
+                f"x n_env), got {self.lights_per_sample}"
+            )
         if self.mis_compensation and self.strategy != "mis":
             raise ParameterError(
                 "mis_compensation needs strategy 'mis' (the compensated PDF is zero on dim texels)"
@@ -110,8 +126,13 @@ class RenderSettings:
             raise ParameterError(f"pass_samples must be >= 1, got {self.pass_samples!r}")
 
     @property
+    def light_samples(self) -> int:
+        """Light slots per camera sample: K lights, ``n_env`` samples each (the lecture's K N)."""
+        return self.lights_per_sample * self.n_env
+
+    @property
     def shading_samples(self) -> int:
-        return self.n_bsdf + self.n_env
+        return self.n_bsdf + self.light_samples
 
 
 _KINDS = {"integer": numbers.Integral, "number": numbers.Real, "string": str, "true or false": bool}
@@ -410,6 +431,14 @@ class _Accumulator:
         self.nonfinite = np.zeros(n_pixels, dtype=np.int64)
 
 
+def _placeholder_environment():
+    """An environment for kernels that must be given one when the scene has none (it is never looked up)."""
+    from ..emitters.envmap import EnvironmentMap
+    from ..emitters.procedural import constant
+
+    return EnvironmentMap.from_array(constant(1.0, width=2, height=1), source="none")
+
+
 def _check_material_strategy(scene: Scene, settings: RenderSettings) -> None:
     if settings.strategy == "mis":
         for name, bsdf in scene.materials.items():
@@ -487,7 +516,12 @@ def render(
     spp_pass = max(1, min(settings.spp, settings.pass_samples // n_pixels))
     band = max(1, min(n_pixels, settings.pass_samples // spp_pass))
     acc = _Accumulator(n_pixels)
-    env = scene.environment.kernel
+    # scenes lit by an environment map alone keep its measured fast path (decisions.md 12); any emitter, no
+    # environment, or several light picks per sample take the general area-light path
+    area_path = bool(scene.emitters) or scene.environment is None or settings.lights_per_sample > 1
+    if area_path and settings.mis_compensation:
+        raise ParameterError("mis_compensation applies to scenes lit by an environment map alone")
+    env = (scene.environment or _placeholder_environment()).kernel
     stats = {
         "width": width,
         "height": height,
@@ -498,6 +532,10 @@ def render(
         "n_env": settings.n_env,
         "seed": settings.seed,
         "mis_compensation": settings.mis_compensation,
+        "light_sampler": settings.light_sampler,
+        "lights_per_sample": settings.lights_per_sample,
+        "light_strategy": settings.light_strategy,
+        "area_lights": 0,
         "threads": threads,
         "spp_per_pass": spp_pass,
         "camera_rays": 0,
@@ -511,6 +549,27 @@ def render(
     largest_pass = max(1, band * spp_pass)
     buffers = _pass_buffers(largest_pass, m)  # every pass uses leading views of these: memory bounded by one pass
     strategy = STRATEGIES[settings.strategy]
+    stages = (_shade_setup, _env_sample_stage, _env_lookup_stage, _shade_finish)
+    light_constants = {}
+    if area_path:
+        from .area_lights import STAGES, slot_buffers
+
+        lights = scene.light_table()
+        has_env = scene.environment is not None
+        selector = build_selector(
+            settings.light_sampler, lights, env_power=scene.environment_power() if has_env else None
+        )
+        stats["area_lights"] = int(lights.kind.shape[0])
+        buffers.update(slot_buffers(largest_pass * m))
+        stages = STAGES
+        light_constants = {
+            "lights": lights,
+            "sel": selector,
+            "has_env": has_env,
+            "light_strategy": LIGHT_STRATEGIES[settings.light_strategy],
+            "n_light": settings.light_samples,
+            "n_per_light": settings.n_env,
+        }
     constants = {
         "s": arrays,
         "env": env,
@@ -523,6 +582,7 @@ def render(
         "beta": HEURISTICS[settings.heuristic],
         "compensated": bool(settings.mis_compensation),
         "mis": strategy == MIS,
+        **light_constants,
     }
 
     def run_pass(acc: _Accumulator, pixel_start: int, count: int, spp_now: int, sample_start: int) -> int:
@@ -534,14 +594,31 @@ def render(
         tracer.add_mesh_hits(
             cam[:3], b["dirs"], b["needs_mesh"], b["t"], b["kind"], b["index"], b["prim"], b["b1"], b["b2"]
         )
-        for kernel in (_shade_setup, _env_sample_stage, _env_lookup_stage, _shade_finish):
-            _launch(kernel, values)
+        if area_path:
+            _launch(stages[0], values)
+            # BSDF directions: the nearest mesh hit, where a mesh may be nearer than the analytic one
+            tracer.add_mesh_hits(
+                b["ray_o"],
+                b["wdir"],
+                b["hit_mesh"],
+                b["hit_t"],
+                b["hit_kind"],
+                b["hit_index"],
+                b["hit_prim"],
+                b["hit_b1"],
+                b["hit_b2"],
+            )
+            _launch(stages[1], values)
+        else:
+            for kernel in stages:
+                _launch(kernel, values)
         flags = b["flags"]
         direct, contrib = b["direct"], b["contrib"]
         shadow_rays = int(np.count_nonzero(flags))
         test = np.nonzero(flags == TEST_MESH)[0]
         if test.size:
-            blocked = tracer.embree_occluded(b["shadow_o"][test], b["shadow_d"][test])
+            tfar = b["shadow_t"][test] if area_path else None
+            blocked = tracer.embree_occluded(b["shadow_o"][test], b["shadow_d"][test], tfar)
             flags[test] = np.where(blocked, BLOCKED, VISIBLE).astype(np.int8)
         _accumulate(direct, contrib, flags, m, spp_now, pixel_start, acc.mean, acc.m2, acc.count, acc.nonfinite)
         return shadow_rays

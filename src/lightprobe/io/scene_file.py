@@ -10,7 +10,7 @@ Example (every key shown; optional ones have their default)::
     fov_axis = "y"                      # optional: "y" vertical (default) or "x" horizontal
     resolution = [512, 512]
 
-    [environment]                       # exactly one of file / sky / constant
+    [environment]                       # exactly one of file / sky / constant; optional when objects emit
     file = "sky.exr"                    # .exr, .hdr, .pfm
     mapping = "latlong"                 # or "angular" (Debevec light probe)
     scale = 1.0
@@ -66,13 +66,24 @@ Example (every key shown; optional ones have their default)::
     edge_v = [2, 0, 0]
     material = "floor"
 
+    [[objects]]                         # any object can emit: an area light (a mesh: one light per triangle)
+    type = "rectangle"
+    origin = [-0.5, 3, -0.5]
+    edge_u = [1, 0, 0]                  # edge_u x edge_v = -Y: it emits downward (one-sided unless two_sided)
+    edge_v = [0, 0, 1]
+    emission = [1.0, 0.9, 0.8]          # radiance, RGB or a number; `material` is optional for emitters
+    emission_scale = 20.0
+
     [render]                            # optional defaults for `lightprobe render` (options override them)
     spp = 64
     strategy = "mis"
     heuristic = "power"
     bsdf_samples = 1
-    env_samples = 1
+    env_samples = 1                     # light samples per chosen light (N)
     seed = 0
+    light_sampler = "power"             # uniform | power | bvh
+    lights_per_sample = 1               # lights chosen per camera sample (K)
+    light_strategy = "solid-angle"      # area | solid-angle | hemisphere | cosine
 
 Every mistake is a :class:`~lightprobe.errors.SceneError` naming the file and the table at fault.
 """
@@ -97,7 +108,18 @@ from ..geometry.shapes import Rectangle, Sphere
 
 __all__ = ["RENDER_KEYS", "load_scene"]
 
-RENDER_KEYS = {"spp", "strategy", "heuristic", "bsdf_samples", "env_samples", "seed", "mis_compensation"}
+RENDER_KEYS = {
+    "spp",
+    "strategy",
+    "heuristic",
+    "bsdf_samples",
+    "env_samples",
+    "seed",
+    "mis_compensation",
+    "light_sampler",
+    "lights_per_sample",
+    "light_strategy",
+}
 
 
 class _Table:
@@ -254,16 +276,20 @@ def _material(t: _Table):
 
 def _object(scene: Scene, t: _Table, base: Path) -> None:
     kind = t.string("type", required=True)
-    material = t.string("material", required=True)
+    emission = t.rgb("emission")
+    if emission is not None:
+        emission = emission * t.number("emission_scale", 1.0)
+    material = t.string("material", required=emission is None)
     two_sided = t.boolean("two_sided", False)
     name = t.string("name", t.where)
+    extra = {"emission": emission} if emission is not None else {}
     if kind == "mesh":
         mesh = TriangleMesh.load(_path(base, t.get("file", required=True), t.where), smooth=t.boolean("smooth", True))
         transform = t.get("transform")
         if transform is not None and not isinstance(transform, dict):
             raise SceneError(f"{t.where}: transform must be a table")
         t.done()
-        scene.add(mesh, material, transform=transform, two_sided=two_sided, name=name)
+        scene.add(mesh, material, transform=transform, two_sided=two_sided, name=name, **extra)
         return
     if kind == "sphere":
         shape = Sphere(t.get("center", required=True), t.number("radius", required=True))
@@ -276,7 +302,7 @@ def _object(scene: Scene, t: _Table, base: Path) -> None:
     else:
         raise SceneError(f"{t.where}: unknown object type {kind!r}; use mesh, sphere, ground or rectangle")
     t.done()
-    scene.add(shape, material, two_sided=two_sided, name=name)
+    scene.add(shape, material, two_sided=two_sided, name=name, **extra)
 
 
 def load_scene(path: str | os.PathLike) -> tuple[Scene, dict]:
@@ -293,9 +319,9 @@ def load_scene(path: str | os.PathLike) -> tuple[Scene, dict]:
     base = p.resolve().parent
     root = _Table(data, str(p))
     camera = _within(f"{p}: [camera]", lambda w: _camera(_Table(root.get("camera", required=True), w)))
-    env = _within(
-        f"{p}: [environment]", lambda w: _environment(_Table(root.get("environment", required=True), w), base)
-    )
+    env = None
+    if "environment" in root.data:
+        env = _within(f"{p}: [environment]", lambda w: _environment(_Table(root.get("environment"), w), base))
     scene = Scene(camera, env, name=p.stem)
     materials = root.get("materials", {})
     if not isinstance(materials, dict):
@@ -308,6 +334,8 @@ def load_scene(path: str | os.PathLike) -> tuple[Scene, dict]:
         raise SceneError(f"{p}: the scene needs at least one [[objects]] entry")
     for i, spec in enumerate(objects):
         _within(f"{p}: objects[{i}]", lambda w, spec=spec: _object(scene, _Table(spec, w), base))
+    if env is None and not scene.emitters:
+        raise SceneError(f"{p}: the scene has no light: add an [environment] table or an object with emission")
     defaults = _render_defaults(_Table(root.get("render", {}), f"{p}: [render]"))
     root.done()
     return scene, defaults
@@ -316,6 +344,8 @@ def load_scene(path: str | os.PathLike) -> tuple[Scene, dict]:
 def _render_defaults(t: _Table) -> dict:
     """The ``[render]`` table, checked key by key (type and range), then as a whole (e.g. compensation needs
     strategy 'mis'); returns the keys given."""
+    from ..emitters.area import STRATEGIES as LIGHT_STRATEGIES
+    from ..emitters.selection import SELECTORS
     from ..integrators.wavefront import HEURISTICS, STRATEGIES, RenderSettings
 
     readers = {
@@ -326,6 +356,9 @@ def _render_defaults(t: _Table) -> dict:
         "env_samples": lambda: t.integer("env_samples", minimum=0),
         "seed": lambda: t.integer("seed", minimum=0),
         "mis_compensation": lambda: t.boolean("mis_compensation"),
+        "light_sampler": lambda: t.choice("light_sampler", list(SELECTORS)),
+        "lights_per_sample": lambda: t.integer("lights_per_sample", minimum=1),
+        "light_strategy": lambda: t.choice("light_strategy", list(LIGHT_STRATEGIES)),
     }
     assert set(readers) == RENDER_KEYS
     defaults = {key: read() for key, read in readers.items() if key in t.data}

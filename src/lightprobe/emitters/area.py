@@ -1,0 +1,665 @@
+"""Area emitters (rectangles, spheres, triangles) behind one contract, and their sampling strategies.
+
+The contract, after pbrt-v4's ``Light::SampleLi / PDF_Li / L`` and Mitsuba 3's ``sample_direction /
+pdf_direction / eval``: for a reference point ``p`` with normal ``n`` and two random numbers ``u``,
+
+* ``light_sample(...) -> (wx, wy, wz, distance, r, g, b, pdf)``: a direction toward the light, the distance to
+  the sampled point (a shadow ray tests the segment, not the ray), the radiance arriving along it (zero from the
+  back of a one-sided light) and the density **per steradian**; ``pdf == 0`` means "no sample" (the point is
+  behind a one-sided light, or in its plane);
+* ``light_pdf(...) -> pdf``: the density with which the same strategy produces direction ``w`` (0 where it never
+  does);
+* ``light_radiance(...)``: the radiance seen along a ray that hits the light with cosine ``cos_light`` between
+  the light's normal and the reversed ray (the camera and BSDF samples use it).
+
+Lights live in one table (:class:`LightArrays`), a row per emitter: rectangles, spheres and triangles (an
+emissive mesh contributes one row per triangle, as pbrt-v4 does).  Emission is uniform RGB radiance per row; a
+later textured emission replaces ``radiance[l]`` by a lookup at the sampled point and changes nothing else.
+
+Strategies (``STRATEGIES``), each with its density per steradian:
+
+``area``
+    uniform on the light's area A; converted to solid angle (the lecture's reparameterisation,
+    dw = cos(theta') dA / |x - x'|^2): p(w) = |x - x'|^2 / (|cos theta'| A).
+``solid-angle``
+    uniform in the solid angle the light subtends: spherical rectangles (Urena et al. 2013, as pbrt-v4's
+    ``SampleSphericalRectangle``), spherical triangles (Arvo 1995, pbrt-v4's ``SampleSphericalTriangle``) and
+    cones for spheres (pbrt-v4's ``Sphere::Sample``): p(w) = 1 / Omega.  Fallbacks, decided from the reference
+    point alone (so the sample and the pdf always agree): area sampling when Omega < 3e-4 sr (float round-off in
+    the spherical formulas exceeds the variance they save; pbrt-v4's ``MinSphericalSampleArea``), when Omega > 6.22
+    sr (the triangle nearly covers a hemisphere and Arvo's inversion loses precision; pbrt-v4's
+    ``MaxSphericalSampleArea``), for a parallelogram that is not a rectangle, and for a point inside a sphere.
+    For a sphere, 1 - cos(theta_max) is computed as sin^2 / (1 + cos) (no cancellation for distant spheres,
+    where pbrt-v4 switches to a Taylor series in float32).
+``hemisphere`` / ``cosine``
+    the lecture's baseline: a direction uniform (1 / 2 pi) or cosine-weighted (cos / pi) about the reference
+    normal, which counts only if it hits this light.
+
+Every light is one-sided by default (it emits on the side its normal points to: edge_u x edge_v for
+rectangles, the winding for triangles, outward for spheres); ``two_sided`` lights emit on both sides.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+from .._numba import jit, jit_parallel, prange
+from ..errors import ParameterError
+from ..geometry.frame import coordinate_system, normalize, to_world
+from ..geometry.intersect import sphere_hit
+from ..sampling.kernels import (
+    INV_2PI,
+    INV_PI,
+    TWO_PI,
+    square_to_cosine_hemisphere,
+    square_to_uniform_hemisphere,
+    square_to_uniform_triangle,
+)
+
+__all__ = [
+    "KINDS",
+    "STRATEGIES",
+    "AreaLight",
+    "LightArrays",
+    "LightSample",
+    "light_arrays",
+    "light_pdf",
+    "light_radiance",
+    "light_sample",
+]
+
+LIGHT_RECT, LIGHT_SPHERE, LIGHT_TRIANGLE = 0, 1, 2
+KINDS = {"rectangle": LIGHT_RECT, "sphere": LIGHT_SPHERE, "triangle": LIGHT_TRIANGLE}
+AREA, SOLID_ANGLE, HEMISPHERE, COSINE = 0, 1, 2, 3
+STRATEGIES = {"area": AREA, "solid-angle": SOLID_ANGLE, "hemisphere": HEMISPHERE, "cosine": COSINE}
+MIN_SOLID_ANGLE = 3e-4  # sr: below, spherical sampling falls back to area sampling (pbrt-v4)
+MAX_SOLID_ANGLE = 6.22  # sr: above, likewise (pbrt-v4's MaxSphericalSampleArea)
+
+
+class LightArrays(NamedTuple):
+    """The light table the kernels read: row l is one emitter."""
+
+    kind: np.ndarray  # (L,) int64: LIGHT_RECT / LIGHT_SPHERE / LIGHT_TRIANGLE
+    geom: np.ndarray  # (L, 12) float64: rect origin, edge_u, edge_v, unit normal | sphere centre, radius |
+    #                                    triangle v0, v1, v2, unit normal
+    radiance: np.ndarray  # (L, 3) float64
+    two_sided: np.ndarray  # (L,) int64
+    area: np.ndarray  # (L,) float64
+
+
+# --- geometry helpers ------------------------------------------------------------------------------------------------
+@jit
+def _dot(ax, ay, az, bx, by, bz):
+    return ax * bx + ay * by + az * bz
+
+
+@jit
+def _dot3(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+@jit
+def _normalize3(a):
+    return normalize(a[0], a[1], a[2])
+
+
+@jit
+def _cross(ax, ay, az, bx, by, bz):
+    return ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+
+
+@jit
+def _angle_between(ax, ay, az, bx, by, bz):
+    """Angle between unit vectors, accurate near 0 and pi (pbrt-v4's AngleBetween)."""
+    if _dot(ax, ay, az, bx, by, bz) < 0.0:
+        return math.pi - 2.0 * math.asin(min(1.0, 0.5 * math.sqrt((ax + bx) ** 2 + (ay + by) ** 2 + (az + bz) ** 2)))
+    return 2.0 * math.asin(min(1.0, 0.5 * math.sqrt((bx - ax) ** 2 + (by - ay) ** 2 + (bz - az) ** 2)))
+
+
+@jit
+def _triangle_hit(ox, oy, oz, dx, dy, dz, g):
+    """Moeller-Trumbore: t of the hit with triangle (g[0:3], g[3:6], g[6:9]), or inf."""
+    e1x, e1y, e1z = g[3] - g[0], g[4] - g[1], g[5] - g[2]
+    e2x, e2y, e2z = g[6] - g[0], g[7] - g[1], g[8] - g[2]
+    px, py, pz = _cross(dx, dy, dz, e2x, e2y, e2z)
+    det = _dot(e1x, e1y, e1z, px, py, pz)
+    if det == 0.0:
+        return math.inf
+    inv = 1.0 / det
+    sx, sy, sz = ox - g[0], oy - g[1], oz - g[2]
+    b1 = _dot(sx, sy, sz, px, py, pz) * inv
+    if b1 < 0.0 or b1 > 1.0:
+        return math.inf
+    qx, qy, qz = _cross(sx, sy, sz, e1x, e1y, e1z)
+    b2 = _dot(dx, dy, dz, qx, qy, qz) * inv
+    if b2 < 0.0 or b1 + b2 > 1.0:
+        return math.inf
+    t = _dot(e2x, e2y, e2z, qx, qy, qz) * inv
+    return t if t > 0.0 else math.inf
+
+
+@jit
+def _rect_hit(ox, oy, oz, dx, dy, dz, g):
+    nx, ny, nz = g[9], g[10], g[11]
+    denom = _dot(dx, dy, dz, nx, ny, nz)
+    if denom == 0.0:
+        return math.inf
+    t = _dot(g[0] - ox, g[1] - oy, g[2] - oz, nx, ny, nz) / denom
+    if not t > 0.0:
+        return math.inf
+    px, py, pz = ox + t * dx - g[0], oy + t * dy - g[1], oz + t * dz - g[2]
+    # coordinates in the (possibly oblique) edge basis: solve the 2x2 Gram system
+    uu = _dot(g[3], g[4], g[5], g[3], g[4], g[5])
+    vv = _dot(g[6], g[7], g[8], g[6], g[7], g[8])
+    uv = _dot(g[3], g[4], g[5], g[6], g[7], g[8])
+    pu = _dot(px, py, pz, g[3], g[4], g[5])
+    pv = _dot(px, py, pz, g[6], g[7], g[8])
+    det = uu * vv - uv * uv
+    a = (pu * vv - pv * uv) / det
+    b = (pv * uu - pu * uv) / det
+    if a < 0.0 or a > 1.0 or b < 0.0 or b > 1.0:
+        return math.inf
+    return t
+
+
+@jit
+def light_intersect(lights, l, ox, oy, oz, dx, dy, dz):
+    """(t, cos_light) of the ray (o, unit d) with light l's own surface (t = inf: missed); cos_light is the cosine
+    between the light's normal at the hit and -d (> 0: the front)."""
+    g = lights.geom[l]
+    kind = lights.kind[l]
+    if kind == LIGHT_SPHERE:
+        t = sphere_hit(ox, oy, oz, dx, dy, dz, g[0], g[1], g[2], g[3], math.inf)
+        if t == math.inf:
+            return t, 0.0
+        nx, ny, nz = normalize(ox + t * dx - g[0], oy + t * dy - g[1], oz + t * dz - g[2])
+        return t, -_dot(nx, ny, nz, dx, dy, dz)
+    if kind == LIGHT_RECT:
+        t = _rect_hit(ox, oy, oz, dx, dy, dz, g)
+    else:
+        t = _triangle_hit(ox, oy, oz, dx, dy, dz, g)
+    return t, -_dot(g[9], g[10], g[11], dx, dy, dz)
+
+
+@jit
+def light_radiance(lights, l, cos_light):
+    """Radiance leaving light l toward a viewer at cosine ``cos_light`` from its normal (0 behind a one-sided
+    light)."""
+    if cos_light > 0.0 or (cos_light < 0.0 and lights.two_sided[l] == 1):
+        return lights.radiance[l, 0], lights.radiance[l, 1], lights.radiance[l, 2]
+    return 0.0, 0.0, 0.0
+
+
+# --- solid angles ----------------------------------------------------------------------------------------------------
+@jit
+def _spherical_triangle(px, py, pz, g):
+    """Unit vectors a, b, c from p to the triangle's vertices, the angle alpha at a, and the solid angle
+    (Girard: alpha + beta + gamma - pi, with pbrt-v4's robust angles).  Solid angle 0 when degenerate."""
+    ax, ay, az = normalize(g[0] - px, g[1] - py, g[2] - pz)
+    bx, by, bz = normalize(g[3] - px, g[4] - py, g[5] - pz)
+    cx, cy, cz = normalize(g[6] - px, g[7] - py, g[8] - pz)
+    nab = _cross(ax, ay, az, bx, by, bz)
+    nbc = _cross(bx, by, bz, cx, cy, cz)
+    nca = _cross(cx, cy, cz, ax, ay, az)
+    if _dot3(nab, nab) == 0.0 or _dot3(nbc, nbc) == 0.0 or _dot3(nca, nca) == 0.0:
+        return (ax, ay, az), (bx, by, bz), (cx, cy, cz), 0.0, 0.0
+    nab = _normalize3(nab)
+    nbc = _normalize3(nbc)
+    nca = _normalize3(nca)
+    alpha = _angle_between(nab[0], nab[1], nab[2], -nca[0], -nca[1], -nca[2])
+    beta = _angle_between(nbc[0], nbc[1], nbc[2], -nab[0], -nab[1], -nab[2])
+    gamma = _angle_between(nca[0], nca[1], nca[2], -nbc[0], -nbc[1], -nbc[2])
+    return (ax, ay, az), (bx, by, bz), (cx, cy, cz), alpha, max(0.0, alpha + beta + gamma - math.pi)
+
+
+@jit
+def _rect_frame(px, py, pz, g):
+    """Ureña et al.'s local frame: x along edge_u, y along edge_v, z toward the side of p (so the rectangle lies
+    at z0 < 0).  Returns (x axis, y axis, z axis, x0, y0, z0, |edge_u|, |edge_v|)."""
+    eu = math.sqrt(_dot(g[3], g[4], g[5], g[3], g[4], g[5]))
+    ev = math.sqrt(_dot(g[6], g[7], g[8], g[6], g[7], g[8]))
+    xx, xy, xz = g[3] / eu, g[4] / eu, g[5] / eu
+    yx, yy, yz = g[6] / ev, g[7] / ev, g[8] / ev
+    zx, zy, zz = _cross(xx, xy, xz, yx, yy, yz)
+    dx, dy, dz = g[0] - px, g[1] - py, g[2] - pz
+    z0 = _dot(dx, dy, dz, zx, zy, zz)
+    if z0 > 0.0:
+        zx, zy, zz, z0 = -zx, -zy, -zz, -z0
+    return (xx, xy, xz), (yx, yy, yz), (zx, zy, zz), _dot(dx, dy, dz, xx, xy, xz), _dot(dx, dy, dz, yx, yy, yz), z0, eu, ev
+
+
+@jit
+def _rect_solid_angle_terms(x0, y0, z0, x1, y1):
+    """Edge-plane normals' z components b0, b1 and the four internal angles of the spherical rectangle."""
+    n0 = _normalize3(_cross(x0, y0, z0, x1, y0, z0))
+    n1 = _normalize3(_cross(x1, y0, z0, x1, y1, z0))
+    n2 = _normalize3(_cross(x1, y1, z0, x0, y1, z0))
+    n3 = _normalize3(_cross(x0, y1, z0, x0, y0, z0))
+    g0 = _angle_between(-n0[0], -n0[1], -n0[2], n1[0], n1[1], n1[2])
+    g1 = _angle_between(-n1[0], -n1[1], -n1[2], n2[0], n2[1], n2[2])
+    g2 = _angle_between(-n2[0], -n2[1], -n2[2], n3[0], n3[1], n3[2])
+    g3 = _angle_between(-n3[0], -n3[1], -n3[2], n0[0], n0[1], n0[2])
+    return n0[2], n2[2], g0, g1, g2, g3
+
+
+@jit
+def _is_rectangle(g):
+    return abs(_dot(g[3], g[4], g[5], g[6], g[7], g[8])) <= 1e-9 * (
+        _dot(g[3], g[4], g[5], g[3], g[4], g[5]) + _dot(g[6], g[7], g[8], g[6], g[7], g[8])
+    )
+
+
+@jit
+def _solid_angle_mode(lights, l, px, py, pz):
+    """(use spherical sampling?, solid angle, sphere's cos(theta_max) or 0) for light l seen from p: the single
+    place where the fallbacks of the module docstring are decided."""
+    g = lights.geom[l]
+    kind = lights.kind[l]
+    if kind == LIGHT_SPHERE:
+        d2 = (g[0] - px) ** 2 + (g[1] - py) ** 2 + (g[2] - pz) ** 2
+        r2 = g[3] * g[3]
+        if d2 <= r2 * (1.0 + 1e-9):
+            return False, 0.0, 0.0
+        sin2 = r2 / d2
+        one_minus_cos = sin2 / (1.0 + math.sqrt(1.0 - sin2))  # = 1 - sqrt(1 - sin2), without cancellation
+        return True, TWO_PI * one_minus_cos, 1.0 - one_minus_cos
+    if kind == LIGHT_RECT:
+        if not _is_rectangle(g):
+            return False, 0.0, 0.0
+        _, _, _, x0, y0, z0, eu, ev = _rect_frame(px, py, pz, g)
+        if z0 == 0.0:
+            return False, 0.0, 0.0
+        _, _, g0, g1, g2, g3 = _rect_solid_angle_terms(x0, y0, z0, x0 + eu, y0 + ev)
+        omega = g0 + g1 + g2 + g3 - TWO_PI
+    else:
+        omega = _spherical_triangle(px, py, pz, g)[4]
+    return MIN_SOLID_ANGLE <= omega <= MAX_SOLID_ANGLE, omega, 0.0
+
+
+# --- the strategies --------------------------------------------------------------------------------------------------
+@jit
+def _sample_area_point(lights, l, px, py, pz, u0, u1):
+    """A point uniform on light l's area and its outward normal."""
+    g = lights.geom[l]
+    kind = lights.kind[l]
+    if kind == LIGHT_RECT:
+        return (
+            (g[0] + u0 * g[3] + u1 * g[6], g[1] + u0 * g[4] + u1 * g[7], g[2] + u0 * g[5] + u1 * g[8]),
+            (g[9], g[10], g[11]),
+        )
+    if kind == LIGHT_TRIANGLE:
+        b0, b1, b2 = square_to_uniform_triangle(u0, u1)
+        return (
+            (b0 * g[0] + b1 * g[3] + b2 * g[6], b0 * g[1] + b1 * g[4] + b2 * g[7], b0 * g[2] + b1 * g[5] + b2 * g[8]),
+            (g[9], g[10], g[11]),
+        )
+    z = 1.0 - 2.0 * u0
+    r = math.sqrt(max(0.0, 1.0 - z * z))
+    phi = TWO_PI * u1
+    nx, ny, nz = r * math.cos(phi), r * math.sin(phi), z
+    return (g[0] + g[3] * nx, g[1] + g[3] * ny, g[2] + g[3] * nz), (nx, ny, nz)
+
+
+@jit
+def _area_to_solid_angle(lights, l, distance, cos_light):
+    c = abs(cos_light)
+    if c == 0.0 or distance == 0.0:
+        return 0.0
+    return distance * distance / (c * lights.area[l])
+
+
+@jit
+def _sample_spherical_rect(g, px, py, pz, u0, u1):
+    """Ureña et al. 2013 (pbrt-v4 SampleSphericalRectangle): a point on the rectangle, uniform in solid angle."""
+    ax, ay, az, x0, y0, z0, eu, ev = _rect_frame(px, py, pz, g)
+    x1, y1 = x0 + eu, y0 + ev
+    b0, b1, g0, g1, g2, g3 = _rect_solid_angle_terms(x0, y0, z0, x1, y1)
+    au = u0 * (g0 + g1 - TWO_PI) + (u0 - 1.0) * (g2 + g3)
+    fu = (math.cos(au) * b0 - b1) / math.sin(au)
+    cu = math.copysign(1.0 / math.sqrt(fu * fu + b0 * b0), fu)
+    cu = min(max(cu, -1.0 + 1e-12), 1.0 - 1e-12)
+    xu = -(cu * z0) / math.sqrt(max(0.0, 1.0 - cu * cu))
+    xu = min(max(xu, x0), x1)
+    dd = math.sqrt(xu * xu + z0 * z0)
+    h0 = y0 / math.sqrt(dd * dd + y0 * y0)
+    h1 = y1 / math.sqrt(dd * dd + y1 * y1)
+    hv = h0 + u1 * (h1 - h0)
+    yv = hv * dd / math.sqrt(1.0 - hv * hv) if hv * hv < 1.0 - 1e-6 else y1
+    yv = min(max(yv, y0), y1)
+    xx, xy, xz = ax
+    yx, yy, yz = ay
+    zx, zy, zz = az
+    return (
+        px + xu * xx + yv * yx + z0 * zx,
+        py + xu * xy + yv * yy + z0 * zy,
+        pz + xu * xz + yv * yz + z0 * zz,
+    )
+
+
+@jit
+def _sample_spherical_triangle(g, px, py, pz, u0, u1):
+    """Arvo 1995 (pbrt-v4 SampleSphericalTriangle): a unit direction uniform in the triangle's solid angle."""
+    a, b, c, alpha, omega = _spherical_triangle(px, py, pz, g)
+    ap = math.pi + u0 * omega  # the sub-triangle's area plus pi
+    cos_alpha, sin_alpha = math.cos(alpha), math.sin(alpha)
+    sin_phi = math.sin(ap) * cos_alpha - math.cos(ap) * sin_alpha
+    cos_phi = math.cos(ap) * cos_alpha + math.sin(ap) * sin_alpha
+    k1 = cos_phi + cos_alpha
+    k2 = sin_phi - sin_alpha * _dot3(a, b)
+    cos_bp = (k2 + (k2 * cos_phi - k1 * sin_phi) * cos_alpha) / ((k2 * sin_phi + k1 * cos_phi) * sin_alpha)
+    cos_bp = min(max(cos_bp, -1.0), 1.0)
+    sin_bp = math.sqrt(max(0.0, 1.0 - cos_bp * cos_bp))
+    ca = _dot3(c, a)
+    gx, gy, gz = normalize(c[0] - ca * a[0], c[1] - ca * a[1], c[2] - ca * a[2])
+    cpx, cpy, cpz = cos_bp * a[0] + sin_bp * gx, cos_bp * a[1] + sin_bp * gy, cos_bp * a[2] + sin_bp * gz
+    cos_theta = 1.0 - u1 * (1.0 - _dot(cpx, cpy, cpz, b[0], b[1], b[2]))
+    sin_theta = math.sqrt(max(0.0, 1.0 - cos_theta * cos_theta))
+    cb = _dot(cpx, cpy, cpz, b[0], b[1], b[2])
+    hx, hy, hz = normalize(cpx - cb * b[0], cpy - cb * b[1], cpz - cb * b[2])
+    return normalize(
+        cos_theta * b[0] + sin_theta * hx, cos_theta * b[1] + sin_theta * hy, cos_theta * b[2] + sin_theta * hz
+    )
+
+
+@jit
+def _toward(lights, l, px, py, pz, wx, wy, wz, pdf):
+    """The sample record for direction w from p: distance and radiance where the ray meets light l."""
+    t, cos_light = light_intersect(lights, l, px, py, pz, wx, wy, wz)
+    if t == math.inf:  # a hemisphere sample that misses the light: a sample of the density, with no radiance
+        return wx, wy, wz, math.inf, 0.0, 0.0, 0.0, pdf
+    r, gg, b = light_radiance(lights, l, cos_light)
+    return wx, wy, wz, t, r, gg, b, pdf
+
+
+@jit
+def _behind(lights, l, px, py, pz):
+    """p cannot receive light from l: behind (or in the plane of) a one-sided planar light."""
+    if lights.kind[l] == LIGHT_SPHERE or lights.two_sided[l] == 1:
+        return False
+    g = lights.geom[l]
+    return _dot(px - g[0], py - g[1], pz - g[2], g[9], g[10], g[11]) <= 0.0
+
+
+@jit
+def light_sample(lights, l, strategy, px, py, pz, nx, ny, nz, u0, u1):
+    """Sample a direction toward light l from point p (normal n): (wx, wy, wz, distance, r, g, b, pdf per sr)."""
+    if strategy == HEMISPHERE or strategy == COSINE:
+        ts, tt = coordinate_system(nx, ny, nz)
+        if strategy == HEMISPHERE:
+            wl = square_to_uniform_hemisphere(u0, u1)
+            pdf = INV_2PI
+        else:
+            wl = square_to_cosine_hemisphere(u0, u1)
+            pdf = wl[2] * INV_PI
+        wx, wy, wz = to_world(ts, tt, (nx, ny, nz), wl[0], wl[1], wl[2])
+        return _toward(lights, l, px, py, pz, wx, wy, wz, pdf)
+    if _behind(lights, l, px, py, pz):
+        return 0.0, 0.0, 1.0, math.inf, 0.0, 0.0, 0.0, 0.0
+    g = lights.geom[l]
+    if strategy == SOLID_ANGLE:
+        spherical, omega, cos_max = _solid_angle_mode(lights, l, px, py, pz)
+        if spherical:
+            kind = lights.kind[l]
+            if kind == LIGHT_TRIANGLE:
+                wx, wy, wz = _sample_spherical_triangle(g, px, py, pz, u0, u1)
+                return _toward(lights, l, px, py, pz, wx, wy, wz, 1.0 / omega)
+            if kind == LIGHT_RECT:
+                qx, qy, qz = _sample_spherical_rect(g, px, py, pz, u0, u1)
+                wx, wy, wz = normalize(qx - px, qy - py, qz - pz)
+                return _toward(lights, l, px, py, pz, wx, wy, wz, 1.0 / omega)
+            # sphere: a direction uniform in the cone of directions that hit it
+            cx, cy, cz = normalize(g[0] - px, g[1] - py, g[2] - pz)
+            ts, tt = coordinate_system(cx, cy, cz)
+            one_minus_cos = u1 * (1.0 - cos_max)
+            cos_t = 1.0 - one_minus_cos
+            sin_t = math.sqrt(max(0.0, one_minus_cos * (2.0 - one_minus_cos)))
+            phi = TWO_PI * u0
+            wx, wy, wz = to_world(ts, tt, (cx, cy, cz), sin_t * math.cos(phi), sin_t * math.sin(phi), cos_t)
+            wx, wy, wz = normalize(wx, wy, wz)
+            rec = _toward(lights, l, px, py, pz, wx, wy, wz, 1.0 / omega)
+            if rec[3] == math.inf:  # the cone's rim grazes the sphere: round-off, take the tangent point's distance
+                d = math.sqrt((g[0] - px) ** 2 + (g[1] - py) ** 2 + (g[2] - pz) ** 2)
+                r, gg, b = light_radiance(lights, l, 1e-12)
+                return wx, wy, wz, math.sqrt(max(0.0, d * d - g[3] * g[3])), r, gg, b, 1.0 / omega
+            return rec
+    # area sampling (the strategy itself, or the fallback of solid-angle sampling)
+    q, nq = _sample_area_point(lights, l, px, py, pz, u0, u1)
+    dx, dy, dz = q[0] - px, q[1] - py, q[2] - pz
+    dist = math.sqrt(dx * dx + dy * dy + dz * dz)
+    if dist == 0.0:
+        return 0.0, 0.0, 1.0, math.inf, 0.0, 0.0, 0.0, 0.0
+    wx, wy, wz = dx / dist, dy / dist, dz / dist
+    cos_light = -_dot(nq[0], nq[1], nq[2], wx, wy, wz)
+    pdf = _area_to_solid_angle(lights, l, dist, cos_light)
+    if pdf == 0.0:
+        return wx, wy, wz, math.inf, 0.0, 0.0, 0.0, 0.0
+    if lights.kind[l] == LIGHT_SPHERE:
+        # a direction toward a sphere crosses it twice, and area sampling may pick either point (the far one seen
+        # through the sphere): the density of the direction sums both (light_pdf), and the radiance and distance
+        # are those of the first crossing, which is what a ray in direction w meets
+        pdf = light_pdf(lights, l, AREA, px, py, pz, nx, ny, nz, wx, wy, wz)
+        return _toward(lights, l, px, py, pz, wx, wy, wz, pdf)
+    r, gg, b = light_radiance(lights, l, cos_light)
+    return wx, wy, wz, dist, r, gg, b, pdf
+
+
+@jit
+def light_pdf(lights, l, strategy, px, py, pz, nx, ny, nz, wx, wy, wz):
+    """Density per steradian with which ``light_sample(..., strategy, ...)`` produces unit direction w."""
+    if strategy == HEMISPHERE or strategy == COSINE:
+        c = _dot(nx, ny, nz, wx, wy, wz)
+        if c <= 0.0:
+            return 0.0
+        return INV_2PI if strategy == HEMISPHERE else c * INV_PI
+    if _behind(lights, l, px, py, pz):
+        return 0.0
+    t, cos_light = light_intersect(lights, l, px, py, pz, wx, wy, wz)
+    if t == math.inf:
+        return 0.0
+    if strategy == SOLID_ANGLE:
+        spherical, omega, _ = _solid_angle_mode(lights, l, px, py, pz)
+        if spherical:
+            return 1.0 / omega
+    pdf = _area_to_solid_angle(lights, l, t, cos_light)
+    if lights.kind[l] == LIGHT_SPHERE:
+        # the ray crosses the sphere twice; area sampling can pick either point (the far one seen through the
+        # sphere), so the density of the direction is the sum over both crossings
+        g = lights.geom[l]
+        ox, oy, oz = px + t * wx, py + t * wy, pz + t * wz
+        # second crossing: along the chord, t2 = t + 2 (c - x) . w with c the centre
+        t2 = t + 2.0 * _dot(g[0] - ox, g[1] - oy, g[2] - oz, wx, wy, wz)
+        if t2 > t:
+            pdf += _area_to_solid_angle(lights, l, t2, cos_light)
+    return pdf
+
+
+# --- batch kernels and the Python interface -----------------------------------------------------------------------
+@jit_parallel
+def _sample_batch(lights, l, strategy, points, normals, u):
+    n = u.shape[0]
+    out = np.empty((n, 8))
+    for i in prange(n):
+        rec = light_sample(
+            lights,
+            l,
+            strategy,
+            points[i, 0],
+            points[i, 1],
+            points[i, 2],
+            normals[i, 0],
+            normals[i, 1],
+            normals[i, 2],
+            u[i, 0],
+            u[i, 1],
+        )
+        for j in range(8):
+            out[i, j] = rec[j]
+    return out
+
+
+@jit_parallel
+def _pdf_batch(lights, l, strategy, points, normals, dirs):
+    n = dirs.shape[0]
+    out = np.empty(n)
+    for i in prange(n):
+        out[i] = light_pdf(
+            lights,
+            l,
+            strategy,
+            points[i, 0],
+            points[i, 1],
+            points[i, 2],
+            normals[i, 0],
+            normals[i, 1],
+            normals[i, 2],
+            dirs[i, 0],
+            dirs[i, 1],
+            dirs[i, 2],
+        )
+    return out
+
+
+@jit_parallel
+def _eval_batch(lights, l, points, dirs):
+    n = dirs.shape[0]
+    out = np.zeros((n, 3))
+    for i in prange(n):
+        t, c = light_intersect(lights, l, points[i, 0], points[i, 1], points[i, 2], dirs[i, 0], dirs[i, 1], dirs[i, 2])
+        if t < math.inf:
+            out[i, 0], out[i, 1], out[i, 2] = light_radiance(lights, l, c)
+    return out
+
+
+@dataclass(frozen=True)
+class LightSample:
+    """What :meth:`AreaLight.sample_li` returns, per sample: unit direction toward the light (N, 3), distance to
+    the sampled point (N,), radiance arriving along it (N, 3), density per steradian (N,; 0 = no sample), and
+    whether the light is a delta light (never, for area lights)."""
+
+    direction: np.ndarray
+    distance: np.ndarray
+    radiance: np.ndarray
+    pdf: np.ndarray
+    delta: bool = False
+
+
+def _rgb(value, name: str) -> np.ndarray:
+    from ..bsdfs.base import rgb_param
+
+    return rgb_param(value, name)
+
+
+def _rows(points, name: str, n: int | None = None) -> np.ndarray:
+    a = np.asarray(points, dtype=np.float64)
+    if a.ndim == 1:
+        a = a[None, :]
+    if a.ndim != 2 or a.shape[1] != 3:
+        raise ParameterError(f"{name} must be (N, 3) or (3,), got shape {a.shape}")
+    if n is not None and a.shape[0] == 1 and n > 1:
+        a = np.repeat(a, n, axis=0)
+    return np.ascontiguousarray(a)
+
+
+class AreaLight:
+    """One area emitter with uniform radiance, testable outside the renderer.
+
+    ``AreaLight.rectangle(origin, edge_u, edge_v, radiance)``, ``AreaLight.sphere(center, radius, radiance)``,
+    ``AreaLight.triangle(v0, v1, v2, radiance)``; ``two_sided=True`` emits on both sides.  ``strategy`` is one of
+    :data:`STRATEGIES`.
+    """
+
+    def __init__(self, kind: str, geom, radiance, *, two_sided: bool = False):
+        if kind not in KINDS:
+            raise ParameterError(f"light kind must be one of {list(KINDS)}, got {kind!r}")
+        self.kind = kind
+        self.geom = np.asarray(geom, dtype=np.float64).reshape(12)
+        self.radiance = _rgb(radiance, "emission")
+        self.two_sided = bool(two_sided)
+        self._arrays = light_arrays([self])
+
+    @classmethod
+    def rectangle(cls, origin, edge_u, edge_v, radiance, *, two_sided: bool = False) -> AreaLight:
+        from ..geometry.shapes import Rectangle
+
+        r = Rectangle(origin, edge_u, edge_v)
+        return cls("rectangle", [*r.origin, *r.edge_u, *r.edge_v, *r.normal], radiance, two_sided=two_sided)
+
+    @classmethod
+    def sphere(cls, center, radius, radiance, *, two_sided: bool = False) -> AreaLight:
+        from ..geometry.shapes import Sphere
+
+        s = Sphere(center, radius)
+        return cls("sphere", [*s.center, s.radius, *([0.0] * 8)], radiance, two_sided=two_sided)
+
+    @classmethod
+    def triangle(cls, v0, v1, v2, radiance, *, two_sided: bool = False) -> AreaLight:
+        v = np.array([v0, v1, v2], dtype=np.float64)
+        n = np.cross(v[1] - v[0], v[2] - v[0])
+        if v.shape != (3, 3) or not np.all(np.isfinite(v)) or not np.linalg.norm(n) > 0:
+            raise ParameterError("a triangle light needs three finite, non-collinear vertices")
+        return cls("triangle", [*v.reshape(-1), *(n / np.linalg.norm(n))], radiance, two_sided=two_sided)
+
+    @property
+    def area(self) -> float:
+        return float(self._arrays.area[0])
+
+    @property
+    def power(self) -> float:
+        """Emitted flux of the luminance: pi A L (x 2 if two-sided)."""
+        from ..color import luminance
+
+        return float(math.pi * self.area * luminance(self.radiance) * (2 if self.two_sided else 1))
+
+    def _strategy(self, strategy: str) -> int:
+        if strategy not in STRATEGIES:
+            raise ParameterError(f"light strategy must be one of {list(STRATEGIES)}, got {strategy!r}")
+        return STRATEGIES[strategy]
+
+    def sample_li(self, points, normals, u, *, strategy: str = "solid-angle") -> LightSample:
+        """Sample directions toward the light from ``points`` (N, 3) with ``normals`` (N, 3); ``u`` (N, 2)."""
+        uu = np.ascontiguousarray(np.asarray(u, dtype=np.float64).reshape(-1, 2))
+        n = uu.shape[0]
+        out = _sample_batch(
+            self._arrays, 0, self._strategy(strategy), _rows(points, "points", n), _rows(normals, "normals", n), uu
+        )
+        return LightSample(out[:, :3], out[:, 3], out[:, 4:7], out[:, 7])
+
+    def pdf_li(self, points, normals, dirs, *, strategy: str = "solid-angle") -> np.ndarray:
+        d = _rows(dirs, "dirs")
+        n = d.shape[0]
+        return _pdf_batch(
+            self._arrays, 0, self._strategy(strategy), _rows(points, "points", n), _rows(normals, "normals", n), d
+        )
+
+    def eval(self, points, dirs) -> np.ndarray:
+        """Radiance (N, 3) seen from ``points`` along ``dirs`` (zero where the ray misses the light or meets its
+        back)."""
+        d = _rows(dirs, "dirs")
+        return _eval_batch(self._arrays, 0, _rows(points, "points", d.shape[0]), d)
+
+    def __repr__(self) -> str:
+        return f"AreaLight({self.kind!r}, radiance={self.radiance.tolist()}, two_sided={self.two_sided})"
+
+
+def _area(kind: str, g: np.ndarray) -> float:
+    if kind == "rectangle":
+        return float(np.linalg.norm(np.cross(g[3:6], g[6:9])))
+    if kind == "triangle":
+        return float(0.5 * np.linalg.norm(np.cross(g[3:6] - g[0:3], g[6:9] - g[0:3])))
+    return float(4.0 * math.pi * g[3] ** 2)
+
+
+def light_arrays(lights) -> LightArrays:
+    """The kernels' table of ``lights`` (a sequence of :class:`AreaLight`)."""
+    n = len(lights)
+    return LightArrays(
+        np.array([KINDS[x.kind] for x in lights], dtype=np.int64).reshape(n),
+        np.array([x.geom for x in lights], dtype=np.float64).reshape(n, 12),
+        np.array([x.radiance for x in lights], dtype=np.float64).reshape(n, 3),
+        np.array([x.two_sided for x in lights], dtype=np.int64).reshape(n),
+        np.array([_area(x.kind, x.geom) for x in lights], dtype=np.float64).reshape(n),
+    )

@@ -1,0 +1,352 @@
+"""The wavefront renderer's shading stages for scenes with area lights (the environment, if any, is one more light).
+
+Scenes lit by an environment map alone keep the measured four-stage environment path of
+:mod:`lightprobe.integrators.wavefront`; a scene with emitters shades here instead:
+
+1. ``_lights_setup``: hit points and frames; a camera ray that hits an emitter sees its radiance; BSDF and
+   hemisphere directions get their nearest analytic hit (and a flag if a mesh may be nearer); each light slot
+   picks a light with the selector (one pick per group of ``n_per_light`` slots, from that group's own random
+   dimension, so a pick never shifts the dimensions of other samples) and samples it with the light strategy.
+2. Embree closest hits for the BSDF directions that may reach a mesh.
+3. ``_lights_finish``: a BSDF or hemisphere direction counts the radiance of what it hits: an emitter's (MIS
+   weight from p_l x pdf_li of *that* emitter), the environment's if it escapes, nothing if it hits an ordinary
+   surface (so it needs no shadow ray).  A light sample casts a shadow ray over the *segment* to the sampled
+   point (tested against analytic shapes here, left for Embree with its ``tfar`` otherwise).
+
+The estimator of a light slot is the lecture's 1/(KN) sum f L cos / (p_l p(x')), combined with BSDF samples by the
+balance or power heuristic on sample-count-weighted densities (n_bsdf p_bsdf against K N p_l p_li).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .._numba import jit, jit_parallel, prange
+from ..bsdfs.dispatch import bsdf_eval, bsdf_pdf, bsdf_sample
+from ..emitters.area import light_intersect, light_pdf, light_radiance, light_sample
+from ..emitters.envmap import env_eval, env_eval_pdf, env_sample
+from ..emitters.selection import select_light, selector_pmf
+from ..geometry.frame import coordinate_system, to_local, to_world
+from ..geometry.intersect import MESH, MISS, RECT, SPHERE, closest_analytic, may_hit_mesh, occluded_analytic
+from ..geometry.intersect import ray_offset, surface
+from ..sampling.kernels import INV_2PI, cosine_hemisphere_pdf, square_to_cosine_hemisphere
+from ..sampling.kernels import square_to_uniform_hemisphere
+from ..sampling.mis import mis_weight
+from ..sampling.rng import random_uniform, sample_key
+
+__all__ = ["slot_buffers"]
+
+# techniques (the renderer's strategies) and slot states, as in wavefront.py
+UNIFORM, COSINE, BRDF, ENV, MIS = range(5)
+SLOT_NONE, SLOT_BSDF, SLOT_LIGHT, SLOT_HEMI = 0, 1, 2, 3
+NONE, VISIBLE, TEST_MESH, BLOCKED = 0, 1, 2, 3
+
+
+@jit
+def emitter_of(s, kind, index, prim):
+    """Row of the light table for a surface hit, or -1 if the surface does not emit."""
+    if kind == SPHERE:
+        return s.sphere_light[index]
+    if kind == RECT:
+        return s.rect_light[index]
+    if kind == MESH:
+        start = s.mesh_light_start[index]
+        return start + prim if start >= 0 else -1
+    return -1
+
+
+@jit
+def _light_slot(n_bsdf, n_per_light, strategy, j):
+    """The slot whose random dimension picks the light for light slot j (the first of its group)."""
+    if strategy == MIS:
+        return n_bsdf + ((j - n_bsdf) // n_per_light) * n_per_light
+    return j
+
+
+@jit_parallel
+def _lights_setup(
+    s,
+    env,
+    has_env,
+    lights,
+    sel,
+    cam,
+    seed,
+    pixel_start,
+    spp_pass,
+    sample_start,
+    dirs,
+    t,
+    kind,
+    index,
+    prim,
+    b1,
+    b2,
+    strategy,
+    light_strategy,
+    n_bsdf,
+    n_light,
+    n_per_light,
+    direct,
+    point,
+    gnormal,
+    frame,
+    wo_local,
+    material,
+    state,
+    wdir,
+    wloc,
+    tpdf,
+    bweight,
+    radiance,
+    seg,
+    ray_o,
+    hit_t,
+    hit_kind,
+    hit_index,
+    hit_prim,
+    hit_b1,
+    hit_b2,
+    hit_mesh,
+):
+    m = n_bsdf + n_light
+    ox, oy, oz = cam[0], cam[1], cam[2]
+    for k in prange(dirs.shape[0]):
+        base = k * m
+        material[k] = -1
+        for j in range(m):
+            state[base + j] = SLOT_NONE
+            hit_mesh[base + j] = False
+        dx, dy, dz = dirs[k, 0], dirs[k, 1], dirs[k, 2]
+        if kind[k] == MISS:
+            if has_env:
+                direct[k, 0], direct[k, 1], direct[k, 2] = env_eval(env, dx, dy, dz)
+            else:
+                direct[k, 0] = direct[k, 1] = direct[k, 2] = 0.0
+            continue
+        direct[k, 0] = direct[k, 1] = direct[k, 2] = 0.0
+        p, ng, ns, mat, two_sided = surface(s, kind[k], index[k], prim[k], b1[k], b2[k], ox, oy, oz, dx, dy, dz, t[k])
+        emitter = emitter_of(s, kind[k], index[k], prim[k])
+        if emitter >= 0:  # the camera sees the light itself
+            tl, cos_light = light_intersect(lights, emitter, ox, oy, oz, dx, dy, dz)
+            if tl < math.inf:
+                direct[k, 0], direct[k, 1], direct[k, 2] = light_radiance(lights, emitter, cos_light)
+        if two_sided == 1 and -(dx * ng[0] + dy * ng[1] + dz * ng[2]) < 0.0:
+            ng = (-ng[0], -ng[1], -ng[2])
+            ns = (-ns[0], -ns[1], -ns[2])
+        ts, tt = coordinate_system(ns[0], ns[1], ns[2])
+        wo = to_local(ts, tt, ns, -dx, -dy, -dz)
+        if wo[2] <= 0.0:
+            continue
+        for c in range(3):
+            point[k, c] = p[c]
+            gnormal[k, c] = ng[c]
+            frame[k, c] = ts[c]
+            frame[k, 3 + c] = tt[c]
+            frame[k, 6 + c] = ns[c]
+            wo_local[k, c] = wo[c]
+        material[k] = mat
+        mk = s.material_kind[mat]
+        mp = s.material_params[mat]
+        key = sample_key(seed, pixel_start + k // spp_pass, sample_start + k % spp_pass)
+        for j in range(m):
+            r = base + j
+            u0 = random_uniform(key, 2 + 3 * j)
+            u1 = random_uniform(key, 3 + 3 * j)
+            technique = strategy
+            if strategy == MIS:
+                technique = BRDF if j < n_bsdf else ENV
+            if technique == ENV:
+                picker = _light_slot(n_bsdf, n_per_light, strategy, j)
+                light, pmf = select_light(
+                    sel, p[0], p[1], p[2], ng[0], ng[1], ng[2], random_uniform(key, 4 + 3 * picker)
+                )
+                if light < 0 or pmf <= 0.0:
+                    continue
+                if light == sel.env_index:
+                    wx, wy, wz, pdf = env_sample(env, False, u0, u1)
+                    lr, lg, lb = env_eval(env, wx, wy, wz)
+                    dist = math.inf
+                else:
+                    wx, wy, wz, dist, lr, lg, lb, pdf = light_sample(
+                        lights, light, light_strategy, p[0], p[1], p[2], ng[0], ng[1], ng[2], u0, u1
+                    )
+                if pdf <= 0.0 or (lr == 0.0 and lg == 0.0 and lb == 0.0):
+                    continue
+                wdir[r, 0], wdir[r, 1], wdir[r, 2] = wx, wy, wz
+                radiance[r, 0], radiance[r, 1], radiance[r, 2] = lr, lg, lb
+                tpdf[r] = pmf * pdf
+                seg[r] = dist
+                state[r] = SLOT_LIGHT
+                continue
+            if technique == BRDF:
+                wi, pdf, w = bsdf_sample(mk, mp, wo, u0, u1, random_uniform(key, 4 + 3 * j))
+                if pdf <= 0.0 or (w[0] == 0.0 and w[1] == 0.0 and w[2] == 0.0):
+                    continue
+                bweight[r, 0], bweight[r, 1], bweight[r, 2] = w
+                state[r] = SLOT_BSDF
+            else:
+                if technique == UNIFORM:
+                    wi = square_to_uniform_hemisphere(u0, u1)
+                    pdf = INV_2PI
+                else:
+                    wi = square_to_cosine_hemisphere(u0, u1)
+                    pdf = cosine_hemisphere_pdf(wi[0], wi[1], wi[2])
+                if wi[2] <= 0.0 or pdf <= 0.0:
+                    continue
+                state[r] = SLOT_HEMI
+            wx, wy, wz = to_world(ts, tt, ns, wi[0], wi[1], wi[2])
+            wdir[r, 0], wdir[r, 1], wdir[r, 2] = wx, wy, wz
+            wloc[r, 0], wloc[r, 1], wloc[r, 2] = wi
+            tpdf[r] = pdf
+            # the nearest hit along the direction decides what it sees (an emitter, the sky, or nothing)
+            qx, qy, qz = ray_offset(p[0], p[1], p[2], ng[0], ng[1], ng[2], wx, wy, wz)
+            ray_o[r, 0], ray_o[r, 1], ray_o[r, 2] = qx, qy, qz
+            th, kh, ih = closest_analytic(s, qx, qy, qz, wx, wy, wz, np.inf)
+            hit_t[r], hit_kind[r], hit_index[r] = th, kh, ih
+            hit_prim[r] = 0
+            hit_b1[r] = 0.0
+            hit_b2[r] = 0.0
+            hit_mesh[r] = may_hit_mesh(s, qx, qy, qz, wx, wy, wz, th)
+
+
+@jit_parallel
+def _lights_finish(
+    s,
+    env,
+    has_env,
+    lights,
+    sel,
+    strategy,
+    light_strategy,
+    n_bsdf,
+    n_light,
+    beta,
+    point,
+    gnormal,
+    frame,
+    wo_local,
+    material,
+    state,
+    wdir,
+    wloc,
+    tpdf,
+    bweight,
+    radiance,
+    seg,
+    ray_o,
+    hit_t,
+    hit_kind,
+    hit_index,
+    hit_prim,
+    contrib,
+    flags,
+    shadow_o,
+    shadow_d,
+    shadow_t,
+):
+    m = n_bsdf + n_light
+    inv_m = 1.0 / m
+    for k in prange(point.shape[0]):
+        base = k * m
+        for j in range(m):
+            flags[base + j] = NONE
+        if material[k] < 0:
+            continue
+        ts = (frame[k, 0], frame[k, 1], frame[k, 2])
+        tt = (frame[k, 3], frame[k, 4], frame[k, 5])
+        ns = (frame[k, 6], frame[k, 7], frame[k, 8])
+        wo = (wo_local[k, 0], wo_local[k, 1], wo_local[k, 2])
+        px, py, pz = point[k, 0], point[k, 1], point[k, 2]
+        nx, ny, nz = gnormal[k, 0], gnormal[k, 1], gnormal[k, 2]
+        mk = s.material_kind[material[k]]
+        mp = s.material_params[material[k]]
+        for j in range(m):
+            r = base + j
+            st = state[r]
+            if st == SLOT_NONE:
+                continue
+            wx, wy, wz = wdir[r, 0], wdir[r, 1], wdir[r, 2]
+            if st == SLOT_LIGHT:
+                wi = to_local(ts, tt, ns, wx, wy, wz)
+                f = bsdf_eval(mk, mp, wo, wi)
+                if f[0] == 0.0 and f[1] == 0.0 and f[2] == 0.0:
+                    continue
+                scale = wi[2] / tpdf[r] * inv_m
+                if strategy == MIS:
+                    pb = bsdf_pdf(mk, mp, wo, wi)
+                    scale = wi[2] / tpdf[r] * mis_weight(n_light, tpdf[r], n_bsdf, pb, beta) / n_light
+                cr, cg, cb = f[0] * radiance[r, 0] * scale, f[1] * radiance[r, 1] * scale, f[2] * radiance[r, 2] * scale
+                if cr == 0.0 and cg == 0.0 and cb == 0.0:
+                    continue
+                qx, qy, qz = ray_offset(px, py, pz, nx, ny, nz, wx, wy, wz)
+                tmax = math.inf
+                if seg[r] < math.inf:  # a point on an area light: test the segment, stopping short of the light
+                    tx, ty, tz = px + seg[r] * wx - qx, py + seg[r] * wy - qy, pz + seg[r] * wz - qz
+                    tmax = math.sqrt(tx * tx + ty * ty + tz * tz) * (1.0 - 1e-5)
+                if occluded_analytic(s, qx, qy, qz, wx, wy, wz, tmax):
+                    flags[r] = BLOCKED
+                    continue
+                contrib[r, 0], contrib[r, 1], contrib[r, 2] = cr, cg, cb
+                if may_hit_mesh(s, qx, qy, qz, wx, wy, wz, tmax):
+                    flags[r] = TEST_MESH
+                    shadow_o[r, 0], shadow_o[r, 1], shadow_o[r, 2] = qx, qy, qz
+                    shadow_d[r, 0], shadow_d[r, 1], shadow_d[r, 2] = wx, wy, wz
+                    shadow_t[r] = tmax if tmax < 3e38 else 3e38
+                else:
+                    flags[r] = VISIBLE
+                continue
+            # a BSDF or hemisphere direction: what does it hit?
+            light = -1
+            lr = lg = lb = 0.0
+            p_light = 0.0
+            if hit_kind[r] == MISS:
+                if has_env:
+                    (lr, lg, lb), penv = env_eval_pdf(env, False, wx, wy, wz)
+                    light = sel.env_index
+                    p_light = penv
+            else:
+                light = emitter_of(s, hit_kind[r], hit_index[r], hit_prim[r])
+                if light >= 0:
+                    tl, cos_light = light_intersect(lights, light, ray_o[r, 0], ray_o[r, 1], ray_o[r, 2], wx, wy, wz)
+                    if tl < math.inf:
+                        lr, lg, lb = light_radiance(lights, light, cos_light)
+                    p_light = light_pdf(lights, light, light_strategy, px, py, pz, nx, ny, nz, wx, wy, wz)
+            if light < 0 or (lr == 0.0 and lg == 0.0 and lb == 0.0):
+                continue
+            if st == SLOT_BSDF:
+                scale = inv_m
+                if strategy == MIS:
+                    pl = selector_pmf(sel, px, py, pz, nx, ny, nz, light) * p_light
+                    scale = mis_weight(n_bsdf, tpdf[r], n_light, pl, beta) / n_bsdf
+                cr, cg, cb = bweight[r, 0] * lr * scale, bweight[r, 1] * lg * scale, bweight[r, 2] * lb * scale
+            else:
+                wi = (wloc[r, 0], wloc[r, 1], wloc[r, 2])
+                f = bsdf_eval(mk, mp, wo, wi)
+                scale = wi[2] / tpdf[r] * inv_m
+                cr, cg, cb = f[0] * lr * scale, f[1] * lg * scale, f[2] * lb * scale
+            if cr == 0.0 and cg == 0.0 and cb == 0.0:
+                continue
+            contrib[r, 0], contrib[r, 1], contrib[r, 2] = cr, cg, cb
+            flags[r] = VISIBLE  # the closest hit already decided visibility
+
+
+def slot_buffers(nm: int) -> dict[str, np.ndarray]:
+    """The extra per-slot arrays of this path, keyed by kernel parameter name."""
+    return {
+        "seg": np.empty(nm),  # distance to the sampled point on an area light (inf: the environment)
+        "ray_o": np.empty((nm, 3)),  # origin of a BSDF direction's ray (offset from the surface)
+        "hit_t": np.empty(nm),  # its nearest hit
+        "hit_kind": np.empty(nm, np.int64),
+        "hit_index": np.empty(nm, np.int64),
+        "hit_prim": np.empty(nm, np.int64),
+        "hit_b1": np.empty(nm),
+        "hit_b2": np.empty(nm),
+        "hit_mesh": np.empty(nm, np.bool_),  # a mesh may be nearer than the analytic hit
+        "shadow_t": np.empty(nm, np.float32),  # the segment length of a shadow ray left for Embree
+    }
+
+
+STAGES = (_lights_setup, _lights_finish)

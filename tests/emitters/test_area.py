@@ -1,0 +1,185 @@
+"""Area emitters through their interface: chi-square of every strategy against its own pdf at several reference
+points, the pdf integrates to one, sample() and pdf() agree, and irradiance matches closed forms."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from lightprobe.analysis import chi2
+from lightprobe.emitters.area import STRATEGIES, AreaLight
+from lightprobe.geometry.frame import frame_matrix
+
+# A 1 x 0.6 rectangle and a triangle in the plane y = 2 facing down (-Y), and a sphere of radius 0.4 at height 2.
+RECT = AreaLight.rectangle([-0.5, 2.0, -0.3], [0.0, 0.0, 0.6], [1.0, 0.0, 0.0], 3.0)  # (+Z) x (+X) = +Y: faces up
+RECT_DOWN = AreaLight.rectangle([-0.5, 2.0, -0.3], [1.0, 0.0, 0.0], [0.0, 0.0, 0.6], 3.0)  # faces down
+TRIANGLE = AreaLight.triangle([-0.5, 2.0, -0.3], [0.5, 2.0, -0.3], [0.1, 2.0, 0.5], 2.0)  # winding: faces down
+SPHERE = AreaLight.sphere([0.2, 2.0, 0.1], 0.4, 1.5)
+LIGHTS = {"rectangle": RECT_DOWN, "triangle": TRIANGLE, "sphere": SPHERE}
+
+# Reference points (position, normal): near, far, grazing (the light near the horizon of the receiver), just
+# above the plane of the light (grazing from the light's side), inside the plane, and behind a one-sided light.
+POINTS = {
+    "near": ([0.1, 1.5, 0.0], [0.0, 1.0, 0.0]),
+    "far": ([3.0, -20.0, 2.0], [0.0, 1.0, 0.0]),
+    "grazing": ([4.0, 1.8, 0.0], [0.0, 1.0, 0.0]),
+    "light-plane-grazing": ([3.0, 1.9, 0.2], [-1.0, 0.0, 0.0]),  # 2 degrees below the light's plane
+}
+
+
+def _frame_toward(light: AreaLight, p):
+    """Chi-square frame with its axis toward the light's centre (the lobe of a small light sits on the axis)."""
+    g = light.geom
+    centre = {"rectangle": g[0:3] + 0.5 * (g[3:6] + g[6:9]), "triangle": (g[0:3] + g[3:6] + g[6:9]) / 3}.get(
+        light.kind, g[0:3]
+    )
+    d = centre - np.asarray(p, dtype=float)
+    return frame_matrix(d / np.linalg.norm(d))
+
+
+def _chi2(light, strategy, p, n, samples=200_000, seed=1):
+    u = np.random.default_rng(seed).random((samples, 2))
+    s = light.sample_li(p, n, u, strategy=strategy)
+    valid = s.pdf > 0
+
+    def density(v):
+        return light.pdf_li(p, n, v, strategy=strategy)
+
+    frame = _frame_toward(light, p)
+    edges = chi2.equal_mass_theta_edges(density, 48, frame=frame)
+    return chi2.spherical_test(
+        s.direction[valid],
+        density,
+        frame=frame,
+        theta_edges=edges,
+        phi_edges=np.linspace(0, 2 * np.pi, 65),
+        test_count=len(LIGHTS) * len(POINTS) * 2 + len(LIGHTS) * 2,
+    ), s
+
+
+@pytest.mark.parametrize("point", list(POINTS))
+@pytest.mark.parametrize("strategy", ["area", "solid-angle"])
+@pytest.mark.parametrize("kind", list(LIGHTS))
+def test_light_sampling_matches_its_pdf(kind, strategy, point):
+    light = LIGHTS[kind]
+    p, n = POINTS[point]
+    result, s = _chi2(light, strategy, p, n)
+    assert result.passed, str(result)
+    # the pdf integrates to one over the sphere, and sample() reports pdf() at the sampled direction
+    assert result.pdf_integral == pytest.approx(1.0, abs=2e-3), result.pdf_integral
+    valid = s.pdf > 0
+    assert valid.mean() > 0.999
+    np.testing.assert_allclose(light.pdf_li(p, n, s.direction[valid], strategy=strategy), s.pdf[valid], rtol=1e-9)
+
+
+@pytest.mark.parametrize("strategy", ["hemisphere", "cosine"])
+@pytest.mark.parametrize("kind", list(LIGHTS))
+def test_hemisphere_strategies_match_their_pdf(kind, strategy):
+    light = LIGHTS[kind]
+    p, n = POINTS["near"]
+    u = np.random.default_rng(2).random((200_000, 2))
+    s = light.sample_li(p, n, u, strategy=strategy)
+    frame = frame_matrix(np.asarray(n, dtype=float))
+
+    def density(v):
+        return light.pdf_li(p, n, v, strategy=strategy)
+
+    result = chi2.spherical_test(s.direction, density, frame=frame)
+    assert result.passed and result.pdf_integral == pytest.approx(1.0, abs=1e-3), str(result)
+    np.testing.assert_allclose(light.pdf_li(p, n, s.direction, strategy=strategy), s.pdf, rtol=1e-12)
+    # only directions that hit the light carry its radiance
+    hits = np.isfinite(s.distance)
+    assert 0 < hits.mean() < 1 and np.all(s.radiance[~hits] == 0)
+
+
+@pytest.mark.parametrize("strategy", list(STRATEGIES))
+@pytest.mark.parametrize("kind", ["rectangle", "triangle"])
+def test_nothing_is_sampled_behind_or_in_the_plane_of_a_one_sided_light(kind, strategy):
+    light = LIGHTS[kind]
+    u = np.random.default_rng(3).random((2000, 2))
+    for p, n in (([0.0, 2.5, 0.0], [0.0, -1.0, 0.0]), ([3.0, 2.0, 0.0], [-1.0, 0.0, 0.0])):
+        s = light.sample_li(p, n, u, strategy=strategy)
+        assert np.all(s.radiance == 0) and np.all(np.isfinite(s.pdf))
+        assert np.all(light.eval(p, s.direction) == 0)
+        if strategy in ("area", "solid-angle"):
+            assert np.all(s.pdf == 0) and np.all(light.pdf_li(p, n, s.direction, strategy=strategy) == 0)
+
+
+def test_two_sided_lights_emit_from_the_back():
+    back = AreaLight.rectangle([-0.5, 2.0, -0.3], [0.0, 0.0, 0.6], [1.0, 0.0, 0.0], 3.0, two_sided=True)
+    s = back.sample_li([0.0, 1.0, 0.0], [0.0, 1.0, 0.0], np.full((10, 2), 0.5), strategy="area")
+    np.testing.assert_allclose(s.radiance, 3.0)
+    assert np.all(RECT.sample_li([0.0, 1.0, 0.0], [0.0, 1.0, 0.0], np.full((10, 2), 0.5)).radiance == 0)
+
+
+# --- closed forms ----------------------------------------------------------------------------------------------------
+def polygon_irradiance(p, n, vertices, radiance):
+    """Lambert's 1760 formula for a uniform polygon (Baum et al. 1989): E = L/2 sum_i Theta_i (n . Gamma_i)."""
+    v = [(np.asarray(q, float) - p) / np.linalg.norm(np.asarray(q, float) - p) for q in vertices]
+    total = 0.0
+    for a, b in zip(v, v[1:] + v[:1], strict=True):
+        g = np.cross(a, b)
+        total += math.acos(np.clip(a @ b, -1, 1)) * (n @ (g / np.linalg.norm(g)))
+    return 0.5 * abs(total) * radiance
+
+
+def _estimate(light, p, n, strategy, samples, seed):
+    u = np.random.default_rng(seed).random((samples, 2))
+    s = light.sample_li(p, n, u, strategy=strategy)
+    cos = np.clip(s.direction @ n, 0, None)
+    ok = s.pdf > 0
+    value = np.zeros(samples)
+    value[ok] = s.radiance[ok, 0] * cos[ok] / s.pdf[ok]
+    return value.mean(), value.std() / math.sqrt(samples)
+
+
+RECEIVERS = [
+    ([0.0, 0.0, 0.0], [0.0, 1.0, 0.0]),  # below the centre, facing it
+    ([0.7, 1.0, 0.4], [0.0, 1.0, 0.0]),  # near and off-axis
+    ([0.3, -6.0, 0.0], [0.0, 1.0, 0.0]),  # far
+    ([0.0, 1.0, 0.0], [0.6, 0.8, 0.0]),  # tilted
+    ([1.5, 1.2, 0.0], [-0.8, 0.6, 0.0]),  # tilted toward the light from the side
+]
+
+
+@pytest.mark.parametrize("receiver", range(len(RECEIVERS)))
+@pytest.mark.parametrize("strategy", list(STRATEGIES))
+def test_rectangle_irradiance_matches_the_polygon_form_factor(strategy, receiver):
+    p, n = (np.asarray(x, float) for x in RECEIVERS[receiver])
+    g = RECT_DOWN.geom
+    corners = [g[0:3], g[0:3] + g[3:6], g[0:3] + g[3:6] + g[6:9], g[0:3] + g[6:9]]
+    if n[1] != 1.0:  # the whole rectangle must be above the tilted horizon for the formula
+        assert all((c - p) @ n > 0 for c in corners)
+    expected = polygon_irradiance(p, n, corners, 3.0)
+    mean, se = _estimate(RECT_DOWN, p, n, strategy, 400_000, seed=10 + receiver)
+    assert abs(mean - expected) < 4 * se + 1e-12 * expected, (mean, expected, se)
+
+
+@pytest.mark.parametrize("distance", [0.6, 1.0, 3.0, 30.0])
+@pytest.mark.parametrize("strategy", list(STRATEGIES))
+def test_sphere_irradiance_on_axis_is_pi_l_sin2(strategy, distance):
+    """On the axis, facing the sphere: E = pi L sin^2(alpha), sin(alpha) = r / d (also under a tilt that keeps the
+    sphere above the horizon: E = pi L sin^2(alpha) cos(tilt))."""
+    r, radiance = 0.4, 1.5
+    light = AreaLight.sphere([0.0, 0.0, 0.0], r, radiance)
+    p = np.array([0.0, -distance, 0.0])
+    for tilt in (0.0, 0.3):
+        if math.asin(r / distance) + tilt >= math.pi / 2:
+            continue
+        n = np.array([math.sin(tilt), math.cos(tilt), 0.0])
+        expected = math.pi * radiance * (r / distance) ** 2 * math.cos(tilt)
+        mean, se = _estimate(light, p, n, strategy, 400_000, seed=int(distance * 10))
+        if strategy == "solid-angle":  # uniform over the cone: exact on the axis up to the cosine's variation
+            assert se < 0.02 * expected
+        assert abs(mean - expected) < 4 * se + 1e-9 * expected, (tilt, mean, expected, se)
+
+
+def test_triangle_irradiance_matches_the_polygon_form_factor():
+    p, n = np.array([0.05, 0.8, 0.0]), np.array([0.0, 1.0, 0.0])
+    g = TRIANGLE.geom
+    expected = polygon_irradiance(p, n, [g[0:3], g[3:6], g[6:9]], 2.0)
+    for strategy in STRATEGIES:
+        mean, se = _estimate(TRIANGLE, p, n, strategy, 400_000, seed=5)
+        assert abs(mean - expected) < 4 * se, (strategy, mean, expected, se)
