@@ -34,3 +34,12 @@ def load_quietly(path, **options):
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)
+
+
+@pytest.fixture(autouse=True)
+def _fresh_warnings():
+    """Each test hears every file warning anew (lightprobe warns once per file and process)."""
+    from lightprobe import errors
+
+    errors._warned.clear()
+    yield

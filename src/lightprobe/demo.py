@@ -59,14 +59,17 @@ def light_panels(n_lights: int, *, seed: int = 7, height: float = 2.4, extent: f
     n_quads = n_lights // 4  # a quad is two triangle lights
     n_tris = n_lights - 2 * n_quads
     centres = np.column_stack(
-        [rng.uniform(-extent / 2, extent / 2, n_quads + n_tris), height + rng.uniform(-0.3, 0.3, n_quads + n_tris),
-         rng.uniform(-extent / 2, extent / 2, n_quads + n_tris)]
+        [
+            rng.uniform(-extent / 2, extent / 2, n_quads + n_tris),
+            height + rng.uniform(-0.3, 0.3, n_quads + n_tris),
+            rng.uniform(-extent / 2, extent / 2, n_quads + n_tris),
+        ]
     )
     size = 0.35 * extent / math.sqrt(n_quads + n_tris)
     angle = rng.uniform(0, 2 * math.pi, n_quads + n_tris)
     c, s = np.cos(angle), np.sin(angle)
     vertices, faces, radiance = [], [], []
-    level = 10.0 ** rng.uniform(-1.0, 3.0, n_quads + n_tris) * (50.0 / math.sqrt(max(n_lights, 1)))
+    level = 10.0 ** rng.uniform(-1.0, 3.0, n_quads + n_tris) * (3.0 / math.sqrt(max(n_lights, 1)))
     hue = rng.uniform(0.0, 1.0, n_quads + n_tris)
     tint = np.column_stack([1.0 - 0.5 * hue, 0.75 + 0.0 * hue, 0.5 + 0.5 * hue])
     for i in range(n_quads + n_tris):
@@ -95,7 +98,7 @@ def many_lights_scene(n_lights: int = 4000, resolution: tuple[int, int] = (480, 
     """The lecture's many-light setting, no files needed: ``n_lights`` small emissive quads and triangles of
     powers spread over four decades, above a grey ground with a plastic blob, a rough gold sphere, a rough
     aluminium sphere and a diffuse green sphere; no environment (the lights alone)."""
-    camera = Camera([0.0, 3.2, 7.5], [0.0, 0.6, 0.0], fov=38.0, resolution=resolution)
+    camera = Camera([0.0, 1.2, 7.0], [0.0, 1.0, 0.0], fov=45.0, resolution=resolution)
     scene = Scene(camera, None, name=f"many-lights ({n_lights})")
     scene.add(Rectangle.ground(size=40.0), Lambert(0.5), name="ground")
     scene.add(

@@ -66,8 +66,9 @@ def test_a_mesh_casts_the_closed_form_shadow(strategy):
     scene.add(ball, Lambert(0.5))
     result = render(scene, RenderSettings(spp=4096, strategy=strategy, seed=5))
     expected = albedo * radiance * (1 - (r / d) ** 2)
-    standard_error = np.sqrt(result.variance.sum()) / result.variance.size
-    assert abs(result.image.mean() - expected) < 4 * standard_error + 2e-4, (result.image.mean(), standard_error)
+    # one channel: under a grey sky the three are the same estimate, not three independent ones
+    mean, standard_error = result.image[..., 0].mean(), np.sqrt(result.variance[..., 0].sum()) / 9
+    assert abs(mean - expected) < 4 * standard_error + 2e-4, (mean, standard_error)
 
 
 def small_scene(resolution=(32, 24)):

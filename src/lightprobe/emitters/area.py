@@ -229,7 +229,16 @@ def _rect_frame(px, py, pz, g):
     z0 = _dot(dx, dy, dz, zx, zy, zz)
     if z0 > 0.0:
         zx, zy, zz, z0 = -zx, -zy, -zz, -z0
-    return (xx, xy, xz), (yx, yy, yz), (zx, zy, zz), _dot(dx, dy, dz, xx, xy, xz), _dot(dx, dy, dz, yx, yy, yz), z0, eu, ev
+    return (
+        (xx, xy, xz),
+        (yx, yy, yz),
+        (zx, zy, zz),
+        _dot(dx, dy, dz, xx, xy, xz),
+        _dot(dx, dy, dz, yx, yy, yz),
+        z0,
+        eu,
+        ev,
+    )
 
 
 @jit

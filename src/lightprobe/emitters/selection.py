@@ -34,7 +34,15 @@ from ..color import luminance
 from ..errors import ParameterError
 from .area import LIGHT_RECT, LIGHT_SPHERE, LIGHT_TRIANGLE, LightArrays
 
-__all__ = ["SELECTORS", "LightSampler", "LightSelector", "build_selector", "power_of_lights", "select_light", "selector_pmf"]
+__all__ = [
+    "SELECTORS",
+    "LightSampler",
+    "LightSelector",
+    "build_selector",
+    "power_of_lights",
+    "select_light",
+    "selector_pmf",
+]
 
 SELECTORS = {"uniform": 0, "power": 1, "bvh": 2}
 UNIFORM, POWER, BVH = 0, 1, 2
@@ -394,8 +402,21 @@ def build_selector(mode: str, lights: LightArrays, *, env_power: float | None = 
             trail,
         )
     return LightSelector(
-        SELECTORS[mode], n, n_area if has_env else -1, p_env, cdf, empty2, empty2, empty1, empty2, empty1, empty1,
-        emptyi, emptyi, emptyi, emptyi,
+        SELECTORS[mode],
+        n,
+        n_area if has_env else -1,
+        p_env,
+        cdf,
+        empty2,
+        empty2,
+        empty1,
+        empty2,
+        empty1,
+        empty1,
+        emptyi,
+        emptyi,
+        emptyi,
+        emptyi,
     )
 
 

@@ -72,7 +72,9 @@ def _measure(experiment, scene, settings, label, reference, out_dir: Path | None
         from ..io.images import write_png
 
         write_png(out_dir / f"{experiment}-{label}.png", result.image)
-    row = Row(experiment, label, settings.light_samples, settings.spp, round(result.stats["seconds"], 3), rays, mse, rel)
+    row = Row(
+        experiment, label, settings.light_samples, settings.spp, round(result.stats["seconds"], 3), rays, mse, rel
+    )
     return row, result.image
 
 

@@ -29,10 +29,18 @@ from ..emitters.area import light_intersect, light_pdf, light_radiance, light_sa
 from ..emitters.envmap import env_eval, env_eval_pdf, env_sample
 from ..emitters.selection import select_light, selector_pmf
 from ..geometry.frame import coordinate_system, to_local, to_world
-from ..geometry.intersect import MESH, MISS, RECT, SPHERE, closest_analytic, may_hit_mesh, occluded_analytic
-from ..geometry.intersect import ray_offset, surface
-from ..sampling.kernels import INV_2PI, cosine_hemisphere_pdf, square_to_cosine_hemisphere
-from ..sampling.kernels import square_to_uniform_hemisphere
+from ..geometry.intersect import (
+    MESH,
+    MISS,
+    RECT,
+    SPHERE,
+    closest_analytic,
+    may_hit_mesh,
+    occluded_analytic,
+    ray_offset,
+    surface,
+)
+from ..sampling.kernels import INV_2PI, cosine_hemisphere_pdf, square_to_cosine_hemisphere, square_to_uniform_hemisphere
 from ..sampling.mis import mis_weight
 from ..sampling.rng import random_uniform, sample_key
 
@@ -283,9 +291,14 @@ def _lights_finish(
                     continue
                 qx, qy, qz = ray_offset(px, py, pz, nx, ny, nz, wx, wy, wz)
                 tmax = math.inf
-                if seg[r] < math.inf:  # a point on an area light: test the segment, stopping short of the light
+                if seg[r] < math.inf:
+                    # a point on an area light: the shadow ray leaves the offset origin aimed *at that point* and
+                    # stops just short of it (from the offset origin along the original direction, a grazing ray
+                    # would meet the light's plane before the segment ends and shadow itself)
                     tx, ty, tz = px + seg[r] * wx - qx, py + seg[r] * wy - qy, pz + seg[r] * wz - qz
-                    tmax = math.sqrt(tx * tx + ty * ty + tz * tz) * (1.0 - 1e-5)
+                    length = math.sqrt(tx * tx + ty * ty + tz * tz)
+                    wx, wy, wz = tx / length, ty / length, tz / length
+                    tmax = length * (1.0 - 1e-5)
                 if occluded_analytic(s, qx, qy, qz, wx, wy, wz, tmax):
                     flags[r] = BLOCKED
                     continue

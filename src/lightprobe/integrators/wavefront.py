@@ -35,8 +35,8 @@ from .._numba import jit_parallel, prange
 from ..bsdfs.dispatch import bsdf_eval, bsdf_pdf, bsdf_sample
 from ..bsdfs.phong import PHONG
 from ..emitters.area import STRATEGIES as LIGHT_STRATEGIES
-from ..emitters.selection import SELECTORS, build_selector
 from ..emitters.envmap import env_coords, env_eval, env_lookup, env_pdf_at, env_sample_coords, env_sample_full
+from ..emitters.selection import SELECTORS, build_selector
 from ..errors import ParameterError
 from ..geometry.camera import camera_ray
 from ..geometry.frame import coordinate_system, to_local, to_world
