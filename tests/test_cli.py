@@ -340,3 +340,57 @@ def test_kernels_report_whether_they_are_cached():
         return x + 1
 
     assert not is_cached(never_called)
+
+
+def test_render_many_lights_demo_records_the_light_settings(tmp_path):
+    out = tmp_path / "lights.exr"
+    args = ["render", "--demo", "many-lights", "--width", "24", "--spp", "2", "-o", str(out), "-q"]
+    assert main([*args, "--light-sampler", "bvh", "--lights-per-sample", "3", "--light-strategy", "area"]) == 0
+    meta = json.loads((tmp_path / "lights.exr.json").read_text())
+    assert meta["light_sampler"] == "bvh" and meta["lights_per_sample"] == 3 and meta["light_strategy"] == "area"
+    assert meta["area_lights"] == 4000 and meta["spp_done"] == 2
+    image = read_image(out)
+    assert np.all(np.isfinite(image)) and image.mean() > 0
+
+
+def test_scene_file_with_area_lights_and_no_environment(tmp_path):
+    path = tmp_path / "lit.toml"
+    path.write_text(
+        "[camera]\norigin = [0, 2, 4]\ntarget = [0, 0, 0]\nresolution = [12, 8]\n"
+        '[materials.grey]\ntype = "lambert"\nalbedo = 0.5\n'
+        '[[objects]]\ntype = "ground"\nmaterial = "grey"\n'
+        '[[objects]]\ntype = "rectangle"\norigin = [-0.5, 1.5, -0.5]\nedge_u = [1, 0, 0]\nedge_v = [0, 0, 1]\n'
+        "emission = [1.0, 0.9, 0.8]\nemission_scale = 5.0\n"
+        '[[objects]]\ntype = "sphere"\ncenter = [1, 0.3, 0]\nradius = 0.3\nemission = 2.0\n'
+        '[render]\nspp = 2\nlight_sampler = "bvh"\nlights_per_sample = 2\nlight_strategy = "area"\n'
+    )
+    out = tmp_path / "lit.pfm"
+    assert main(["render", str(path), "-o", str(out), "-q"]) == 0
+    meta = json.loads((tmp_path / "lit.pfm.json").read_text())
+    assert meta["area_lights"] == 2 and meta["light_sampler"] == "bvh" and meta["lights_per_sample"] == 2
+    assert read_image(out).mean() > 0
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["render", "--demo", "nowhere"], "unknown demo 'nowhere'"),
+        (["render", "--demo", "--light-sampler", "random"], "light_sampler must be one of"),
+        (["render", "--demo", "--light-strategy", "magic"], "light_strategy must be one of"),
+        (["render", "--demo", "--lights-per-sample", "0"], "lights_per_sample must be >= 1"),
+    ],
+)
+def test_light_option_errors_are_one_line(capsys, tmp_path, args, message):
+    assert main([*args, "-o", str(tmp_path / "x.exr"), "-q"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("lightprobe: error:") and message in err[0], err
+
+
+def test_a_scene_without_any_light_is_an_error(tmp_path, capsys):
+    path = tmp_path / "dark.toml"
+    path.write_text(
+        "[camera]\norigin = [0, 2, 4]\ntarget = [0, 0, 0]\n"
+        '[materials.grey]\ntype = "lambert"\n[[objects]]\ntype = "ground"\nmaterial = "grey"\n'
+    )
+    assert main(["render", str(path), "-o", str(tmp_path / "x.exr"), "-q"]) == 2
+    assert "the scene has no light" in capsys.readouterr().err

@@ -183,3 +183,15 @@ def test_triangle_irradiance_matches_the_polygon_form_factor():
     for strategy in STRATEGIES:
         mean, se = _estimate(TRIANGLE, p, n, strategy, 400_000, seed=5)
         assert abs(mean - expected) < 4 * se, (strategy, mean, expected, se)
+
+
+def test_the_environment_map_honours_the_same_contract():
+    from lightprobe.emitters.envmap import EnvironmentMap
+    from lightprobe.emitters.procedural import sky_with_sun
+
+    env = EnvironmentMap.from_array(sky_with_sun(64, 32, sun_diameter_deg=8.0))
+    p, n = np.zeros((500, 3)), np.tile([0.0, 1.0, 0.0], (500, 1))
+    s = env.sample_li(p, n, np.random.default_rng(4).random((500, 2)))
+    assert np.all(np.isinf(s.distance)) and not s.delta
+    np.testing.assert_allclose(env.pdf_li(p, n, s.direction), s.pdf, rtol=1e-12)
+    np.testing.assert_allclose(env.eval(s.direction), s.radiance)

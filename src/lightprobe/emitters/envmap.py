@@ -473,6 +473,21 @@ class EnvironmentMap:
     def pdf(self, dirs, *, compensated: bool = False) -> np.ndarray:
         return _pdf_batch(self._kernel, bool(compensated), _directions(dirs))
 
+    # --- the emitter contract (emitters/area.py): the environment is a light whose samples do not depend on the
+    # reference point and lie infinitely far away
+    def sample_li(self, points, normals, u, *, compensated: bool = False):
+        """Directions toward the environment for reference ``points`` (N, 3) with ``normals`` (ignored: the
+        map is sampled the same way from everywhere): a :class:`~lightprobe.emitters.area.LightSample` with
+        infinite distances."""
+        from .area import LightSample
+
+        dirs, pdf = self.sample(u, compensated=compensated)
+        return LightSample(dirs, np.full(pdf.shape, np.inf), self.eval(dirs), pdf)
+
+    def pdf_li(self, points, normals, dirs, *, compensated: bool = False) -> np.ndarray:
+        """Density per steradian of :meth:`sample_li` producing ``dirs`` (the same from every point)."""
+        return self.pdf(dirs, compensated=compensated)
+
     def to_square(self, dirs, *, compensated: bool = False) -> np.ndarray:
         """Inverse of :meth:`sample`: the ``u`` that produces each direction."""
         return _to_square_batch(self._kernel, bool(compensated), _directions(dirs))
