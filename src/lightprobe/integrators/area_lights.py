@@ -24,7 +24,7 @@ import math
 import numpy as np
 
 from .._numba import jit, jit_parallel, prange
-from ..bsdfs.dispatch import bsdf_eval, bsdf_pdf, bsdf_sample
+from ..bsdfs.dispatch import bsdf_eval, bsdf_pdf
 from ..emitters.area import light_intersect, light_pdf, light_radiance, light_sample
 from ..emitters.envmap import env_eval, env_eval_pdf, env_sample
 from ..emitters.selection import select_light, selector_pmf
@@ -40,16 +40,25 @@ from ..geometry.intersect import (
     ray_offset,
     surface,
 )
-from ..sampling.kernels import INV_2PI, cosine_hemisphere_pdf, square_to_cosine_hemisphere, square_to_uniform_hemisphere
 from ..sampling.mis import mis_weight
 from ..sampling.rng import random_uniform, sample_key
+from .techniques import (
+    BLOCKED,
+    BRDF,
+    ENV,
+    MIS,
+    NONE,
+    SLOT_BSDF,
+    SLOT_ENV,
+    SLOT_NONE,
+    TEST_MESH,
+    VISIBLE,
+    sample_direction,
+)
 
 __all__ = ["slot_buffers"]
 
-# techniques (the renderer's strategies) and slot states, as in wavefront.py
-UNIFORM, COSINE, BRDF, ENV, MIS = range(5)
-SLOT_NONE, SLOT_BSDF, SLOT_LIGHT, SLOT_HEMI = 0, 1, 2, 3
-NONE, VISIBLE, TEST_MESH, BLOCKED = 0, 1, 2, 3
+SLOT_LIGHT = SLOT_ENV  # a light sample: the environment's or an area light's
 
 
 @jit
@@ -189,22 +198,12 @@ def _lights_setup(
                 seg[r] = dist
                 state[r] = SLOT_LIGHT
                 continue
-            if technique == BRDF:
-                wi, pdf, w = bsdf_sample(mk, mp, wo, u0, u1, random_uniform(key, 4 + 3 * j))
-                if pdf <= 0.0 or (w[0] == 0.0 and w[1] == 0.0 and w[2] == 0.0):
-                    continue
+            st, wi, pdf, w = sample_direction(technique, mk, mp, wo, u0, u1, random_uniform(key, 4 + 3 * j))
+            if st == SLOT_NONE:
+                continue
+            if st == SLOT_BSDF:
                 bweight[r, 0], bweight[r, 1], bweight[r, 2] = w
-                state[r] = SLOT_BSDF
-            else:
-                if technique == UNIFORM:
-                    wi = square_to_uniform_hemisphere(u0, u1)
-                    pdf = INV_2PI
-                else:
-                    wi = square_to_cosine_hemisphere(u0, u1)
-                    pdf = cosine_hemisphere_pdf(wi[0], wi[1], wi[2])
-                if wi[2] <= 0.0 or pdf <= 0.0:
-                    continue
-                state[r] = SLOT_HEMI
+            state[r] = st
             wx, wy, wz = to_world(ts, tt, ns, wi[0], wi[1], wi[2])
             wdir[r, 0], wdir[r, 1], wdir[r, 2] = wx, wy, wz
             wloc[r, 0], wloc[r, 1], wloc[r, 2] = wi

@@ -1,4 +1,4 @@
-"""Wavefront direct-illumination renderer: environment light, BSDF/env/MIS sampling, shadow rays.
+"""Wavefront direct-illumination renderer: an environment map and area lights, BSDF/light/MIS sampling, shadow rays.
 
 The image is rendered in *passes*: a pass is a few samples per pixel over a band of pixels (the whole image when
 it fits the ``pass_samples`` budget), so memory is bounded by the pass, not by the sample count.  A pass runs as a
@@ -6,19 +6,23 @@ wavefront of kernels:
 
 1. camera rays (box filter with jitter) and their nearest sphere/rectangle hit, and which rays may reach a mesh;
 2. Embree closest hits for those rays only;
-3. shading: for each hit, ``n_bsdf + n_env`` directions from the chosen strategy, their unoccluded
-   contributions, and shadow rays (tested against spheres and rectangles on the spot);
-4. Embree occlusion for the shadow rays that may reach a mesh;
+3. shading: for each hit, ``n_bsdf + K n_env`` directions from the chosen strategy, their unoccluded
+   contributions, and shadow rays (tested against spheres and rectangles on the spot).  Scenes lit by an
+   environment map alone shade in the four stages below (their measured fast path); scenes with area lights in
+   the stages of :mod:`lightprobe.integrators.area_lights`;
+4. Embree occlusion for the shadow rays that may reach a mesh (with the segment's end for area lights);
 5. accumulation: each pixel's samples are added *in sample order* to a running mean and variance (Welford).
 
 Every random number is a hash of (seed, pixel, sample index, dimension) and each pixel is accumulated in sample
 order, so the image is bit-identical for any pass size and any thread count.  Camera rays that miss show the
-environment.  Objects cast shadows but do not light each other (direct illumination from the environment only).
+environment (black without one); camera rays that hit an emitter see its radiance.  Objects cast shadows but do
+not light each other (direct illumination only).
 
-Strategies (per camera sample, ``n = n_bsdf + n_env`` directions for the single-technique ones, so that all
+Strategies (per camera sample, ``n = n_bsdf + K n_env`` directions for the single-technique ones, so that all
 strategies cost the same number of shadow rays): ``uniform`` and ``cosine`` hemisphere sampling about the shading
-normal, ``brdf``, ``env``, and ``mis`` with ``n_bsdf`` BSDF and ``n_env`` environment samples weighted by the balance
-or power heuristic on sample-count-weighted densities.
+normal, ``brdf``, ``env`` (light sampling: K lights picked by the light sampler, ``n_env`` samples each; the
+environment is one of the lights), and ``mis`` with ``n_bsdf`` BSDF and K ``n_env`` light samples weighted by the
+balance or power heuristic on sample-count-weighted densities.
 """
 
 from __future__ import annotations
@@ -32,7 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .._numba import jit_parallel, prange
-from ..bsdfs.dispatch import bsdf_eval, bsdf_pdf, bsdf_sample
+from ..bsdfs.dispatch import bsdf_eval, bsdf_pdf
 from ..bsdfs.phong import PHONG
 from ..emitters.area import STRATEGIES as LIGHT_STRATEGIES
 from ..emitters.envmap import env_coords, env_eval, env_lookup, env_pdf_at, env_sample_coords, env_sample_full
@@ -43,22 +47,26 @@ from ..geometry.frame import coordinate_system, to_local, to_world
 from ..geometry.intersect import MISS, closest_analytic, may_hit_mesh, occluded_analytic, ray_offset, surface
 from ..geometry.raytracer import RayTracer
 from ..geometry.scene import Scene
-from ..sampling.kernels import (
-    INV_2PI,
-    cosine_hemisphere_pdf,
-    square_to_cosine_hemisphere,
-    square_to_uniform_hemisphere,
-)
 from ..sampling.mis import mis_weight
 from ..sampling.rng import random_uniform, sample_key
+from .techniques import (
+    BLOCKED,
+    BRDF,
+    ENV,
+    MIS,
+    NONE,
+    SLOT_BSDF,
+    SLOT_ENV,
+    SLOT_NONE,
+    STRATEGIES,
+    TEST_MESH,
+    VISIBLE,
+    sample_direction,
+)
 
 __all__ = ["STRATEGIES", "RenderResult", "RenderSettings", "kernels_cached", "render"]
 
-STRATEGIES = {"uniform": 0, "cosine": 1, "brdf": 2, "env": 3, "mis": 4}
-UNIFORM, COSINE, BRDF, ENV, MIS = range(5)
 HEURISTICS = {"balance": 1.0, "power": 2.0}
-# flags of a shading sample's shadow ray: no ray, unblocked, to be tested against meshes, blocked
-NONE, VISIBLE, TEST_MESH, BLOCKED = 0, 1, 2, 3
 
 
 @dataclass(frozen=True)
@@ -176,7 +184,6 @@ def _camera_pass(s, cam, seed, pixel_start, spp_pass, sample_start, dirs, t, kin
 # are megabytes), and in small loops of independent iterations the CPU overlaps many misses, while in one large
 # loop body it stalls on each (measured: a bilinear lookup costs 35 ns in its own loop, 150 ns inside the body).
 # Slot r = k * m + j is shading sample j of camera sample k; its state says which technique made it.
-SLOT_NONE, SLOT_BSDF, SLOT_ENV, SLOT_HEMI = 0, 1, 2, 3
 
 
 @jit_parallel
@@ -256,22 +263,12 @@ def _shade_setup(
                 env_u[r, 1] = u1
                 state[r] = SLOT_ENV
                 continue
-            if technique == BRDF:
-                wi, pdf, w = bsdf_sample(mk, mp, wo, u0, u1, u2)
-                if pdf <= 0.0 or (w[0] == 0.0 and w[1] == 0.0 and w[2] == 0.0):
-                    continue
+            st, wi, pdf, w = sample_direction(technique, mk, mp, wo, u0, u1, u2)
+            if st == SLOT_NONE:
+                continue
+            if st == SLOT_BSDF:
                 bweight[r, 0], bweight[r, 1], bweight[r, 2] = w
-                state[r] = SLOT_BSDF
-            else:
-                if technique == UNIFORM:
-                    wi = square_to_uniform_hemisphere(u0, u1)
-                    pdf = INV_2PI
-                else:
-                    wi = square_to_cosine_hemisphere(u0, u1)
-                    pdf = cosine_hemisphere_pdf(wi[0], wi[1], wi[2])
-                if wi[2] <= 0.0 or pdf <= 0.0:
-                    continue
-                state[r] = SLOT_HEMI
+            state[r] = st
             wx, wy, wz = to_world(ts, tt, ns, wi[0], wi[1], wi[2])
             wdir[r, 0], wdir[r, 1], wdir[r, 2] = wx, wy, wz
             wloc[r, 0], wloc[r, 1], wloc[r, 2] = wi

@@ -1,0 +1,42 @@
+"""What the wavefront renderer's two shading paths share: technique and slot codes, and directions from BSDF or
+hemisphere sampling.
+
+A camera sample has ``m`` shading *slots*; slot r = k m + j is shading sample j of camera sample k, and its state
+says which technique made its direction.  Shadow-ray flags say what became of the ray.
+"""
+
+from __future__ import annotations
+
+from .._numba import jit
+from ..bsdfs.dispatch import bsdf_sample
+from ..sampling.kernels import INV_2PI, cosine_hemisphere_pdf, square_to_cosine_hemisphere, square_to_uniform_hemisphere
+
+__all__ = ["STRATEGIES", "sample_direction"]
+
+#: the renderer's strategies (``env`` samples the lights: the environment and any area lights)
+STRATEGIES = {"uniform": 0, "cosine": 1, "brdf": 2, "env": 3, "mis": 4}
+UNIFORM, COSINE, BRDF, ENV, MIS = range(5)
+# slot states: empty, a BSDF sample, a light (environment) sample, a hemisphere sample
+SLOT_NONE, SLOT_BSDF, SLOT_ENV, SLOT_HEMI = 0, 1, 2, 3
+# flags of a shading sample's shadow ray: no ray, unblocked, to be tested against meshes, blocked
+NONE, VISIBLE, TEST_MESH, BLOCKED = 0, 1, 2, 3
+
+
+@jit
+def sample_direction(technique, mk, mp, wo, u0, u1, u2):
+    """A local direction from BSDF (``BRDF``) or hemisphere (``UNIFORM``, ``COSINE``) sampling:
+    (slot state, wi, pdf, BSDF sample weight f cos / pdf); state ``SLOT_NONE`` when the technique declines."""
+    if technique == BRDF:
+        wi, pdf, w = bsdf_sample(mk, mp, wo, u0, u1, u2)
+        if pdf <= 0.0 or (w[0] == 0.0 and w[1] == 0.0 and w[2] == 0.0):
+            return SLOT_NONE, wi, 0.0, w
+        return SLOT_BSDF, wi, pdf, w
+    if technique == UNIFORM:
+        wi = square_to_uniform_hemisphere(u0, u1)
+        pdf = INV_2PI
+    else:
+        wi = square_to_cosine_hemisphere(u0, u1)
+        pdf = cosine_hemisphere_pdf(wi[0], wi[1], wi[2])
+    if wi[2] <= 0.0 or pdf <= 0.0:
+        return SLOT_NONE, wi, 0.0, (0.0, 0.0, 0.0)
+    return SLOT_HEMI, wi, pdf, (0.0, 0.0, 0.0)
