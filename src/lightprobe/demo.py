@@ -94,11 +94,16 @@ def light_panels(n_lights: int, *, seed: int = 7, height: float = 2.4, extent: f
     return v, f, np.array(radiance, dtype=np.float64)
 
 
-def many_lights_scene(n_lights: int = 4000, resolution: tuple[int, int] = (480, 320)) -> Scene:
+def many_lights_scene(n_lights: int = 4000, resolution: tuple[int, int] = (480, 320), *, view: str = "demo") -> Scene:
     """The lecture's many-light setting, no files needed: ``n_lights`` small emissive quads and triangles of
     powers spread over four decades, above a grey ground with a plastic blob, a rough gold sphere, a rough
-    aluminium sphere and a diffuse green sphere; no environment (the lights alone)."""
-    camera = Camera([0.0, 1.2, 7.0], [0.0, 1.0, 0.0], fov=45.0, resolution=resolution)
+    aluminium sphere and a diffuse green sphere; no environment (the lights alone).  ``view="demo"`` shows the
+    lights from below; ``view="lit"`` looks down on the lit objects only (for error measurements that the pixels
+    partly covered by a bright light would otherwise dominate)."""
+    if view == "lit":
+        camera = Camera([0.0, 2.0, 6.5], [0.0, 0.2, 0.0], fov=30.0, resolution=resolution)
+    else:
+        camera = Camera([0.0, 1.2, 7.0], [0.0, 1.0, 0.0], fov=45.0, resolution=resolution)
     scene = Scene(camera, None, name=f"many-lights ({n_lights})")
     scene.add(Rectangle.ground(size=40.0), Lambert(0.5), name="ground")
     scene.add(

@@ -126,7 +126,7 @@ def many_lights(
     from ..demo import many_lights_scene
 
     out = _out(out_dir)
-    scene = many_lights_scene(n_lights, resolution=resolution)
+    scene = many_lights_scene(n_lights, resolution=resolution, view="lit")
     reference = _reference(scene, reference_spp, seed + 1000, out, "lecture-many-lights", lights_per_sample=4)
     rows = []
     for selector in ("uniform", "power", "bvh"):
