@@ -28,7 +28,7 @@ from ..bsdfs.dispatch import bsdf_eval, bsdf_pdf
 from ..emitters.area import light_intersect, light_pdf, light_radiance, light_sample
 from ..emitters.envmap import env_eval, env_eval_pdf, env_sample
 from ..emitters.selection import select_light, selector_pmf
-from ..geometry.frame import coordinate_system, to_local, to_world
+from ..geometry.frame import to_local, to_world
 from ..geometry.intersect import (
     MESH,
     MISS,
@@ -38,7 +38,6 @@ from ..geometry.intersect import (
     may_hit_mesh,
     occluded_analytic,
     ray_offset,
-    surface,
 )
 from ..sampling.mis import mis_weight
 from ..sampling.rng import random_uniform, sample_key
@@ -54,6 +53,7 @@ from .techniques import (
     TEST_MESH,
     VISIBLE,
     sample_direction,
+    store_shading_frame,
 )
 
 __all__ = ["slot_buffers"]
@@ -144,29 +144,20 @@ def _lights_setup(
                 direct[k, 0] = direct[k, 1] = direct[k, 2] = 0.0
             continue
         direct[k, 0] = direct[k, 1] = direct[k, 2] = 0.0
-        p, ng, ns, mat, two_sided = surface(s, kind[k], index[k], prim[k], b1[k], b2[k], ox, oy, oz, dx, dy, dz, t[k])
         emitter = emitter_of(s, kind[k], index[k], prim[k])
         if emitter >= 0:  # the camera sees the light itself
             tl, cos_light = light_intersect(lights, emitter, ox, oy, oz, dx, dy, dz)
             if tl < math.inf:
                 direct[k, 0], direct[k, 1], direct[k, 2] = light_radiance(lights, emitter, cos_light)
-        if two_sided == 1 and -(dx * ng[0] + dy * ng[1] + dz * ng[2]) < 0.0:
-            ng = (-ng[0], -ng[1], -ng[2])
-            ns = (-ns[0], -ns[1], -ns[2])
-        ts, tt = coordinate_system(ns[0], ns[1], ns[2])
-        wo = to_local(ts, tt, ns, -dx, -dy, -dz)
+        hit = (kind[k], index[k], prim[k], b1[k], b2[k], t[k])
+        p, ng, wo = store_shading_frame(s, k, hit, ox, oy, oz, dx, dy, dz, point, gnormal, frame, wo_local, material)
         if wo[2] <= 0.0:
             continue
-        for c in range(3):
-            point[k, c] = p[c]
-            gnormal[k, c] = ng[c]
-            frame[k, c] = ts[c]
-            frame[k, 3 + c] = tt[c]
-            frame[k, 6 + c] = ns[c]
-            wo_local[k, c] = wo[c]
-        material[k] = mat
-        mk = s.material_kind[mat]
-        mp = s.material_params[mat]
+        ts = (frame[k, 0], frame[k, 1], frame[k, 2])
+        tt = (frame[k, 3], frame[k, 4], frame[k, 5])
+        ns = (frame[k, 6], frame[k, 7], frame[k, 8])
+        mk = s.material_kind[material[k]]
+        mp = s.material_params[material[k]]
         key = sample_key(seed, pixel_start + k // spp_pass, sample_start + k % spp_pass)
         for j in range(m):
             r = base + j

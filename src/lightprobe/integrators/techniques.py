@@ -9,9 +9,11 @@ from __future__ import annotations
 
 from .._numba import jit
 from ..bsdfs.dispatch import bsdf_sample
+from ..geometry.frame import coordinate_system, to_local
+from ..geometry.intersect import surface
 from ..sampling.kernels import INV_2PI, cosine_hemisphere_pdf, square_to_cosine_hemisphere, square_to_uniform_hemisphere
 
-__all__ = ["STRATEGIES", "sample_direction"]
+__all__ = ["STRATEGIES", "sample_direction", "store_shading_frame"]
 
 #: the renderer's strategies (``env`` samples the lights: the environment and any area lights)
 STRATEGIES = {"uniform": 0, "cosine": 1, "brdf": 2, "env": 3, "mis": 4}
@@ -40,3 +42,28 @@ def sample_direction(technique, mk, mp, wo, u0, u1, u2):
     if wi[2] <= 0.0 or pdf <= 0.0:
         return SLOT_NONE, wi, 0.0, (0.0, 0.0, 0.0)
     return SLOT_HEMI, wi, pdf, (0.0, 0.0, 0.0)
+
+
+@jit
+def store_shading_frame(s, k, hit, ox, oy, oz, dx, dy, dz, point, gnormal, frame, wo_local, material):
+    """Rebuild camera sample k's hit (``hit`` = kind, index, prim, b1, b2, t), orient a two-sided surface toward
+    the viewer, and store its point, geometric normal, shading frame (s, t, n), local ``wo`` and material.
+    Returns (p, ng, wo), or ``wo[2] <= 0`` when the viewer is below a one-sided surface (nothing to shade)."""
+    kind, index, prim, b1, b2, t = hit
+    p, ng, ns, mat, two_sided = surface(s, kind, index, prim, b1, b2, ox, oy, oz, dx, dy, dz, t)
+    if two_sided == 1 and -(dx * ng[0] + dy * ng[1] + dz * ng[2]) < 0.0:
+        ng = (-ng[0], -ng[1], -ng[2])
+        ns = (-ns[0], -ns[1], -ns[2])
+    ts, tt = coordinate_system(ns[0], ns[1], ns[2])
+    wo = to_local(ts, tt, ns, -dx, -dy, -dz)
+    if wo[2] <= 0.0:  # seen from below a one-sided surface: black
+        return p, ng, wo
+    for c in range(3):
+        point[k, c] = p[c]
+        gnormal[k, c] = ng[c]
+        frame[k, c] = ts[c]
+        frame[k, 3 + c] = tt[c]
+        frame[k, 6 + c] = ns[c]
+        wo_local[k, c] = wo[c]
+    material[k] = mat
+    return p, ng, wo

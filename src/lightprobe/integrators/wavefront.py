@@ -43,8 +43,8 @@ from ..emitters.envmap import env_coords, env_eval, env_lookup, env_pdf_at, env_
 from ..emitters.selection import SELECTORS, build_selector
 from ..errors import ParameterError
 from ..geometry.camera import camera_ray
-from ..geometry.frame import coordinate_system, to_local, to_world
-from ..geometry.intersect import MISS, closest_analytic, may_hit_mesh, occluded_analytic, ray_offset, surface
+from ..geometry.frame import to_local, to_world
+from ..geometry.intersect import MISS, closest_analytic, may_hit_mesh, occluded_analytic, ray_offset
 from ..geometry.raytracer import RayTracer
 from ..geometry.scene import Scene
 from ..sampling.mis import mis_weight
@@ -62,6 +62,7 @@ from .techniques import (
     TEST_MESH,
     VISIBLE,
     sample_direction,
+    store_shading_frame,
 )
 
 __all__ = ["STRATEGIES", "RenderResult", "RenderSettings", "kernels_cached", "render"]
@@ -231,24 +232,15 @@ def _shade_setup(
             direct[k, 0], direct[k, 1], direct[k, 2] = env_eval(env, dx, dy, dz)
             continue
         direct[k, 0] = direct[k, 1] = direct[k, 2] = 0.0
-        p, ng, ns, mat, two_sided = surface(s, kind[k], index[k], prim[k], b1[k], b2[k], ox, oy, oz, dx, dy, dz, t[k])
-        if two_sided == 1 and -(dx * ng[0] + dy * ng[1] + dz * ng[2]) < 0.0:
-            ng = (-ng[0], -ng[1], -ng[2])
-            ns = (-ns[0], -ns[1], -ns[2])
-        ts, tt = coordinate_system(ns[0], ns[1], ns[2])
-        wo = to_local(ts, tt, ns, -dx, -dy, -dz)
-        if wo[2] <= 0.0:  # seen from below a one-sided surface: black
+        hit = (kind[k], index[k], prim[k], b1[k], b2[k], t[k])
+        _, _, wo = store_shading_frame(s, k, hit, ox, oy, oz, dx, dy, dz, point, gnormal, frame, wo_local, material)
+        if wo[2] <= 0.0:
             continue
-        for c in range(3):
-            point[k, c] = p[c]
-            gnormal[k, c] = ng[c]
-            frame[k, c] = ts[c]
-            frame[k, 3 + c] = tt[c]
-            frame[k, 6 + c] = ns[c]
-            wo_local[k, c] = wo[c]
-        material[k] = mat
-        mk = s.material_kind[mat]
-        mp = s.material_params[mat]
+        ts = (frame[k, 0], frame[k, 1], frame[k, 2])
+        tt = (frame[k, 3], frame[k, 4], frame[k, 5])
+        ns = (frame[k, 6], frame[k, 7], frame[k, 8])
+        mk = s.material_kind[material[k]]
+        mp = s.material_params[material[k]]
         key = sample_key(seed, pixel_start + k // spp_pass, sample_start + k % spp_pass)
         for j in range(m):
             r = base + j
