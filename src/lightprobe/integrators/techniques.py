@@ -7,7 +7,7 @@ says which technique made its direction.  Shadow-ray flags say what became of th
 
 from __future__ import annotations
 
-from .._numba import jit
+from .._numba import jit_inline
 from ..bsdfs.dispatch import bsdf_sample
 from ..geometry.frame import coordinate_system, to_local
 from ..geometry.intersect import surface
@@ -24,7 +24,7 @@ SLOT_NONE, SLOT_BSDF, SLOT_ENV, SLOT_HEMI = 0, 1, 2, 3
 NONE, VISIBLE, TEST_MESH, BLOCKED = 0, 1, 2, 3
 
 
-@jit
+@jit_inline
 def sample_direction(technique, mk, mp, wo, u0, u1, u2):
     """A local direction from BSDF (``BRDF``) or hemisphere (``UNIFORM``, ``COSINE``) sampling:
     (slot state, wi, pdf, BSDF sample weight f cos / pdf); state ``SLOT_NONE`` when the technique declines."""
@@ -44,7 +44,7 @@ def sample_direction(technique, mk, mp, wo, u0, u1, u2):
     return SLOT_HEMI, wi, pdf, (0.0, 0.0, 0.0)
 
 
-@jit
+@jit_inline
 def store_shading_frame(s, k, hit, ox, oy, oz, dx, dy, dz, point, gnormal, frame, wo_local, material):
     """Rebuild camera sample k's hit (``hit`` = kind, index, prim, b1, b2, t), orient a two-sided surface toward
     the viewer, and store its point, geometric normal, shading frame (s, t, n), local ``wo`` and material.
