@@ -110,12 +110,13 @@ CASES = [
     ("env", "power", "area", 1),
     ("brdf", "power", "solid-angle", 1),
     ("cosine", "power", "solid-angle", 1),
+    ("uniform", "bvh", "solid-angle", 1),
 ]
 
 
 @pytest.mark.parametrize(("strategy", "selector", "light_strategy", "k"), CASES)
 def test_every_strategy_and_selector_converges_to_the_reference(mixed_reference, strategy, selector, light_strategy, k):
-    spp = 8192 if strategy in ("brdf", "cosine") else 4096
+    spp = 8192 if strategy in ("brdf", "cosine", "uniform") else 4096
     settings = RenderSettings(
         spp=spp, strategy=strategy, light_sampler=selector, light_strategy=light_strategy, lights_per_sample=k, seed=8
     )
