@@ -1,0 +1,192 @@
+#!/usr/bin/env python3
+"""Benchmark: time to a given error on the peer scene, lightprobe against Mitsuba 3 with each of its samplers.
+
+    python benchmarks/vs_mitsuba.py                          # 64 spp, 2 repetitions, A B A B
+    python benchmarks/vs_mitsuba.py --spp 16 64 --reps 3 --plot vs_mitsuba.png
+    python benchmarks/vs_mitsuba.py --mitsuba-python /path/to/venv/bin/python
+
+Mitsuba runs through the peer kit's own scripts (``../shared/peers/mitsuba/``) in a Python that can import it:
+this one (``pip install -e '.[peers]'``), or the one given with ``--mitsuba-python``.  Without Mitsuba the
+benchmark says so and measures lightprobe alone (against a reference it finds, or none).  The 4096-spp Mitsuba
+reference and the scene assets are made once and cached outside the repository (``--cache``, default
+``~/.cache/lightprobe/peer``), with the peer kit's command (``render.py --spp 256 --passes 16 --seed 100000``).
+
+Renderers alternate (A B A B ...) so that drifting machine load hits both alike.  One JSON line per run:
+renderer, sampler, spp, seconds, samples_per_s, relmse, efficiency = 1 / (relMSE x seconds) and its ratio to
+Mitsuba's ``independent`` sampler at the same spp; then a table of the best run per configuration.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+MITSUBA_SAMPLERS = ("independent", "stratified", "multijitter", "orthogonal", "ldsampler")
+
+
+def _kit() -> Path:
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
+    from lightprobe.peer import find_peers
+
+    peers = find_peers()
+    if peers is None:
+        sys.exit("../shared/peers not found (set LIGHTPROBE_PEERS)")
+    return peers
+
+
+def _mitsuba_python(given: str | None) -> str | None:
+    """A Python that imports mitsuba, or None."""
+    for candidate in ([given] if given else []) + [sys.executable]:
+        if candidate and subprocess.run([candidate, "-c", "import mitsuba"], capture_output=True).returncode == 0:
+            return candidate
+    return None
+
+
+def _run_json(cmd: list[str], env=None) -> dict:
+    out = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    lines = [line for line in out.stdout.splitlines() if line.startswith("{")]
+    if out.returncode != 0 or not lines:
+        return {"error": (out.stderr.strip().splitlines() or ["no output"])[-1]}
+    return json.loads(lines[-1])
+
+
+def _reference(py: str | None, kit: Path, cache: Path) -> Path | None:
+    ref = cache / "ref4096.exr"
+    if ref.exists():
+        return ref
+    if py is None:
+        return None
+    cache.mkdir(parents=True, exist_ok=True)
+    assets = cache / "peer_assets"
+    if not (assets / "env.exr").exists():
+        subprocess.run([py, str(kit / "mitsuba" / "scene_assets.py"), str(assets)], check=True)
+    print(f"making the 4096-spp Mitsuba reference in {ref} (about 2.5 minutes) ...", file=sys.stderr)
+    cmd = [py, str(kit / "mitsuba" / "render.py"), "--assets", str(assets), "--spp", "256", "--passes", "16"]
+    cmd += ["--reps", "1", "--no-warmup", "--seed", "100000", "--out", str(ref)]
+    cmd += ["--variance-out", str(cache / "ref4096_var.exr")]
+    subprocess.run(cmd, check=True, capture_output=True)
+    return ref
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--spp", type=int, nargs="*", default=[64])
+    parser.add_argument("--reps", type=int, default=2, help="repetitions of the A B sequence")
+    parser.add_argument("--samplers", nargs="*", default=list(MITSUBA_SAMPLERS))
+    parser.add_argument("--mitsuba-python", help="a Python that imports mitsuba (default: this one, if it does)")
+    parser.add_argument("--cache", default=str(Path.home() / ".cache" / "lightprobe" / "peer"))
+    parser.add_argument("--plot", help="write a log-log PNG of relMSE against seconds")
+    args = parser.parse_args()
+    kit = _kit()
+    cache = Path(args.cache)
+    py = _mitsuba_python(args.mitsuba_python)
+    if py is None:
+        print(
+            "Mitsuba 3 is not importable (pip install -e '.[peers]', or --mitsuba-python): lightprobe alone",
+            file=sys.stderr,
+        )
+    reference = _reference(py, kit, cache)
+    here = Path(__file__).resolve().parent
+    rows = []
+    for _ in range(args.reps):
+        for spp in args.spp:
+            cmd = [sys.executable, str(here / "peer_scene.py"), "--spp", str(spp)]
+            if reference is not None:
+                cmd += ["--reference", str(reference)]
+            r = _run_json(cmd)
+            rows.append({"renderer": "lightprobe", "sampler": "default", "spp": spp, **_pick(r)})
+            print(json.dumps(rows[-1]), flush=True)
+            if py is None:
+                continue
+            for sampler in args.samplers:
+                cmd = [py, str(kit / "mitsuba" / "render.py"), "--assets", str(cache / "peer_assets"), "--spp"]
+                cmd += [str(spp), "--sampler", sampler, "--reps", "1", "--seed", "0"]
+                if reference is not None:
+                    cmd += ["--reference", str(reference)]
+                r = _run_json(cmd)
+                rows.append({"renderer": "mitsuba 3", "sampler": sampler, "spp": spp, **_pick(r)})
+                print(json.dumps(rows[-1]), flush=True)
+    best = _best(rows)
+    print(_table(best))
+    if args.plot:
+        _plot(best, args.plot)
+    return 0
+
+
+def _pick(r: dict) -> dict:
+    if "error" in r:
+        return {"error": r["error"]}
+    seconds = r.get("seconds", r.get("time_s"))
+    relmse = r.get("relmse")
+    return {
+        "seconds": seconds,
+        "samples_per_s": r.get("samples_per_s"),
+        "relmse": relmse,
+        "efficiency": 1.0 / (relmse * seconds) if relmse and seconds else None,
+    }
+
+
+def _best(rows: list[dict]) -> list[dict]:
+    """The fastest run of each (renderer, sampler, spp), with its efficiency relative to Mitsuba independent."""
+    best: dict[tuple, dict] = {}
+    for r in rows:
+        if r.get("seconds") is None:
+            continue
+        key = (r["renderer"], r["sampler"], r["spp"])
+        if key not in best or r["seconds"] < best[key]["seconds"]:
+            best[key] = r
+    for r in best.values():
+        base = best.get(("mitsuba 3", "independent", r["spp"]))
+        eff = r.get("efficiency")
+        r["efficiency_vs_mitsuba_independent"] = (
+            eff / base["efficiency"] if eff and base and base.get("efficiency") else None
+        )
+    return sorted(best.values(), key=lambda r: (r["spp"], r["renderer"], r["sampler"]))
+
+
+def _table(rows: list[dict]) -> str:
+    lines = [
+        "| renderer | sampler | spp | seconds | M samples/s | relMSE | efficiency | vs Mitsuba independent |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+
+        def f(x, fmt):
+            return format(x, fmt) if isinstance(x, int | float) else "-"
+
+        lines.append(
+            f"| {r['renderer']} | {r['sampler']} | {r['spp']} | {f(r['seconds'], '.2f')} | "
+            f"{f((r.get('samples_per_s') or 0) / 1e6, '.2f')} | {f(r.get('relmse'), '.3g')} | "
+            f"{f(r.get('efficiency'), '.3g')} | {f(r.get('efficiency_vs_mitsuba_independent'), '.2f')} |"
+        )
+    return "\n".join(lines)
+
+
+def _plot(rows: list[dict], path: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4.2))
+    series: dict[tuple, list] = {}
+    for r in rows:
+        if r.get("relmse"):
+            series.setdefault((r["renderer"], r["sampler"]), []).append((r["seconds"], r["relmse"]))
+    for (renderer, sampler), pts in series.items():
+        pts.sort()
+        ax.loglog([p[0] for p in pts], [p[1] for p in pts], "o-", label=f"{renderer} {sampler}")
+    ax.set_xlabel("seconds")
+    ax.set_ylabel("relMSE against Mitsuba's 4096-spp reference")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    print(f"wrote {path}", file=sys.stderr)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
