@@ -6,9 +6,9 @@
     uniform points on its area, and uniform directions in its solid angle (Urena et al. 2013), with 1 and 16
     shadow rays per camera sample.  Light sampling only, no MIS, as in the lecture.
 ``lecture-many-lights``
-    The built-in many-light scene (4,000 emissive quads and triangles over four decades of power): K = 16 lights
-    picked per camera sample, N = 1 sample each, by uniform, power-proportional and light-BVH selection.  The
-    lecture reports 12.4x lower MSE for power over uniform on its scene.
+    The built-in many-light scene (4,000 emissive triangles, in quads and singly, over four decades of power):
+    K = 16 lights picked per camera sample, N = 1 sample each, by uniform, power-proportional and light-BVH
+    selection.  The lecture reports 12.4x lower MSE for power over uniform on its scene.
 
 Each row is measured against a reference rendered with MIS (power heuristic, BVH selection, solid-angle light
 sampling) at many samples; MSE and relMSE (the peer kit's (x - ref)^2 / (ref^2 + 0.01)) are means over pixels and
