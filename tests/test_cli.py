@@ -394,3 +394,23 @@ def test_a_scene_without_any_light_is_an_error(tmp_path, capsys):
     )
     assert main(["render", str(path), "-o", str(tmp_path / "x.exr"), "-q"]) == 2
     assert "the scene has no light" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("name", "options", "labels"),
+    [
+        ("lecture-area-sampling", ["--width", "16"], {"hemisphere-1", "area-16", "solid-angle-16"}),
+        ("lecture-many-lights", ["--width", "18", "--lights", "60", "--k", "4"], {"uniform", "power", "bvh"}),
+    ],
+)
+def test_lecture_experiments_write_rows_and_images(capsys, tmp_path, name, options, labels):
+    out = tmp_path / name
+    args = ["experiment", name, "--spp", "1", "--reference-spp", "8", "--json", "-o", str(out), *options]
+    assert main(args) == 0
+    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines() if line.startswith("{")]
+    assert labels <= {r["strategy"] for r in rows}
+    for r in rows:
+        assert r["mse"] > 0 and r["seconds"] > 0 and r["rays"] > 0 and r["mse_ratio_to_best"] >= 1.0
+    assert min(r["mse_ratio_to_best"] for r in rows) == 1.0
+    assert (out / f"{name}.json").exists() and (out / f"{name}-reference.png").exists()
+    assert len(list(out.glob("*.png"))) == len(rows) + 1
