@@ -329,11 +329,12 @@ def test_compiling_is_announced(capsys, tmp_path, monkeypatch):
     assert "compiling kernels" not in capsys.readouterr().err
 
 
-def test_kernels_report_whether_they_are_cached():
+def test_kernels_report_whether_they_are_cached(tmp_path):
     from lightprobe._numba import is_cached, jit
     from lightprobe.integrators.wavefront import kernels_cached
 
-    assert kernels_cached()  # earlier renders in this session put them there
+    assert main(["render", str(_scene_file(tmp_path)), "-o", str(tmp_path / "o.exr"), "--spp", "1", "-q"]) == 0
+    assert kernels_cached()  # the render above compiled (or loaded) them into the cache
 
     @jit
     def never_called(x):
