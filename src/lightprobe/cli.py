@@ -139,9 +139,9 @@ def _render_settings(defaults: dict, chosen: dict):
     """Settings from a scene file's ``[render]`` table, overridden by the options given (None: not given), checked
     (a :class:`~lightprobe.errors.LightprobeError` naming the setting if one is of the wrong type or range)."""
     from .integrators.wavefront import RenderSettings
+    from .io.scene_file import settings_fields
 
-    from_file = {"bsdf_samples": "n_bsdf", "env_samples": "n_env"}
-    settings = {from_file.get(k, k): v for k, v in defaults.items()}
+    settings = settings_fields(defaults)
     settings.update({k: v for k, v in chosen.items() if v is not None})
     settings.setdefault("spp", 16)
     settings = RenderSettings(**settings)

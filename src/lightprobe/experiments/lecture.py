@@ -64,7 +64,7 @@ def area_sampling_scene(resolution=(320, 240)) -> Scene:
     return scene
 
 
-def _measure(experiment, scene, settings, label, reference, out_dir: Path | None) -> tuple[Row, np.ndarray]:
+def _measure(experiment, scene, settings, label, reference, out_dir: Path | None) -> Row:
     result = render(scene, settings)
     mse, rel = _errors(result.image, reference)
     rays = int(result.stats["rays"])
@@ -72,10 +72,9 @@ def _measure(experiment, scene, settings, label, reference, out_dir: Path | None
         from ..io.images import write_png
 
         write_png(out_dir / f"{experiment}-{label}.png", result.image)
-    row = Row(
+    return Row(
         experiment, label, settings.light_samples, settings.spp, round(result.stats["seconds"], 3), rays, mse, rel
     )
-    return row, result.image
 
 
 def _reference(scene, spp: int, seed: int, out_dir: Path | None, name: str, **options) -> np.ndarray:
@@ -107,7 +106,7 @@ def area_sampling(
             settings = RenderSettings(
                 spp=spp, strategy="env", light_strategy=light_strategy, n_bsdf=0, n_env=rays, seed=seed
             )
-            row, _ = _measure("lecture-area-sampling", scene, settings, f"{light_strategy}-{rays}", reference, out)
+            row = _measure("lecture-area-sampling", scene, settings, f"{light_strategy}-{rays}", reference, out)
             rows.append(row)
     return _ratios(rows)
 
@@ -133,7 +132,7 @@ def many_lights(
         settings = RenderSettings(
             spp=spp, strategy="env", light_sampler=selector, lights_per_sample=k, n_bsdf=0, n_env=1, seed=seed
         )
-        row, _ = _measure("lecture-many-lights", scene, settings, selector, reference, out)
+        row = _measure("lecture-many-lights", scene, settings, selector, reference, out)
         rows.append(row)
     return _ratios(rows)
 

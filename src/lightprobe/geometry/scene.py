@@ -180,7 +180,7 @@ class Scene:
                     out.append(-1)
                     continue
                 out.append(row)
-                row += o.shape.triangle_count if isinstance(o.shape, TriangleMesh) else 1
+                row += _light_rows(o)
 
         return SceneArrays(
             np.ascontiguousarray(np.concatenate(vertices)) if vertices else np.zeros((0, 3)),
@@ -215,18 +215,21 @@ class Scene:
         rectangles, then each face of each emissive mesh, in the order :meth:`compile` numbers them."""
         from ..emitters.area import AreaLight, LightArrays, light_arrays
 
-        single, meshes = [], []
-        for kind in (Sphere, Rectangle):
-            for o in self.emitters:
-                if isinstance(o.shape, Sphere) and kind is Sphere:
-                    single.append(AreaLight.sphere(o.shape.center, o.shape.radius, o.emission, two_sided=o.two_sided))
-                elif isinstance(o.shape, Rectangle) and kind is Rectangle:
-                    r = o.shape
-                    single.append(AreaLight.rectangle(r.origin, r.edge_u, r.edge_v, o.emission, two_sided=o.two_sided))
-        for o in self.emitters:
-            if isinstance(o.shape, TriangleMesh):
-                meshes.append(_triangle_lights(o.shape, o.emission, o.two_sided))
-        parts = [light_arrays(single), *meshes]
+        emitters = self.emitters
+        spheres = [
+            AreaLight.sphere(o.shape.center, o.shape.radius, o.emission, two_sided=o.two_sided)
+            for o in emitters
+            if isinstance(o.shape, Sphere)
+        ]
+        rects = [
+            AreaLight.rectangle(o.shape.origin, o.shape.edge_u, o.shape.edge_v, o.emission, two_sided=o.two_sided)
+            for o in emitters
+            if isinstance(o.shape, Rectangle)
+        ]
+        meshes = [
+            _triangle_lights(o.shape, o.emission, o.two_sided) for o in emitters if isinstance(o.shape, TriangleMesh)
+        ]
+        parts = [light_arrays(spheres + rects), *meshes]
         return LightArrays(*(np.concatenate([getattr(t, f) for t in parts]) for f in LightArrays._fields))
 
     def environment_power(self) -> float:
@@ -245,12 +248,17 @@ class Scene:
         if self.environment is not None:
             lights.append(self.environment.source)
         if self.emitters:
-            n = sum(o.shape.triangle_count if isinstance(o.shape, TriangleMesh) else 1 for o in self.emitters)
+            n = sum(_light_rows(o) for o in self.emitters)
             lights.append(f"{n} area lights")
         return (
             f"{self.name}: {len(self.objects)} objects ({self.triangle_count} triangles), "
             f"{len(self.materials)} materials, {w}x{h}, light {' + '.join(lights) or 'none'}"
         )
+
+
+def _light_rows(obj: SceneObject) -> int:
+    """Rows an emissive object takes in the light table: one per triangle of a mesh, else one."""
+    return obj.shape.triangle_count if isinstance(obj.shape, TriangleMesh) else 1
 
 
 def _emission(value, shape, label: str) -> np.ndarray | None:

@@ -106,7 +106,7 @@ from ..geometry.mesh import TriangleMesh
 from ..geometry.scene import Scene
 from ..geometry.shapes import Rectangle, Sphere
 
-__all__ = ["RENDER_KEYS", "load_scene"]
+__all__ = ["RENDER_KEYS", "load_scene", "settings_fields"]
 
 RENDER_KEYS = {
     "spp",
@@ -341,6 +341,12 @@ def load_scene(path: str | os.PathLike) -> tuple[Scene, dict]:
     return scene, defaults
 
 
+def settings_fields(defaults: dict) -> dict:
+    """``[render]`` keys as :class:`~lightprobe.integrators.wavefront.RenderSettings` field names."""
+    names = {"bsdf_samples": "n_bsdf", "env_samples": "n_env"}
+    return {names.get(k, k): v for k, v in defaults.items()}
+
+
 def _render_defaults(t: _Table) -> dict:
     """The ``[render]`` table, checked key by key (type and range), then as a whole (e.g. compensation needs
     strategy 'mis'); returns the keys given."""
@@ -363,9 +369,8 @@ def _render_defaults(t: _Table) -> dict:
     assert set(readers) == RENDER_KEYS
     defaults = {key: read() for key, read in readers.items() if key in t.data}
     t.done()
-    names = {"bsdf_samples": "n_bsdf", "env_samples": "n_env"}
     try:
-        RenderSettings(**{names.get(k, k): v for k, v in defaults.items()}).validate()
+        RenderSettings(**settings_fields(defaults)).validate()
     except LightprobeError as exc:
         raise SceneError(f"{t.where}: {exc}") from None
     return defaults
