@@ -549,6 +549,8 @@ def render(
             settings.light_sampler, lights, env_power=scene.environment_power() if has_env else None
         )
         stats["area_lights"] = int(lights.kind.shape[0])
+        for name in ("env_u", "uv", "epdf"):  # the environment stages' own arrays: this path has no use for them
+            del buffers[name]
         buffers.update(slot_buffers(largest_pass * m))
         stages = STAGES
         light_constants = {
