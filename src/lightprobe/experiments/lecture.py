@@ -72,9 +72,7 @@ def _measure(experiment, scene, settings, label, reference, out_dir: Path | None
         from ..io.images import write_png
 
         write_png(out_dir / f"{experiment}-{label}.png", result.image)
-    return Row(
-        experiment, label, settings.light_samples, settings.spp, round(result.stats["seconds"], 3), rays, mse, rel
-    )
+    return Row(experiment, label, settings.light_samples, settings.spp, result.stats["seconds"], rays, mse, rel)
 
 
 def _reference(scene, spp: int, seed: int, out_dir: Path | None, name: str, **options) -> np.ndarray:
