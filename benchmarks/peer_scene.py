@@ -64,16 +64,28 @@ def bare_embree_rate(tracer, batches) -> float:
 
 def run_one(args) -> dict:
     from lightprobe.geometry.raytracer import RayTracer
+    from lightprobe.integrators import wavefront
     from lightprobe.integrators.wavefront import RenderSettings, render
     from lightprobe.io.images import read_image, write_image
     from lightprobe.peer import peer_scene
 
     scene = peer_scene(resolution=(args.res, args.res))
     settings = RenderSettings(
-        spp=args.spp, strategy=args.strategy, heuristic=args.heuristic, seed=args.seed, threads=args.threads
+        spp=args.spp,
+        strategy=args.strategy,
+        heuristic=args.heuristic,
+        seed=args.seed,
+        threads=args.threads,
+        sampler=args.sampler,
+        mis_compensation={"auto": None, "on": True, "off": False}[args.mis_compensation],
+        n_bsdf=args.bsdf_samples,
+        n_env=args.env_samples,
     )
     tracer = RayTracer(scene.compile(), threads=args.threads or os.cpu_count() or 1)
+    if args.profile:
+        wavefront.PROFILE = {}
     result = render(scene, settings, tracer=tracer)
+    profile, wavefront.PROFILE = wavefront.PROFILE, None
     stats = result.stats
     peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # before the recording below
     # record one pass worth of Embree batches and re-trace them bare
@@ -88,6 +100,10 @@ def run_one(args) -> dict:
         "spp": args.spp,
         "strategy": args.strategy,
         "heuristic": args.heuristic,
+        "sampler": args.sampler,
+        "mis_compensation": stats["mis_compensation"],
+        "bsdf_samples": args.bsdf_samples,
+        "env_samples": args.env_samples,
         "seconds": round(stats["seconds"], 4),
         "samples_per_s": round(stats["samples_per_s"]),
         "rays_per_s": round(stats["rays_per_s"]),
@@ -102,6 +118,13 @@ def run_one(args) -> dict:
         "cores": os.cpu_count(),
         "threads": stats["threads"],
     }
+    if profile is not None:
+        stages = {name: round(t, 3) for name, t in sorted(profile.items(), key=lambda kv: -kv[1])}
+        stages["embree"] = round(stats["embree_seconds"], 3)
+        stages["other (Python between kernels)"] = round(
+            stats["seconds"] - sum(profile.values()) - stats["embree_seconds"], 3
+        )
+        line["profile_seconds"] = stages
     if args.reference:
         ref = read_image(args.reference)[:, :, :3]
         line["relmse"] = relmse(result.image, ref)
@@ -119,9 +142,14 @@ def main(argv=None) -> int:
     parser.add_argument("--strategy", default="mis")
     parser.add_argument("--heuristic", default="power")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--sampler", default="sobol", help="sobol or independent")
+    parser.add_argument("--mis-compensation", choices=["auto", "on", "off"], default="auto")
+    parser.add_argument("--bsdf-samples", type=int, default=1)
+    parser.add_argument("--env-samples", type=int, default=1)
     parser.add_argument("--threads", type=int)
     parser.add_argument("--reference", help="EXR to compute relMSE against")
     parser.add_argument("--out", help="write the render here")
+    parser.add_argument("--profile", action="store_true", help="add seconds per kernel (warm-up excluded)")
     args = parser.parse_args(argv)
 
     from lightprobe.peer import find_peers
@@ -146,6 +174,14 @@ def main(argv=None) -> int:
             args.heuristic,
             "--seed",
             str(args.seed),
+            "--sampler",
+            args.sampler,
+            "--bsdf-samples",
+            str(args.bsdf_samples),
+            "--env-samples",
+            str(args.env_samples),
+            "--mis-compensation",
+            args.mis_compensation,
         ]
         if args.threads:
             cmd += ["--threads", str(args.threads)]

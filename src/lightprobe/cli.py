@@ -53,9 +53,15 @@ def render_command(
         int | None, typer.Option("--env-samples", "--light-samples", help="Samples per picked light, N [1].")
     ] = None,
     seed: Annotated[int | None, typer.Option(help="Random seed [0].")] = None,
+    sampler: Annotated[
+        str | None, typer.Option(help="Random numbers: sobol (Owen-scrambled Sobol') or independent [sobol].")
+    ] = None,
     mis_compensation: Annotated[
         bool | None,
-        typer.Option("--mis-compensation/--no-mis-compensation", help="Sample the MIS-compensated env PDF."),
+        typer.Option(
+            "--mis-compensation/--no-mis-compensation",
+            help="Sample the MIS-compensated env PDF [on for mis, env map alone].",
+        ),
     ] = None,
     light_sampler: Annotated[
         str | None, typer.Option(help="How a light is picked: uniform, power or bvh [power].")
@@ -104,6 +110,7 @@ def render_command(
         "n_bsdf": bsdf_samples,
         "n_env": env_samples,
         "seed": seed,
+        "sampler": sampler,
         "mis_compensation": mis_compensation,
         "light_sampler": light_sampler,
         "lights_per_sample": lights_per_sample,

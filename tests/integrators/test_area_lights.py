@@ -127,14 +127,16 @@ def test_every_strategy_and_selector_converges_to_the_reference(mixed_reference,
     assert abs(np.mean(z)) < 0.12, np.mean(z)
 
 
-# SHA-256 of the image of an environment-only test scene rendered by the code before area lights (commit 3b49dfa):
-# environment-lit scenes keep their fast path, bit for bit.  The same bits come from AVX-512 and from AVX2 code
-# (NUMBA_CPU_NAME=haswell): the kernels have no reductions whose order the vector width could change.
-ENV_ONLY_SHA256 = "185f47bb0fc3a93561a02c1c65c727de913f11c4e2d483840c043e7c51ef48cd"
+# SHA-256 of the image of an environment-only test scene with the independent sampler: environment-lit scenes keep
+# their fast path, bit for bit.  The same bits come from AVX-512 and from AVX2 code (NUMBA_CPU_NAME=haswell): the
+# kernels have no reductions whose order the vector width could change.  History: pinned to the code before area
+# lights (3b49dfa); re-pinned when the map's PDF weights became float32 (issue 9: at most 3.8e-7 relative
+# difference, in 12 % of the pixels, from 3b49dfa's image).
+ENV_ONLY_SHA256 = "7c37c6ac1e23082b15175128c7fcede4abc4e364b21de599f7336464d14be22b"
 
 
 def test_an_environment_only_scene_is_bit_identical_to_before():
     from .test_wavefront import small_scene
 
-    result = render(small_scene((20, 12)), RenderSettings(spp=8, seed=21))
+    result = render(small_scene((20, 12)), RenderSettings(spp=8, seed=21, sampler="independent", mis_compensation=False))
     assert hashlib.sha256(result.image.tobytes()).hexdigest() == ENV_ONLY_SHA256

@@ -16,7 +16,7 @@ from lightprobe.errors import ParameterError
 from lightprobe.geometry.camera import Camera
 from lightprobe.geometry.scene import Scene
 from lightprobe.geometry.shapes import Rectangle, Sphere
-from lightprobe.integrators.wavefront import RenderSettings, render
+from lightprobe.integrators.wavefront import RenderSettings, render, result_from
 from lightprobe.peer import find_peers, peer_scene
 
 from . import STRATEGY_CASES
@@ -127,18 +127,49 @@ def test_mis_has_lower_error_than_either_technique_alone(reference):
     assert err["mis"] < min(err["brdf"], err["env"])
 
 
-def test_bit_identical_across_threads_and_pass_sizes():
+@pytest.mark.parametrize("sampler", ["sobol", "independent"])
+def test_bit_identical_across_threads_and_pass_sizes(sampler):
     scene = small_scene((20, 12))
-    base = render(scene, RenderSettings(spp=12, threads=2))
+    base = render(scene, RenderSettings(spp=12, threads=2, sampler=sampler))
     for settings in (
-        RenderSettings(spp=12, threads=1),
-        RenderSettings(spp=12, pass_samples=100),
-        RenderSettings(spp=12, pass_samples=7, threads=1),
+        RenderSettings(spp=12, threads=1, sampler=sampler),
+        RenderSettings(spp=12, pass_samples=100, sampler=sampler),
+        RenderSettings(spp=12, pass_samples=7, threads=1, sampler=sampler),
     ):
         other = render(scene, settings)
         np.testing.assert_array_equal(other.image, base.image)
         np.testing.assert_array_equal(other.variance, base.variance)
-    assert render(scene, RenderSettings(spp=12, seed=1)).image.tobytes() != base.image.tobytes()
+    assert render(scene, RenderSettings(spp=12, seed=1, sampler=sampler)).image.tobytes() != base.image.tobytes()
+
+
+@pytest.mark.parametrize("sampler", ["sobol", "independent"])
+def test_split_sample_ranges_resume_bit_for_bit_and_merge_exactly(sampler):
+    scene = small_scene((20, 12))
+    whole = render(scene, RenderSettings(spp=12, sampler=sampler, pass_samples=500))
+    first = render(scene, RenderSettings(spp=5, sampler=sampler))
+    second = render(scene, RenderSettings(spp=7, first_sample=5, sampler=sampler, threads=1))
+    # resuming the first range with the second: the same operations in the same order as one render
+    resumed = render(scene, RenderSettings(spp=7, first_sample=5, sampler=sampler), resume=first.accumulator)
+    np.testing.assert_array_equal(resumed.image, whole.image)
+    np.testing.assert_array_equal(resumed.variance, whole.variance)
+    np.testing.assert_array_equal(first.accumulator.count, np.full(240, 5))  # resume worked on a copy
+    # merging the two ranges (in either order): equal up to float64 rounding
+    for merged in (first.accumulator.merged(second.accumulator), second.accumulator.merged(first.accumulator)):
+        out = result_from(merged, 20, 12)
+        np.testing.assert_allclose(merged.mean, whole.accumulator.mean, rtol=1e-12, atol=1e-14)
+        np.testing.assert_allclose(merged.m2, whole.accumulator.m2, rtol=1e-9, atol=1e-14)
+        np.testing.assert_array_equal(out.counts, whole.counts)
+        np.testing.assert_allclose(out.variance, whole.variance, rtol=1e-5, atol=1e-12)
+    # a range is not the whole: the test can fail
+    assert not np.allclose(second.image, whole.image)
+
+
+def test_sobol_has_lower_error_than_independent_at_equal_samples(reference):
+    err = {}
+    for sampler in ("sobol", "independent"):
+        result = render(small_scene(), RenderSettings(spp=16, sampler=sampler, seed=4))
+        err[sampler] = np.mean((result.image - reference.image) ** 2)
+    assert err["sobol"] < 0.8 * err["independent"], err
 
 
 def test_time_limit_keeps_the_result():

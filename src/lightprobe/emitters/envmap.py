@@ -42,6 +42,7 @@ that is black everywhere is rejected (nothing could be lit and there is no distr
 from __future__ import annotations
 
 import math
+import numbers
 import os
 from pathlib import Path
 from typing import NamedTuple
@@ -49,17 +50,18 @@ from typing import NamedTuple
 import numpy as np
 
 from .._numba import jit, jit_parallel, prange
-from ..color import luminance
 from ..errors import ImageError, ParameterError, warn_once
-from ..sampling.distributions import PiecewiseConstant2D, invert_2d, pdf_2d, sample_2d
+from ..sampling.distributions import invert_2d, pdf_2d, sample_2d
 from ..sampling.kernels import TWO_PI
 from . import mappings
+from .envmap_pdf import build_distributions, luminance_f32
 from .mappings import bilinear_latlong, direction_to_latlong, nearest_latlong
 
 __all__ = ["EnvKernel", "EnvironmentMap"]
 
 LOOKUPS = {"nearest": 0, "bilinear": 1}
 PDF_MODES = {"exact": 0, "pbrt": 1}
+_REFINE_UP_TO = 2048 * 1024  # texels: maps up to 2K get a PDF grid 2x finer in each dimension
 PDF_WEIGHTS = ("bilinear", "texel", "blur")
 EXACT, PBRT = 0, 1
 NEAREST, BILINEAR = 0, 1
@@ -291,16 +293,19 @@ def _row_solid_angles(rows: int, columns: int) -> np.ndarray:
     return (TWO_PI / columns) * (edges[:-1] - edges[1:])
 
 
-def _refine(values: np.ndarray, f: int) -> np.ndarray:
-    """Each texel repeated f x f times."""
-    return np.repeat(np.repeat(values, f, axis=0), f, axis=1) if f > 1 else values
-
-
-def _binomial_blur(lum: np.ndarray) -> np.ndarray:
-    """[1 2 1] x [1 2 1] / 16, periodic in u (columns), edge-replicated in v (rows)."""
-    horizontal = 0.25 * np.roll(lum, 1, axis=1) + 0.5 * lum + 0.25 * np.roll(lum, -1, axis=1)
-    padded = np.concatenate([horizontal[:1], horizontal, horizontal[-1:]], axis=0)
-    return 0.25 * padded[:-2] + 0.5 * padded[1:-1] + 0.25 * padded[2:]
+@jit
+def _count_bad(values):
+    """(non-finite values, negative values, the lowest value) of a flat array."""
+    nonfinite = 0
+    negative = 0
+    lowest = math.inf
+    for x in values:
+        if not math.isfinite(x):
+            nonfinite += 1
+        elif x < 0.0:
+            negative += 1
+            lowest = min(lowest, float(x))
+    return nonfinite, negative, lowest
 
 
 def _as_rgb(pixels, source: str) -> np.ndarray:
@@ -316,12 +321,13 @@ def _as_rgb(pixels, source: str) -> np.ndarray:
         data = data[:, :, :3]
     elif channels != 3:
         raise ImageError(f"{source}: expected 1, 3 or 4 channels, got {channels}")
-    bad = ~np.isfinite(data)
-    if bad.any():
-        raise ImageError(f"{source}: {int(bad.any(axis=2).sum())} texels are NaN or infinite; repair the image first")
-    negative = data < 0.0
-    if negative.any():
-        warn_once(f"{source}: clamped {int(negative.sum())} negative values (min {float(data.min()):.3g}) to 0")
+    data = np.ascontiguousarray(data)
+    nonfinite, negative, lowest = _count_bad(data.reshape(-1))  # one pass, no full-size temporaries
+    if nonfinite:
+        bad = int((~np.isfinite(data)).any(axis=2).sum())
+        raise ImageError(f"{source}: {bad} texels are NaN or infinite; repair the image first")
+    if negative:
+        warn_once(f"{source}: clamped {negative} negative values (min {lowest:.3g}) to 0")
         data = np.maximum(data, 0.0)
     return np.ascontiguousarray(data)
 
@@ -342,7 +348,7 @@ class EnvironmentMap:
         lookup: str = "bilinear",
         pdf: str = "exact",
         pdf_weights: str | None = None,
-        pdf_resolution: int = 2,
+        pdf_resolution: int | None = None,
         source: str = "<array>",
         mapping: str = "latlong",
     ):
@@ -367,33 +373,28 @@ class EnvironmentMap:
         self.radiance = image  # unscaled, as read
         self.to_world = _rotation_matrix(rotation)
 
-        lum = luminance(image)
+        lum = luminance_f32(image)
         if not lum.max() > 0.0:
             raise ImageError(f"{source}: the environment map is black everywhere; nothing would be lit")
         h, w = lum.shape
         self.luminance = lum
         self.texel_solid_angle = _row_solid_angles(h, w)
-        self.mean_luminance = float((lum * self.texel_solid_angle[:, None]).sum() / (4.0 * math.pi))
+        self.mean_luminance = float(lum.sum(axis=1, dtype=np.float64) @ self.texel_solid_angle) / (4.0 * math.pi)
 
-        f = int(pdf_resolution)
-        if f < 1 or f > 8 or f != pdf_resolution:
+        if pdf_resolution is None:  # finer cells follow a bilinear sun more closely; large maps need no refining
+            pdf_resolution = 2 if h * w <= _REFINE_UP_TO else 1
+        f = pdf_resolution
+        if isinstance(f, bool) or not isinstance(f, numbers.Integral) or not 1 <= f <= 8:
             raise ParameterError(f"pdf_resolution must be an integer from 1 to 8, got {pdf_resolution!r}")
+        f = int(f)
         self.pdf_resolution = f
-        if pdf_weights == "bilinear":
-            weights = mappings.bilinear_cell_means(np.ascontiguousarray(lum), f, max(1, 4 // f))
-            weights += 1e-4 * _refine(_binomial_blur(lum), f)
-        else:
-            weights = _refine(_binomial_blur(lum) if pdf_weights == "blur" else lum, f)
         cell_solid_angle = _row_solid_angles(h * f, w * f)
         self.cos_edges = _cos_edges(h * f)
-        mean = float((weights * cell_solid_angle[:, None]).sum()) / (4 * np.pi)
-        compensated = np.maximum(weights - mean, 0.0)
-        if not compensated.max() > 0.0:  # constant map: nothing above the mean
-            compensated = weights
-        self.distribution = PiecewiseConstant2D(self._cell_weights(weights))
-        self.compensated_distribution = PiecewiseConstant2D(self._cell_weights(compensated))
+        self.distribution, self.compensated_distribution = build_distributions(
+            lum, f, pdf_weights, self._row_factor(h * f), cell_solid_angle
+        )
         self._kernel = EnvKernel(
-            np.ascontiguousarray(image * np.float32(scale)),
+            image if scale == 1.0 else image * np.float32(scale),  # no copy of a large map when unscaled
             np.ascontiguousarray(self.to_world.T),
             np.ascontiguousarray(self.to_world),
             LOOKUPS[lookup],
@@ -403,13 +404,12 @@ class EnvironmentMap:
             *self.compensated_distribution.kernel_arrays(),
         )
 
-    def _cell_weights(self, lum: np.ndarray) -> np.ndarray:
-        """Probability weights of the PDF grid's cells (equal areas in (u, v)): luminance x solid angle for
-        ``exact``, luminance x sin(theta at the row centre) for ``pbrt``."""
-        rows = lum.shape[0]
+    def _row_factor(self, rows: int) -> np.ndarray:
+        """Per row, what turns a cell's luminance into its probability weight (cells have equal areas in (u, v)):
+        the row's solid angle for ``exact``, sin(theta at the row centre) for ``pbrt``."""
         if self.pdf_mode == "exact":
-            return lum * (self.cos_edges[:-1] - self.cos_edges[1:])[:, None]
-        return lum * np.sin(np.pi * (np.arange(rows) + 0.5) / rows)[:, None]
+            return self.cos_edges[:-1] - self.cos_edges[1:]
+        return np.sin(np.pi * (np.arange(rows) + 0.5) / rows)
 
     # --- construction ---------------------------------------------------------------------------------------------
     @classmethod

@@ -40,7 +40,7 @@ from ..geometry.intersect import (
     ray_offset,
 )
 from ..sampling.mis import mis_weight
-from ..sampling.rng import random_uniform, sample_key
+from ..sampling.rng import sample_state, uniform
 from .techniques import (
     BLOCKED,
     BRDF,
@@ -90,6 +90,7 @@ def _lights_setup(
     lights,
     sel,
     cam,
+    sampler,
     seed,
     pixel_start,
     spp_pass,
@@ -158,19 +159,17 @@ def _lights_setup(
         ns = (frame[k, 6], frame[k, 7], frame[k, 8])
         mk = s.material_kind[material[k]]
         mp = s.material_params[material[k]]
-        key = sample_key(seed, pixel_start + k // spp_pass, sample_start + k % spp_pass)
+        rs = sample_state(sampler, seed, pixel_start + k // spp_pass, sample_start + k % spp_pass)
         for j in range(m):
             r = base + j
-            u0 = random_uniform(key, 2 + 3 * j)
-            u1 = random_uniform(key, 3 + 3 * j)
+            u0 = uniform(rs, 2 + 3 * j)
+            u1 = uniform(rs, 3 + 3 * j)
             technique = strategy
             if strategy == MIS:
                 technique = BRDF if j < n_bsdf else ENV
             if technique == ENV:
                 picker = _light_slot(n_bsdf, n_per_light, strategy, j)
-                light, pmf = select_light(
-                    sel, p[0], p[1], p[2], ng[0], ng[1], ng[2], random_uniform(key, 4 + 3 * picker)
-                )
+                light, pmf = select_light(sel, p[0], p[1], p[2], ng[0], ng[1], ng[2], uniform(rs, 4 + 3 * picker))
                 if light < 0 or pmf <= 0.0:
                     continue
                 if light == sel.env_index:
@@ -189,7 +188,7 @@ def _lights_setup(
                 seg[r] = dist
                 state[r] = SLOT_LIGHT
                 continue
-            st, wi, pdf, w = sample_direction(technique, mk, mp, wo, u0, u1, random_uniform(key, 4 + 3 * j))
+            st, wi, pdf, w = sample_direction(technique, mk, mp, wo, u0, u1, uniform(rs, 4 + 3 * j))
             if st == SLOT_NONE:
                 continue
             if st == SLOT_BSDF:

@@ -48,7 +48,7 @@ from ..geometry.intersect import MISS, closest_analytic, may_hit_mesh, occluded_
 from ..geometry.raytracer import RayTracer
 from ..geometry.scene import Scene
 from ..sampling.mis import mis_weight
-from ..sampling.rng import random_uniform, sample_key
+from ..sampling.rng import SAMPLERS, sample_state, uniform
 from .techniques import (
     BLOCKED,
     BRDF,
@@ -65,7 +65,7 @@ from .techniques import (
     store_shading_frame,
 )
 
-__all__ = ["STRATEGIES", "RenderResult", "RenderSettings", "kernels_cached", "render"]
+__all__ = ["STRATEGIES", "Accumulator", "RenderResult", "RenderSettings", "kernels_cached", "render", "result_from"]
 
 HEURISTICS = {"balance": 1.0, "power": 2.0}
 
@@ -80,7 +80,9 @@ class RenderSettings:
     n_bsdf: int = 1
     n_env: int = 1
     seed: int = 0
-    mis_compensation: bool = False
+    first_sample: int = 0  # sample indices first_sample ... first_sample + spp - 1 (split and resumed renders)
+    sampler: str = "sobol"
+    mis_compensation: bool | None = None  # None: on for MIS in scenes lit by an environment map alone
     light_sampler: str = "power"
     lights_per_sample: int = 1
     light_strategy: str = "solid-angle"
@@ -90,11 +92,12 @@ class RenderSettings:
 
     def validate(self) -> None:
         """Raise :class:`ParameterError` naming the first setting of the wrong type or out of range."""
-        for name in ("spp", "n_bsdf", "n_env", "seed", "pass_samples", "lights_per_sample"):
+        for name in ("spp", "n_bsdf", "n_env", "seed", "first_sample", "pass_samples", "lights_per_sample"):
             _require(name, getattr(self, name), "integer")
-        for name in ("strategy", "heuristic", "light_sampler", "light_strategy"):
+        for name in ("strategy", "heuristic", "sampler", "light_sampler", "light_strategy"):
             _require(name, getattr(self, name), "string")
-        _require("mis_compensation", self.mis_compensation, "true or false")
+        if self.mis_compensation is not None:
+            _require("mis_compensation", self.mis_compensation, "true or false")
         if self.time_limit is not None:
             _require("time_limit", self.time_limit, "number")
         if self.threads is not None:
@@ -110,27 +113,27 @@ class RenderSettings:
                 f"bsdf and env sample counts (n_bsdf, n_env) must be >= 0 with 1 to 64 in all, got {self.n_bsdf} "
                 f"and {self.n_env}"
             )
+        if self.sampler not in SAMPLERS:
+            raise ParameterError(f"sampler must be one of {list(SAMPLERS)}, got {self.sampler!r}")
         if self.light_sampler not in SELECTORS:
             raise ParameterError(f"light_sampler must be one of {list(SELECTORS)}, got {self.light_sampler!r}")
         if self.light_strategy not in LIGHT_STRATEGIES:
-            raise ParameterError(
-                f"light_strategy must be one of {list(LIGHT_STRATEGIES)}, got {self.light_strategy!r}"
-            )
+            raise ParameterError(f"light_strategy must be one of {list(LIGHT_STRATEGIES)}, got {self.light_strategy!r}")
         if not 1 <= self.lights_per_sample <= 64 or self.shading_samples > 64:
             raise ParameterError(
                 f"lights_per_sample must be >= 1 with at most 64 shading samples in all (n_bsdf + lights_per_sample "
                 f"x n_env), got {self.lights_per_sample}"
             )
         if self.mis_compensation and self.strategy != "mis":
-            raise ParameterError(
-                "mis_compensation needs strategy 'mis' (the compensated PDF is zero on dim texels)"
-            )
+            raise ParameterError("mis_compensation needs strategy 'mis' (the compensated PDF is zero on dim texels)")
         if self.time_limit is not None and not (self.time_limit > 0 and math.isfinite(self.time_limit)):
             raise ParameterError(f"time_limit must be > 0 seconds, got {self.time_limit!r}")
         if self.threads is not None and not (1 <= self.threads <= 256):
             raise ParameterError(f"threads must be between 1 and 256, got {self.threads!r}")
         if not 0 <= self.seed < 2**63:
             raise ParameterError(f"seed must be in [0, 2^63), got {self.seed!r}")
+        if not 0 <= self.first_sample < 2**62:
+            raise ParameterError(f"first_sample must be in [0, 2^62), got {self.first_sample!r}")
         if self.pass_samples < 1:
             raise ParameterError(f"pass_samples must be >= 1, got {self.pass_samples!r}")
 
@@ -163,16 +166,20 @@ class RenderResult:
     variance: np.ndarray
     counts: np.ndarray
     stats: dict = field(default_factory=dict)
+    #: the running float64 sums (mean, M2, counts) that produced the image: resume or merge from them
+    accumulator: Accumulator | None = None
 
 
 # --- kernels ------------------------------------------------------------------------------------------------------
 @jit_parallel
-def _camera_pass(s, cam, seed, pixel_start, spp_pass, sample_start, dirs, t, kind, index, needs_mesh, prim, b1, b2):
+def _camera_pass(
+    s, cam, sampler, seed, pixel_start, spp_pass, sample_start, dirs, t, kind, index, needs_mesh, prim, b1, b2
+):
     ox, oy, oz = cam[0], cam[1], cam[2]
     for k in prange(dirs.shape[0]):
         pixel = pixel_start + k // spp_pass
-        key = sample_key(seed, pixel, sample_start + k % spp_pass)
-        dx, dy, dz = camera_ray(cam, pixel, random_uniform(key, 0), random_uniform(key, 1))
+        rs = sample_state(sampler, seed, pixel, sample_start + k % spp_pass)
+        dx, dy, dz = camera_ray(cam, pixel, uniform(rs, 0), uniform(rs, 1))
         dirs[k, 0], dirs[k, 1], dirs[k, 2] = dx, dy, dz
         t[k], kind[k], index[k] = closest_analytic(s, ox, oy, oz, dx, dy, dz, np.inf)
         needs_mesh[k] = may_hit_mesh(s, ox, oy, oz, dx, dy, dz, t[k])
@@ -192,6 +199,7 @@ def _shade_setup(
     s,
     env,
     cam,
+    sampler,
     seed,
     pixel_start,
     spp_pass,
@@ -241,12 +249,12 @@ def _shade_setup(
         ns = (frame[k, 6], frame[k, 7], frame[k, 8])
         mk = s.material_kind[material[k]]
         mp = s.material_params[material[k]]
-        key = sample_key(seed, pixel_start + k // spp_pass, sample_start + k % spp_pass)
+        rs = sample_state(sampler, seed, pixel_start + k // spp_pass, sample_start + k % spp_pass)
         for j in range(m):
             r = base + j
-            u0 = random_uniform(key, 2 + 3 * j)
-            u1 = random_uniform(key, 3 + 3 * j)
-            u2 = random_uniform(key, 4 + 3 * j)
+            u0 = uniform(rs, 2 + 3 * j)
+            u1 = uniform(rs, 3 + 3 * j)
+            u2 = uniform(rs, 4 + 3 * j)
             technique = strategy
             if strategy == MIS:
                 technique = BRDF if j < n_bsdf else ENV
@@ -383,7 +391,8 @@ def _shade_finish(
 
 
 @jit_parallel
-def _accumulate(direct, contrib, flags, m, spp_pass, pixel_start, mean, m2, count, nonfinite):
+def _accumulate(direct, contrib, flags, m, spp_pass, pixel_start, acc_mean, acc_m2, acc_count, acc_nonfinite):
+    mean, m2, count, nonfinite = acc_mean, acc_m2, acc_count, acc_nonfinite
     n_pixels = direct.shape[0] // spp_pass
     for q in prange(n_pixels):
         p = pixel_start + q
@@ -412,12 +421,51 @@ def _accumulate(direct, contrib, flags, m, spp_pass, pixel_start, mean, m2, coun
 
 
 # --- driver -------------------------------------------------------------------------------------------------------
-class _Accumulator:
+class Accumulator:
+    """Per-pixel running statistics in float64: mean, M2 (sum of squared deviations, Welford), sample and
+    non-finite counts.  A render continues one (``render(..., resume=acc)``, bit for bit the same as not
+    stopping); :meth:`merged` combines two over disjoint sample ranges."""
+
     def __init__(self, n_pixels: int):
         self.mean = np.zeros((n_pixels, 3))
         self.m2 = np.zeros((n_pixels, 3))
         self.count = np.zeros(n_pixels, dtype=np.int64)
         self.nonfinite = np.zeros(n_pixels, dtype=np.int64)
+
+    def copy(self) -> Accumulator:
+        other = Accumulator(0)
+        other.mean, other.m2 = self.mean.copy(), self.m2.copy()
+        other.count, other.nonfinite = self.count.copy(), self.nonfinite.copy()
+        return other
+
+    def merged(self, other: Accumulator) -> Accumulator:
+        """Both sample sets as one: Chan, Golub and LeVeque's pairwise update (1979), mean_ab = mean_a + delta
+        n_b / n and M2_ab = M2_a + M2_b + delta^2 n_a n_b / n.  Equal to a single run up to float64 rounding."""
+        if self.mean.shape != other.mean.shape:
+            raise ParameterError(f"cannot merge renders of {self.count.size} and {other.count.size} pixels")
+        out = Accumulator(0)
+        na, nb = self.count[:, None].astype(float), other.count[:, None].astype(float)
+        n = na + nb
+        delta = other.mean - self.mean
+        with np.errstate(divide="ignore", invalid="ignore"):
+            share = np.where(n > 0, nb / n, 0.0)
+            out.mean = self.mean + delta * share
+            out.m2 = self.m2 + other.m2 + np.where(n > 0, delta**2 * na * nb / n, 0.0)
+        out.count = self.count + other.count
+        out.nonfinite = self.nonfinite + other.nonfinite
+        return out
+
+    def to_arrays(self) -> dict[str, np.ndarray]:
+        return {"mean": self.mean, "m2": self.m2, "count": self.count, "nonfinite": self.nonfinite}
+
+    @classmethod
+    def from_arrays(cls, arrays) -> Accumulator:
+        acc = cls(0)
+        acc.mean = np.array(arrays["mean"], np.float64)
+        acc.m2 = np.array(arrays["m2"], np.float64)
+        acc.count = np.array(arrays["count"], np.int64)
+        acc.nonfinite = np.array(arrays["nonfinite"], np.int64)
+        return acc
 
 
 def _placeholder_environment():
@@ -471,10 +519,21 @@ def _pass_buffers(n: int, m: int) -> dict[str, np.ndarray]:
     }
 
 
+#: when a dict, every kernel launch adds its seconds under the kernel's name (``benchmarks/peer_scene.py --profile``)
+PROFILE: dict | None = None
+
+
 def _launch(kernel, values: dict) -> None:
     """Call a kernel with its arguments taken by parameter name from ``values``."""
     code = kernel.py_func.__code__
-    kernel(*[values[name] for name in code.co_varnames[: code.co_argcount]])
+    args = [values[name] for name in code.co_varnames[: code.co_argcount]]
+    if PROFILE is None:
+        kernel(*args)
+        return
+    start = time.perf_counter()
+    kernel(*args)
+    name = kernel.py_func.__name__.lstrip("_")
+    PROFILE[name] = PROFILE.get(name, 0.0) + time.perf_counter() - start
 
 
 def render(
@@ -483,9 +542,12 @@ def render(
     *,
     progress: Callable[[dict], None] | None = None,
     tracer: RayTracer | None = None,
+    resume: Accumulator | None = None,
 ) -> RenderResult:
     """Render ``scene``; ``progress(stats)`` is called after every pass.  Ctrl-C keeps what has been accumulated
-    (``stats['interrupted']``), as does a time limit (``stats['stopped_by_time_limit']``)."""
+    (``stats['interrupted']``), as does a time limit (``stats['stopped_by_time_limit']``).  ``resume``: continue
+    these statistics (a copy) with samples ``settings.first_sample`` onward; resuming where a render stopped gives
+    the same bits as an uninterrupted render."""
     settings = settings or RenderSettings()
     settings.validate()
     _check_material_strategy(scene, settings)
@@ -504,12 +566,17 @@ def render(
     m = settings.shading_samples
     spp_pass = max(1, min(settings.spp, settings.pass_samples // n_pixels))
     band = max(1, min(n_pixels, settings.pass_samples // spp_pass))
-    acc = _Accumulator(n_pixels)
+    if resume is not None and resume.count.size != n_pixels:
+        raise ParameterError(f"cannot resume a render of {resume.count.size} pixels at {width}x{height}")
+    acc = resume.copy() if resume is not None else Accumulator(n_pixels)
     # scenes lit by an environment map alone keep its measured fast path (decisions.md 12); any emitter, no
     # environment, or several light picks per sample take the general area-light path
     area_path = bool(scene.emitters) or scene.environment is None or settings.lights_per_sample > 1
     if area_path and settings.mis_compensation:
         raise ParameterError("mis_compensation applies to scenes lit by an environment map alone")
+    compensated = settings.mis_compensation
+    if compensated is None:  # measured to win on the peer scene (decisions.md 21)
+        compensated = settings.strategy == "mis" and not area_path
     env = (scene.environment or _placeholder_environment()).kernel
     stats = {
         "width": width,
@@ -520,7 +587,8 @@ def render(
         "n_bsdf": settings.n_bsdf,
         "n_env": settings.n_env,
         "seed": settings.seed,
-        "mis_compensation": settings.mis_compensation,
+        "sampler": settings.sampler,
+        "mis_compensation": compensated,
         "light_sampler": settings.light_sampler,
         "lights_per_sample": settings.lights_per_sample,
         "light_strategy": settings.light_strategy,
@@ -566,17 +634,18 @@ def render(
         "env": env,
         "cam": cam,
         "seed": settings.seed,
+        "sampler": SAMPLERS[settings.sampler],
         "strategy": strategy,
         "n_bsdf": settings.n_bsdf,
         "n_env": settings.n_env,
         "m": m,
         "beta": HEURISTICS[settings.heuristic],
-        "compensated": bool(settings.mis_compensation),
+        "compensated": compensated,
         "mis": strategy == MIS,
         **light_constants,
     }
 
-    def run_pass(acc: _Accumulator, pixel_start: int, count: int, spp_now: int, sample_start: int) -> int:
+    def run_pass(acc: Accumulator, pixel_start: int, count: int, spp_now: int, sample_start: int) -> int:
         """One pass over ``count`` pixels x ``spp_now`` samples; returns the number of shadow rays traced."""
         n = count * spp_now
         b = {k: v[: n * m] if v.shape[0] == largest_pass * m else v[:n] for k, v in buffers.items()}
@@ -604,14 +673,14 @@ def render(
             for kernel in stages:
                 _launch(kernel, values)
         flags = b["flags"]
-        direct, contrib = b["direct"], b["contrib"]
         shadow_rays = int(np.count_nonzero(flags))
         test = np.nonzero(flags == TEST_MESH)[0]
         if test.size:
             tfar = b["shadow_t"][test] if area_path else None
             blocked = tracer.embree_occluded(b["shadow_o"][test], b["shadow_d"][test], tfar)
             flags[test] = np.where(blocked, BLOCKED, VISIBLE).astype(np.int8)
-        _accumulate(direct, contrib, flags, m, spp_now, pixel_start, acc.mean, acc.m2, acc.count, acc.nonfinite)
+        values.update(flags=flags, acc_mean=acc.mean, acc_m2=acc.m2, acc_count=acc.count, acc_nonfinite=acc.nonfinite)
+        _launch(_accumulate, values)
         return shadow_rays
 
     embree_before = tracer.embree_rays
@@ -620,12 +689,12 @@ def render(
     with _InterruptAtPassEnd() as interrupt:
         try:
             # warm up every kernel on one pixel (loads cached machine code) before the clock starts
-            run_pass(_Accumulator(n_pixels), 0, 1, 1, 0)
+            run_pass(Accumulator(n_pixels), 0, 1, 1, 0)
             embree_before = tracer.embree_rays
             embree_seconds_before = tracer.embree_seconds
             stats["setup_seconds"] = time.perf_counter() - t_setup
             start = time.perf_counter()
-            for sample_start, spp_now in _sample_rounds(settings.spp, spp_pass):
+            for sample_start, spp_now in _sample_rounds(settings.first_sample, settings.spp, spp_pass):
                 for pixel_start in range(0, n_pixels, band):
                     count = min(band, n_pixels - pixel_start)
                     stats["shadow_rays"] += run_pass(acc, pixel_start, count, spp_now, sample_start)
@@ -665,13 +734,13 @@ class _Stop(Exception):
     """The time limit was reached."""
 
 
-def _sample_rounds(spp: int, spp_pass: int):
+def _sample_rounds(first: int, spp: int, spp_pass: int):
     """(first sample index, samples per pixel) of each round over the image: one sample first, so that a stop
     (Ctrl-C, a time limit) soon after the start still leaves every pixel with a sample, then ``spp_pass`` at a
     time.  The rounds change nothing in the image: each sample's random numbers depend on its index alone."""
-    yield 0, 1
+    yield first, 1
     for start in range(1, spp, spp_pass):
-        yield start, min(spp_pass, spp - start)
+        yield first + start, min(spp_pass, spp - start)
 
 
 class _InterruptAtPassEnd:
@@ -704,10 +773,8 @@ class _InterruptAtPassEnd:
         return False
 
 
-def _finish(acc: _Accumulator, stats: dict, width: int, height: int) -> RenderResult:
+def _finish(acc: Accumulator, stats: dict, width: int, height: int) -> RenderResult:
     counts = acc.count
-    with np.errstate(divide="ignore", invalid="ignore"):
-        var = np.where((counts >= 2)[:, None], acc.m2 / (counts * np.maximum(counts - 1, 1))[:, None], 0.0)
     samples = int(counts.sum())
     seconds = max(stats.get("seconds", 0.0), 1e-12)
     rays = stats["camera_rays"] + stats["shadow_rays"]
@@ -720,10 +787,21 @@ def _finish(acc: _Accumulator, stats: dict, width: int, height: int) -> RenderRe
         rays_per_s=rays / seconds,
         nonfinite_samples=int(acc.nonfinite.sum()),
     )
+    return result_from(acc, width, height, stats)
+
+
+def result_from(acc: Accumulator, width: int, height: int, stats: dict | None = None) -> RenderResult:
+    """The image (float32 mean, never NaN/Inf), the variance of each pixel's mean, and the counts of ``acc``."""
+    counts = acc.count
+    if counts.size != width * height:
+        raise ParameterError(f"{counts.size} pixels are not a {width}x{height} image")
+    with np.errstate(divide="ignore", invalid="ignore"):
+        var = np.where((counts >= 2)[:, None], acc.m2 / (counts * np.maximum(counts - 1, 1))[:, None], 0.0)
     image = np.nan_to_num(acc.mean.reshape(height, width, 3), nan=0.0, posinf=0.0, neginf=0.0)
     return RenderResult(
         image.astype(np.float32),
         np.nan_to_num(var.reshape(height, width, 3), nan=0.0, posinf=0.0).astype(np.float32),
         counts.reshape(height, width),
-        stats,
+        stats if stats is not None else {},
+        acc,
     )

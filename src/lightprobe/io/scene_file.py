@@ -81,6 +81,7 @@ Example (every key shown; optional ones have their default)::
     bsdf_samples = 1
     env_samples = 1                     # light samples per chosen light (N)
     seed = 0
+    sampler = "sobol"                   # sobol (Owen-scrambled Sobol') | independent
     light_sampler = "power"             # uniform | power | bvh
     lights_per_sample = 1               # lights chosen per camera sample (K)
     light_strategy = "solid-angle"      # area | solid-angle | hemisphere | cosine
@@ -115,6 +116,7 @@ RENDER_KEYS = {
     "bsdf_samples",
     "env_samples",
     "seed",
+    "sampler",
     "mis_compensation",
     "light_sampler",
     "lights_per_sample",
@@ -353,6 +355,7 @@ def _render_defaults(t: _Table) -> dict:
     from ..emitters.area import STRATEGIES as LIGHT_STRATEGIES
     from ..emitters.selection import SELECTORS
     from ..integrators.wavefront import HEURISTICS, STRATEGIES, RenderSettings
+    from ..sampling.rng import SAMPLERS
 
     readers = {
         "spp": lambda: t.integer("spp", minimum=1),
@@ -361,6 +364,7 @@ def _render_defaults(t: _Table) -> dict:
         "bsdf_samples": lambda: t.integer("bsdf_samples", minimum=0),
         "env_samples": lambda: t.integer("env_samples", minimum=0),
         "seed": lambda: t.integer("seed", minimum=0),
+        "sampler": lambda: t.choice("sampler", list(SAMPLERS)),
         "mis_compensation": lambda: t.boolean("mis_compensation"),
         "light_sampler": lambda: t.choice("light_sampler", list(SELECTORS)),
         "lights_per_sample": lambda: t.integer("lights_per_sample", minimum=1),

@@ -263,14 +263,23 @@ class PiecewiseConstant2D:
 
     def __init__(self, func):
         values = _check_function(func, 2, "func")
-        self.func = values
         self.conditional_cdf, row_means = _normalized_cdf(values)
         self.marginal_cdf, total = _normalized_cdf(row_means)
         self.integral = float(total)
 
+    @classmethod
+    def from_cdfs(cls, conditional_cdf: np.ndarray, row_means: np.ndarray) -> PiecewiseConstant2D:
+        """From rows' normalised CDFs (ny, nx + 1) and the rows' means (ny,), as built by a caller that never holds
+        the function itself in float64 (a large environment map)."""
+        dist = cls.__new__(cls)
+        dist.conditional_cdf = conditional_cdf
+        dist.marginal_cdf, total = _normalized_cdf(np.asarray(row_means, np.float64))
+        dist.integral = float(total)
+        return dist
+
     @property
     def shape(self) -> tuple[int, int]:
-        return self.func.shape
+        return self.conditional_cdf.shape[0], self.conditional_cdf.shape[1] - 1
 
     @property
     def marginal_density(self) -> np.ndarray:

@@ -1,9 +1,19 @@
-"""Counter-based random numbers: u = hash(seed, pixel, sample index, dimension).
+"""The renderer's random numbers: u = f(seed, pixel, sample index, dimension), for two samplers.
 
 Every random number of a render is a pure function of its coordinates, so an image does not depend on the order
-in which samples are computed: any pass size, tile order or thread count gives the same bits.  The hash is
-SplitMix64's finaliser (Steele et al. 2014) applied to a combination of the coordinates; each value takes the top
-53 bits as a double in [0, 1).
+in which samples are computed: any pass size, tile order or thread count gives the same bits, and a render split
+into sample ranges merges exactly.
+
+``independent``: a hash.  SplitMix64's finaliser (Steele et al. 2014) applied to a combination of the coordinates;
+each value takes the top 53 bits as a double in [0, 1).
+
+``sobol``: padded, Owen-scrambled Sobol' points (Burley, "Practical Hash-based Owen Scrambling", JCGT 2020, the
+design of pbrt-v4's ``PaddedSobolSampler``).  The renderer's dimensions come in pairs (the pixel position, each
+shading slot's 2D direction) and single decisions (lobe or light choice); each pair is its own 2D Sobol' sequence
+(dimensions 0 and 1, a (0, 2)-sequence), its sample index shuffled per pixel and pair by a hash-based Owen
+scramble of the index -- which maps the first 2^k indices onto one aligned block of 2^k points, so every
+power-of-two prefix stays a stratified net -- and each coordinate Owen-scrambled with its own hash seed.  The
+scrambles depend on (seed, pixel, dimension) only, so the numbers stay a pure function of the four coordinates.
 """
 
 from __future__ import annotations
@@ -12,7 +22,20 @@ import numpy as np
 
 from .._numba import jit, jit_parallel, prange
 
-__all__ = ["random_uniform", "uniform_batch"]
+__all__ = [
+    "SAMPLERS",
+    "owen_scramble",
+    "random_uniform",
+    "sample_state",
+    "sampler_batch",
+    "sobol_2d",
+    "uniform",
+    "uniform_batch",
+]
+
+#: the samplers a render can use (settings ``sampler``)
+SAMPLERS = {"independent": 0, "sobol": 1}
+INDEPENDENT, SOBOL = 0, 1
 
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 _M1 = np.uint64(0xBF58476D1CE4E5B9)
@@ -24,6 +47,22 @@ _S27 = np.uint64(27)
 _S31 = np.uint64(31)
 _S11 = np.uint64(11)
 _INV53 = 1.0 / 9007199254740992.0  # 2^-53
+_INV32 = 1.0 / 4294967296.0  # 2^-32
+_U32 = np.uint64(0xFFFFFFFF)
+_ONE = np.uint64(1)
+_TOP = np.uint64(0x80000000)
+_MASKS = (
+    (np.uint64(1), np.uint64(0x55555555)),
+    (np.uint64(2), np.uint64(0x33333333)),
+    (np.uint64(4), np.uint64(0x0F0F0F0F)),
+    (np.uint64(8), np.uint64(0x00FF00FF)),
+)
+_S16 = np.uint64(16)
+_S32 = np.uint64(32)
+# Vegdahl's improved Laine-Karras hash ("Building a better LK hash", 2021; pbrt-v4's FastOwenScrambler)
+_LK1 = np.uint64(0x3D20ADEA)
+_LK2 = np.uint64(0x05526C56)
+_LK3 = np.uint64(0x53A22864)
 
 
 @jit
@@ -34,16 +73,139 @@ def _mix(z):
 
 
 @jit
+def pixel_key(seed, pixel):
+    """A 64-bit key for one (seed, pixel)."""
+    return _mix(np.uint64(seed) * _GOLDEN + np.uint64(pixel) * _PIXEL)
+
+
+@jit
 def sample_key(seed, pixel, sample):
     """A 64-bit key for one (seed, pixel, sample index); combine with :func:`random_uniform` per dimension."""
-    k = _mix(np.uint64(seed) * _GOLDEN + np.uint64(pixel) * _PIXEL)
-    return _mix(k + np.uint64(sample) * _GOLDEN)
+    return _mix(pixel_key(seed, pixel) + np.uint64(sample) * _GOLDEN)
 
 
 @jit
 def random_uniform(key, dim):
     """The ``dim``-th uniform number in [0, 1) of a sample key."""
     return float(_mix(key + np.uint64(dim) * _DIM + _GOLDEN) >> _S11) * _INV53
+
+
+@jit
+def _reverse32(x):
+    for shift, mask in _MASKS:
+        x = ((x >> shift) & mask) | ((x & mask) << shift)
+    return ((x >> _S16) | (x << _S16)) & _U32
+
+
+@jit
+def _laine_karras(x, seed):
+    """Vegdahl's Laine-Karras hash: each bit is flipped by a function of the seed and the bits *below* it."""
+    x = (x ^ (x * _LK1)) & _U32
+    x = (x + (seed & _U32)) & _U32
+    x = (x * (((seed & _U32) >> _S16) | _ONE)) & _U32
+    x = (x ^ (x * _LK2)) & _U32
+    return (x ^ (x * _LK3)) & _U32
+
+
+@jit
+def owen_scramble(x, seed):
+    """Hash-based Owen scrambling of a 32-bit value (Burley 2020, section 3): reversed, each bit flipped by a hash
+    of the bits above it (in the original order), reversed back.  A bijection on [0, 2^32)."""
+    return _reverse32(_laine_karras(_reverse32(x), seed))
+
+
+def _sobol_y_tables() -> np.ndarray:
+    """Sobol's second dimension y = C i (over GF(2)) as four byte tables: y = T[0][i & 255] ^ T[1][i >> 8 & 255]..."""
+    columns = []
+    v = 0x80000000
+    for _ in range(32):
+        columns.append(v)
+        v ^= v >> 1
+    tables = np.zeros((4, 256), dtype=np.uint64)
+    for q in range(4):
+        for byte in range(256):
+            y = 0
+            for t in range(8):
+                if byte >> t & 1:
+                    y ^= columns[8 * q + t]
+            tables[q, byte] = y
+    return tables
+
+
+_SOBOL_Y = _sobol_y_tables()
+_BYTE = np.uint64(0xFF)
+_S8 = np.uint64(8)
+_S24 = np.uint64(24)
+
+
+@jit
+def sobol_2d(index):
+    """The first two dimensions of Sobol's sequence as 32-bit integers: van der Corput (bit reversal) and the
+    Pascal-matrix generator (direction numbers v_{k+1} = v_k ^ (v_k >> 1))."""
+    i = index & _U32
+    return _reverse32(i), _sobol_y(i)
+
+
+@jit
+def _sobol_y(i):
+    t = _SOBOL_Y
+    return t[0, i & _BYTE] ^ t[1, (i >> _S8) & _BYTE] ^ t[2, (i >> _S16) & _BYTE] ^ t[3, i >> _S24]
+
+
+@jit
+def _pair_of(dim):
+    """The renderer's dimension layout (see ``integrators/techniques.py``): 0-1 the position in the pixel, then
+    three per shading slot j -- 2 + 3j and 3 + 3j its 2D direction, 4 + 3j a 1D choice (BSDF lobe, light).
+    Returns (Sobol' pair, coordinate): 2D decisions share a pair, a 1D choice gets a pair of its own."""
+    if dim < 2:
+        return 0, dim
+    j, c = divmod(dim - 2, 3)
+    if c < 2:
+        return 1 + 2 * j, c
+    return 2 + 2 * j, 0
+
+
+@jit
+def sobol_uniform(pkey, sample, dim):
+    """Dimension ``dim`` of sample ``sample`` of the padded Owen-scrambled Sobol' sampler in one pixel."""
+    pair, c = _pair_of(dim)
+    # one hash per (pixel, pair): its low 32 bits shuffle the sample index, its high 32 scramble x, and a second
+    # hash scrambles y.  Sample indices of 2^32 and beyond (never reached in practice) start a fresh scramble.
+    h = _mix(pkey + np.uint64(pair + 1) * _DIM + (np.uint64(sample) >> _S32) * _GOLDEN)
+    index = owen_scramble(np.uint64(sample) & _U32, h)
+    seed = h >> _S32 if c == 0 else _mix(h)
+    if c == 0:  # owen_scramble(reverse(index)) without reversing twice
+        bits = _reverse32(_laine_karras(index, seed))
+    else:
+        bits = owen_scramble(_sobol_y(index), seed)
+    return float(bits) * _INV32
+
+
+@jit
+def sample_state(sampler, seed, pixel, sample):
+    """Everything :func:`uniform` needs for one (seed, pixel, sample index) of ``sampler``."""
+    pkey = pixel_key(seed, pixel)
+    return sampler, _mix(pkey + np.uint64(sample) * _GOLDEN), pkey, sample
+
+
+@jit
+def uniform(state, dim):
+    """The ``dim``-th uniform number in [0, 1) of a sample (``state`` from :func:`sample_state`)."""
+    sampler, key, pkey, sample = state
+    if sampler == SOBOL:
+        return sobol_uniform(pkey, sample, dim)
+    return random_uniform(key, dim)
+
+
+@jit_parallel
+def sampler_batch(sampler, seed, pixels, samples, dims):
+    """(N, dims) uniforms of ``sampler`` (a code of :data:`SAMPLERS`) for N (pixel, sample) pairs."""
+    out = np.empty((pixels.shape[0], dims))
+    for i in prange(pixels.shape[0]):
+        state = sample_state(sampler, seed, pixels[i], samples[i])
+        for d in range(dims):
+            out[i, d] = uniform(state, d)
+    return out
 
 
 @jit_parallel
