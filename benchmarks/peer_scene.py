@@ -62,6 +62,27 @@ def bare_embree_rate(tracer, batches) -> float:
     return total / seconds if seconds > 0 else float("nan")
 
 
+def _replace_blob(path: str) -> None:
+    """Put the mesh at ``path`` in the blob's place: scaled uniformly and centred into the blob's bounding box
+    (its largest extent matched), so the image stays comparable."""
+    import lightprobe.peer as peer
+    from lightprobe.geometry.mesh import TriangleMesh
+
+    original = peer.peer_assets
+
+    def assets(peers=None):
+        env, blob_v, _ = original(peers)
+        mesh = TriangleMesh.load(path)
+        v = mesh.vertices
+        lo, hi = v.min(axis=0), v.max(axis=0)
+        blo, bhi = blob_v.min(axis=0), blob_v.max(axis=0)
+        scale = (bhi - blo).max() / (hi - lo).max()
+        v = (v - (lo + hi) / 2) * scale + (blo + bhi) / 2
+        return env, v, mesh.faces
+
+    peer.peer_assets = assets
+
+
 def run_one(args) -> dict:
     from lightprobe.geometry.raytracer import RayTracer
     from lightprobe.integrators import wavefront
@@ -69,6 +90,8 @@ def run_one(args) -> dict:
     from lightprobe.io.images import read_image, write_image
     from lightprobe.peer import peer_scene
 
+    if args.mesh:
+        _replace_blob(args.mesh)
     scene = peer_scene(resolution=(args.res, args.res))
     settings = RenderSettings(
         spp=args.spp,
@@ -98,6 +121,8 @@ def run_one(args) -> dict:
         "scene": "peer",
         "res": args.res,
         "spp": args.spp,
+        "mesh": args.mesh or "blob (98k triangles)",
+        "triangles": stats["triangles"],
         "strategy": args.strategy,
         "heuristic": args.heuristic,
         "sampler": args.sampler,
@@ -150,6 +175,7 @@ def main(argv=None) -> int:
     parser.add_argument("--reference", help="EXR to compute relMSE against")
     parser.add_argument("--out", help="write the render here")
     parser.add_argument("--profile", action="store_true", help="add seconds per kernel (warm-up excluded)")
+    parser.add_argument("--mesh", help="a mesh file to put in the blob's place (e.g. the 871k-triangle dragon)")
     args = parser.parse_args(argv)
 
     from lightprobe.peer import find_peers

@@ -2,7 +2,7 @@
 """Benchmark: time to a given error on the peer scene, lightprobe against Mitsuba 3 with each of its samplers.
 
     python benchmarks/vs_mitsuba.py                          # 64 spp, 2 repetitions, A B A B
-    python benchmarks/vs_mitsuba.py --spp 16 64 --reps 3 --plot vs_mitsuba.png
+    python benchmarks/vs_mitsuba.py --spp 16 64 256 --reps 2 --plot vs_mitsuba.png
     python benchmarks/vs_mitsuba.py --mitsuba-python /path/to/venv/bin/python
 
 Mitsuba runs through the peer kit's own scripts (``../shared/peers/mitsuba/``) in a Python that can import it:
@@ -75,7 +75,10 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--spp", type=int, nargs="*", default=[64])
     parser.add_argument("--reps", type=int, default=2, help="repetitions of the A B sequence")
-    parser.add_argument("--samplers", nargs="*", default=list(MITSUBA_SAMPLERS))
+    parser.add_argument("--samplers", nargs="*", default=list(MITSUBA_SAMPLERS), help="Mitsuba's samplers")
+    parser.add_argument(
+        "--lightprobe-samplers", nargs="*", default=["sobol", "independent"], help="lightprobe's samplers"
+    )
     parser.add_argument("--mitsuba-python", help="a Python that imports mitsuba (default: this one, if it does)")
     parser.add_argument("--cache", default=str(Path.home() / ".cache" / "lightprobe" / "peer"))
     parser.add_argument("--plot", help="write a log-log PNG of relMSE against seconds")
@@ -93,12 +96,13 @@ def main() -> int:
     rows = []
     for _ in range(args.reps):
         for spp in args.spp:
-            cmd = [sys.executable, str(here / "peer_scene.py"), "--spp", str(spp)]
-            if reference is not None:
-                cmd += ["--reference", str(reference)]
-            r = _run_json(cmd)
-            rows.append({"renderer": "lightprobe", "sampler": "default", "spp": spp, **_pick(r)})
-            print(json.dumps(rows[-1]), flush=True)
+            for sampler in args.lightprobe_samplers:
+                cmd = [sys.executable, str(here / "peer_scene.py"), "--spp", str(spp), "--sampler", sampler]
+                if reference is not None:
+                    cmd += ["--reference", str(reference)]
+                r = _run_json(cmd)
+                rows.append({"renderer": "lightprobe", "sampler": sampler, "spp": spp, **_pick(r)})
+                print(json.dumps(rows[-1]), flush=True)
             if py is None:
                 continue
             for sampler in args.samplers:
@@ -124,6 +128,7 @@ def _pick(r: dict) -> dict:
     return {
         "seconds": seconds,
         "samples_per_s": r.get("samples_per_s"),
+        "peak_mb": r.get("peak_mb"),
         "relmse": relmse,
         "efficiency": 1.0 / (relmse * seconds) if relmse and seconds else None,
     }

@@ -142,6 +142,48 @@ def render_command(
         warnings.warn(f"{stats['nonfinite_samples']} samples were NaN or infinite and counted as 0", stacklevel=1)
 
 
+@app.command("reference")
+def reference_command(
+    scene_file: Annotated[Path, typer.Argument(metavar="SCENE", help="Scene file (TOML).")],
+    output: Annotated[Path, typer.Option("--output", "-o", help=".exr (mean and variance).")] = Path("reference.exr"),
+    spp: Annotated[int, typer.Option(help="Total samples per pixel of the reference.")] = 1024,
+    chunk: Annotated[int, typer.Option(help="Samples per pixel between checkpoints.")] = 16,
+    strategy: Annotated[str | None, typer.Option(help="Strategy [scene or mis].")] = None,
+    seed: Annotated[int | None, typer.Option(help="Random seed [scene or 0].")] = None,
+    sampler: Annotated[str | None, typer.Option(help="sobol or independent [sobol].")] = None,
+    time_limit: Annotated[float | None, typer.Option(help="Stop this run after this many seconds.")] = None,
+    threads: Annotated[int | None, typer.Option(help="Threads [all cores].")] = None,
+) -> None:
+    """Render a high-sample reference in checkpointed chunks.  Run the same command again to resume after Ctrl-C,
+    a crash or a time limit (bit for bit the same image as an uninterrupted run), or with a larger --spp to extend."""
+    from .analysis.reference import checkpoint_path, file_id, render_reference
+    from .io.outputs import check_output, write_render
+    from .io.scene_file import load_scene
+
+    if output.suffix.lower() != ".exr":
+        raise LightprobeError(f"{output}: a reference is written as .exr (mean and variance)")
+    check_output(output, variance=True)
+    scene, defaults = load_scene(scene_file)
+    chosen = {"spp": spp, "strategy": strategy, "seed": seed, "sampler": sampler, "time_limit": time_limit}
+    settings = _render_settings(defaults, {**chosen, "threads": threads})
+    check_output(output, variance=True, resolution=scene.camera.resolution)
+    typer.echo(scene.summary(), err=True)
+    start = time.perf_counter()
+
+    def chunk_done(done: int, total: int) -> None:
+        _echo_err(f"{done}/{total} spp, checkpoint written ({time.perf_counter() - start:.1f} s)")
+
+    result = render_reference(scene, settings, output, chunk=chunk, scene_id=file_id(scene_file), on_chunk=chunk_done)
+    stats = result.stats
+    spp_done = int(result.counts.min())
+    files = write_render(output, result, variance=True)
+    state = "complete" if spp_done >= spp else f"stopped at {spp_done}/{spp} spp; run again to resume"
+    _echo_err(
+        f"wrote {', '.join(str(f) for f in files)}: {spp_done} spp ({state}; resumed from {stats['resumed_from_spp']}),"
+        f" checkpoint {checkpoint_path(output)}"
+    )
+
+
 def _render_settings(defaults: dict, chosen: dict):
     """Settings from a scene file's ``[render]`` table, overridden by the options given (None: not given), checked
     (a :class:`~lightprobe.errors.LightprobeError` naming the setting if one is of the wrong type or range)."""

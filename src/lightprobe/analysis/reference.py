@@ -1,0 +1,153 @@
+"""References that survive interruption: a render accumulated in sample ranges, checkpointed to disk, resumable.
+
+``render_reference(scene, settings, out)`` renders samples ``0 ... spp - 1`` in chunks of ``chunk`` samples per
+pixel.  After each chunk the running statistics (per-pixel float64 mean, M2, sample and non-finite counts) go to
+``<out>.checkpoint.npz`` beside the image, written to a temporary file and renamed into place, so a crash or a
+kill leaves either the old checkpoint or the new one.  Run again with the same settings and it resumes from the
+checkpoint's sample count; since every random number is a pure function of (seed, pixel, sample index,
+dimension) and the statistics continue in sample order, the result is bit for bit that of an uninterrupted run.
+A larger ``spp`` extends a finished reference the same way.  A checkpoint made with other settings (seed,
+sampler, strategy, scene, resolution) is an error naming the file and the difference, never silently mixed in.
+A chunk in flight when Ctrl-C or the time limit stops the render is not checkpointed (its pixels have uneven
+sample counts); at most one chunk of work is redone on resume.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import os
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import LightprobeError
+from ..geometry.scene import Scene
+from ..integrators.wavefront import Accumulator, RenderResult, RenderSettings, render, result_from
+
+__all__ = ["checkpoint_path", "render_reference"]
+
+# settings that may change between runs of one reference without changing its samples
+_FREE = {"spp", "first_sample", "time_limit", "threads", "pass_samples"}
+
+
+def checkpoint_path(out: str | os.PathLike) -> Path:
+    p = Path(out)
+    return p.with_name(p.name + ".checkpoint.npz")
+
+
+def _identity(scene: Scene, settings: RenderSettings, scene_id: str) -> dict:
+    fixed = {k: v for k, v in dataclasses.asdict(settings).items() if k not in _FREE}
+    width, height = scene.camera.resolution
+    return {"settings": fixed, "resolution": [width, height], "scene": scene_id}
+
+
+def _load(path: Path, identity: dict, n_pixels: int) -> Accumulator | None:
+    if not path.exists():
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            meta = json.loads(str(data["identity"]))
+            acc = Accumulator.from_arrays(data)
+    except (OSError, ValueError, KeyError) as exc:
+        raise LightprobeError(f"{path}: not a readable checkpoint ({exc}); move it away to start afresh") from None
+    if meta != identity:
+        diff = sorted(
+            k
+            for k in set(meta.get("settings", {})) | set(identity["settings"])
+            if meta.get("settings", {}).get(k) != identity["settings"].get(k)
+        )
+        if meta.get("resolution") != identity["resolution"]:
+            diff.append("resolution")
+        if meta.get("scene") != identity["scene"]:
+            diff.append("scene")
+        raise LightprobeError(
+            f"{path}: checkpoint of a different render ({', '.join(diff) or 'settings'} differ); "
+            "use the same settings, or move it away to start afresh"
+        )
+    if acc.count.size != n_pixels or acc.count.min() != acc.count.max():
+        raise LightprobeError(f"{path}: damaged checkpoint (pixel counts); move it away to start afresh")
+    return acc
+
+
+def _save(path: Path, acc: Accumulator, identity: dict) -> None:
+    tmp = path.with_name(f".{path.name}.partial-{os.getpid()}.npz")
+    try:
+        with open(tmp, "wb") as fh:
+            np.savez(fh, identity=np.array(json.dumps(identity)), **acc.to_arrays())
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except OSError as exc:
+        raise LightprobeError(f"{path}: cannot write the checkpoint ({exc.strerror or exc})") from None
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def render_reference(
+    scene: Scene,
+    settings: RenderSettings,
+    out: str | os.PathLike,
+    *,
+    chunk: int = 16,
+    scene_id: str = "",
+    progress: Callable[[dict], None] | None = None,
+    on_chunk: Callable[[int, int], None] | None = None,
+) -> RenderResult:
+    """Render (or resume, or extend) ``settings.spp`` samples per pixel, checkpointing after every ``chunk``.
+
+    ``scene_id`` names the scene in the checkpoint (e.g. a hash of the scene file), so that a checkpoint of
+    another scene is refused.  ``settings.time_limit`` bounds this run; the result says how far it got
+    (``stats['spp_done']``) and the checkpoint keeps it.  ``on_chunk(done, spp)`` is called after each checkpoint."""
+    if chunk < 1:
+        raise LightprobeError(f"chunk must be >= 1 sample per pixel, got {chunk}")
+    settings.validate()
+    width, height = scene.camera.resolution
+    identity = _identity(scene, settings, scene_id)
+    ckpt = checkpoint_path(out)
+    acc = _load(ckpt, identity, width * height)
+    done = int(acc.count[0]) if acc is not None else 0
+    resumed_from = done
+    start = time.perf_counter()
+    stats: dict = {}
+    stopped = False
+    while done < settings.spp:
+        n = min(chunk, settings.spp - done)
+        limit = None
+        if settings.time_limit is not None:
+            limit = settings.time_limit - (time.perf_counter() - start)
+            if limit <= 0:
+                stopped = True
+                break
+        part = dataclasses.replace(settings, spp=n, first_sample=done, time_limit=limit)
+        result = render(scene, part, resume=acc, progress=progress)
+        stats = result.stats
+        if stats["interrupted"] or stats["stopped_by_time_limit"]:
+            stopped = True  # the chunk in flight is not checkpointed (uneven counts): it is redone on resume
+            break
+        acc = result.accumulator
+        done += n
+        _save(ckpt, acc, identity)
+        if on_chunk is not None:
+            on_chunk(done, settings.spp)
+    if acc is None:
+        raise LightprobeError("stopped before the first chunk was finished; nothing to write")
+    out_stats = {
+        **{k: v for k, v in stats.items() if k not in ("spp_done", "spp_max")},
+        "reference_spp": settings.spp,
+        "resumed_from_spp": resumed_from,
+        "stopped": stopped,
+        "seconds_this_run": time.perf_counter() - start,
+        "checkpoint": str(ckpt),
+        "scene_id": scene_id,
+        "chunk": chunk,
+    }
+    return result_from(acc, width, height, out_stats)
+
+
+def file_id(path: str | os.PathLike) -> str:
+    """A scene file's identity for checkpoints: the SHA-256 of its bytes."""
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]

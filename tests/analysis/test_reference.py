@@ -1,0 +1,99 @@
+"""References: checkpointed in chunks, resumed after a stop or a kill, bit for bit an uninterrupted render."""
+
+from __future__ import annotations
+
+import dataclasses
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from lightprobe.analysis.reference import checkpoint_path, render_reference
+from lightprobe.cli import main
+from lightprobe.errors import LightprobeError
+from lightprobe.integrators.wavefront import RenderSettings, render
+from lightprobe.io.images import read_image
+from lightprobe.io.scene_file import load_scene
+
+SCENE = (
+    "[camera]\norigin = [0, 1, 4]\ntarget = [0, 0, 0]\nresolution = [24, 16]\n"
+    "[environment]\nsky = { sun_elevation = 35, sun_azimuth = 45, sun_diameter = 2.0, width = 64, height = 32 }\n"
+    '[materials.white]\ntype = "lambert"\nalbedo = 0.5\n'
+    '[materials.metal]\ntype = "conductor"\nalpha = 0.2\nmaterial = "Au"\n'
+    '[[objects]]\ntype = "sphere"\ncenter = [0, 0, 0]\nradius = 1\nmaterial = "metal"\n'
+    '[[objects]]\ntype = "rectangle"\norigin = [-3, -1, 3]\nedge_u = [6, 0, 0]\nedge_v = [0, 0, -6]\n'
+    'material = "white"\n'
+)
+
+
+@pytest.fixture
+def scene_file(tmp_path):
+    path = tmp_path / "scene.toml"
+    path.write_text(SCENE)
+    return path
+
+
+def test_stopped_and_resumed_equals_uninterrupted(scene_file, tmp_path):
+    scene, _ = load_scene(scene_file)
+    settings = RenderSettings(spp=12, seed=3)
+    whole = render(scene, settings)
+    out = tmp_path / "ref.exr"
+    first = render_reference(scene, dataclasses.replace(settings, spp=4), out, chunk=3, scene_id="s")
+    assert int(first.counts.min()) == 4 and checkpoint_path(out).exists()
+    resumed = render_reference(scene, settings, out, chunk=5, scene_id="s")  # extends 4 -> 12 in other chunks
+    assert resumed.stats["resumed_from_spp"] == 4
+    np.testing.assert_array_equal(resumed.image, whole.image)
+    np.testing.assert_array_equal(resumed.variance, whole.variance)
+    # a finished reference resumes to itself without rendering
+    again = render_reference(scene, settings, out, chunk=5, scene_id="s")
+    np.testing.assert_array_equal(again.image, whole.image)
+
+
+def test_a_checkpoint_of_another_render_is_refused(scene_file, tmp_path):
+    scene, _ = load_scene(scene_file)
+    out = tmp_path / "ref.exr"
+    render_reference(scene, RenderSettings(spp=2, seed=3), out, chunk=2, scene_id="s")
+    with pytest.raises(LightprobeError, match=r"ref.exr.checkpoint.npz: checkpoint of a different render \(seed"):
+        render_reference(scene, RenderSettings(spp=4, seed=4), out, chunk=2, scene_id="s")
+    with pytest.raises(LightprobeError, match="scene differ"):
+        render_reference(scene, RenderSettings(spp=4, seed=3), out, chunk=2, scene_id="other")
+    checkpoint_path(out).write_bytes(b"not a checkpoint")
+    with pytest.raises(LightprobeError, match="not a readable checkpoint"):
+        render_reference(scene, RenderSettings(spp=4, seed=3), out, chunk=2, scene_id="s")
+
+
+def test_killed_mid_run_then_resumed_is_bit_identical(scene_file, tmp_path):
+    """SIGKILL (no chance to clean up) after a checkpoint, then the same command again."""
+    out = tmp_path / "ref.exr"
+    cmd = [sys.executable, "-m", "lightprobe", "reference", str(scene_file), "-o", str(out), "--spp", "4000"]
+    cmd += ["--chunk", "2", "--seed", "5"]
+    proc = subprocess.Popen(cmd, stderr=subprocess.DEVNULL)
+    ckpt = checkpoint_path(out)
+    deadline = time.time() + 180
+    while not ckpt.exists() and time.time() < deadline and proc.poll() is None:
+        time.sleep(0.05)
+    time.sleep(0.3)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(timeout=60)
+    assert ckpt.exists() and not out.exists()
+    with np.load(ckpt) as data:
+        done = int(data["count"][0])
+    assert 2 <= done < 4000 and done % 2 == 0
+    # resume to a total a little above what the killed run reached
+    total = done + 6
+    assert main(["reference", str(scene_file), "-o", str(out), "--spp", str(total), "--chunk", "4", "--seed", "5"]) == 0
+    scene, _ = load_scene(scene_file)
+    whole = render(scene, RenderSettings(spp=total, seed=5))
+    image = read_image(out)
+    np.testing.assert_array_equal(image[:, :, :3], whole.image)
+    np.testing.assert_array_equal(image[:, :, 3:6], whole.variance)
+
+
+def test_reference_command_errors_are_one_line(scene_file, tmp_path, capsys):
+    assert main(["reference", str(scene_file), "-o", str(tmp_path / "r.png")]) != 0
+    assert "a reference is written as .exr" in capsys.readouterr().err
+    assert main(["reference", str(scene_file), "-o", str(tmp_path / "r.exr"), "--chunk", "0"]) != 0
+    assert "chunk must be >= 1" in capsys.readouterr().err
