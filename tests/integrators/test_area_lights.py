@@ -138,5 +138,6 @@ ENV_ONLY_SHA256 = "7c37c6ac1e23082b15175128c7fcede4abc4e364b21de599f7336464d14be
 def test_an_environment_only_scene_is_bit_identical_to_before():
     from .test_wavefront import small_scene
 
-    result = render(small_scene((20, 12)), RenderSettings(spp=8, seed=21, sampler="independent", mis_compensation=False))
+    settings = RenderSettings(spp=8, seed=21, sampler="independent", mis_compensation=False)
+    result = render(small_scene((20, 12)), settings)
     assert hashlib.sha256(result.image.tobytes()).hexdigest() == ENV_ONLY_SHA256

@@ -49,7 +49,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .._numba import jit, jit_parallel, prange
+from .._numba import jit, jit_inline, jit_parallel, prange
 from ..errors import ImageError, ParameterError, warn_once
 from ..sampling.distributions import invert_2d, pdf_2d, sample_2d
 from ..sampling.kernels import TWO_PI
@@ -92,14 +92,14 @@ def _mat_vec(m, x, y, z):
     )
 
 
-@jit
+@jit_inline
 def _lookup(k, u, v):
     if k.lookup == BILINEAR:
         return bilinear_latlong(k.image, u, v)
     return nearest_latlong(k.image, u, v)
 
 
-@jit
+@jit_inline
 def env_eval(k, x, y, z):
     """Radiance (r, g, b) arriving from world direction (x, y, z)."""
     ex, ey, ez = _mat_vec(k.to_env, x, y, z)
@@ -107,14 +107,14 @@ def env_eval(k, x, y, z):
     return _lookup(k, u, v)
 
 
-@jit
+@jit_inline
 def _cdfs(k, compensated):
     if compensated:
         return k.comp_marginal_cdf, k.comp_conditional_cdf
     return k.marginal_cdf, k.conditional_cdf
 
 
-@jit
+@jit_inline
 def _cell_pdf(k, joint_density, row, sin_theta):
     """Solid-angle density from the unit-square density of a PDF cell (eqs. in the module docstring)."""
     h = k.marginal_cdf.shape[0] - 1
@@ -125,7 +125,7 @@ def _cell_pdf(k, joint_density, row, sin_theta):
     return joint_density / (2.0 * math.pi * math.pi * sin_theta)
 
 
-@jit
+@jit_inline
 def env_sample_full(k, compensated, u0, u1):
     """Sample a world direction: (x, y, z, pdf, u, y_cell, cos_theta), the last three being what
     :func:`env_radiance_at_sample` needs to look the radiance up without converting the direction back."""
@@ -146,20 +146,20 @@ def env_sample_full(k, compensated, u0, u1):
     return wx, wy, wz, _cell_pdf(k, p, row, sin_theta), x, y, cos_theta
 
 
-@jit
+@jit_inline
 def env_sample(k, compensated, u0, u1):
     """Sample a world direction: returns (x, y, z, pdf per steradian)."""
     wx, wy, wz, pdf, _, _, _ = env_sample_full(k, compensated, u0, u1)
     return wx, wy, wz, pdf
 
 
-@jit
+@jit_inline
 def env_radiance_at_sample(k, u, y, cos_theta):
     """Radiance in the direction :func:`env_sample_full` returned with (u, y, cos_theta)."""
     return _lookup(k, u, env_sample_coords(k, y, cos_theta))
 
 
-@jit
+@jit_inline
 def _pdf_at(k, compensated, u, v, ey):
     mc, cc = _cdfs(k, compensated)
     h = mc.shape[0] - 1
@@ -168,7 +168,7 @@ def _pdf_at(k, compensated, u, v, ey):
     return _cell_pdf(k, p, row, math.sqrt(max(0.0, (1.0 - ey) * (1.0 + ey))))
 
 
-@jit
+@jit_inline
 def env_pdf(k, compensated, x, y, z):
     """Density per steradian of sampling world direction (x, y, z)."""
     ex, ey, ez = _mat_vec(k.to_env, x, y, z)
@@ -176,7 +176,7 @@ def env_pdf(k, compensated, x, y, z):
     return _pdf_at(k, compensated, u, v, ey)
 
 
-@jit
+@jit_inline
 def env_coords(k, x, y, z):
     """(u, v, cos theta in the env frame) of a world direction: what :func:`env_lookup` and
     :func:`env_pdf_at` take."""
@@ -185,25 +185,25 @@ def env_coords(k, x, y, z):
     return u, v, ey
 
 
-@jit
+@jit_inline
 def env_lookup(k, u, v):
     """Radiance at lat-long coordinates (u, v)."""
     return _lookup(k, u, v)
 
 
-@jit
+@jit_inline
 def env_pdf_at(k, compensated, u, v, cos_theta):
     """Density per steradian at lat-long coordinates (u, v) (with the direction's cos theta)."""
     return _pdf_at(k, compensated, u, v, cos_theta)
 
 
-@jit
+@jit_inline
 def env_sample_coords(k, y, cos_theta):
     """Lat-long v of a sample from :func:`env_sample_full` (y and cos theta as it returned them)."""
     return y if k.mode == PBRT else math.acos(min(1.0, max(-1.0, cos_theta))) / math.pi
 
 
-@jit
+@jit_inline
 def env_eval_pdf(k, compensated, x, y, z):
     """env_eval and env_pdf in one: ((r, g, b), pdf), converting the direction once."""
     ex, ey, ez = _mat_vec(k.to_env, x, y, z)
@@ -211,7 +211,7 @@ def env_eval_pdf(k, compensated, x, y, z):
     return _lookup(k, u, v), _pdf_at(k, compensated, u, v, ey)
 
 
-@jit
+@jit_inline
 def env_to_square(k, compensated, x, y, z):
     """The (u0, u1) that ``env_sample`` maps to world direction (x, y, z)."""
     ex, ey, ez = _mat_vec(k.to_env, x, y, z)

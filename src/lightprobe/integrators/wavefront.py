@@ -690,6 +690,8 @@ def render(
         try:
             # warm up every kernel on one pixel (loads cached machine code) before the clock starts
             run_pass(Accumulator(n_pixels), 0, 1, 1, 0)
+            if PROFILE is not None:
+                PROFILE.clear()  # the warm-up (and any compiling) is not the render
             embree_before = tracer.embree_rays
             embree_seconds_before = tracer.embree_seconds
             stats["setup_seconds"] = time.perf_counter() - t_setup
