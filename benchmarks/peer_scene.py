@@ -92,7 +92,8 @@ def run_one(args) -> dict:
 
     if args.mesh:
         _replace_blob(args.mesh)
-    scene = peer_scene(resolution=(args.res, args.res))
+    env_options = {"pdf": args.pdf, "pdf_weights": args.pdf_weights, "pdf_resolution": args.pdf_resolution}
+    scene = peer_scene(resolution=(args.res, args.res), **{k: v for k, v in env_options.items() if v is not None})
     settings = RenderSettings(
         spp=args.spp,
         strategy=args.strategy,
@@ -103,6 +104,7 @@ def run_one(args) -> dict:
         mis_compensation={"auto": None, "on": True, "off": False}[args.mis_compensation],
         n_bsdf=args.bsdf_samples,
         n_env=args.env_samples,
+        env_candidates=args.env_candidates,
     )
     tracer = RayTracer(scene.compile(), threads=args.threads or os.cpu_count() or 1)
     if args.profile:
@@ -129,6 +131,8 @@ def run_one(args) -> dict:
         "mis_compensation": stats["mis_compensation"],
         "bsdf_samples": args.bsdf_samples,
         "env_samples": args.env_samples,
+        "env_candidates": args.env_candidates,
+        "env_pdf": [args.pdf or "exact", args.pdf_weights or "bilinear", scene.environment.pdf_resolution],
         "seconds": round(stats["seconds"], 4),
         "samples_per_s": round(stats["samples_per_s"]),
         "rays_per_s": round(stats["rays_per_s"]),
@@ -171,10 +175,14 @@ def main(argv=None) -> int:
     parser.add_argument("--mis-compensation", choices=["auto", "on", "off"], default="auto")
     parser.add_argument("--bsdf-samples", type=int, default=1)
     parser.add_argument("--env-samples", type=int, default=1)
+    parser.add_argument("--env-candidates", type=int, default=1, help="RIS candidates per environment sample")
     parser.add_argument("--threads", type=int)
     parser.add_argument("--reference", help="EXR to compute relMSE against")
     parser.add_argument("--out", help="write the render here")
     parser.add_argument("--profile", action="store_true", help="add seconds per kernel (warm-up excluded)")
+    parser.add_argument("--pdf", choices=["exact", "pbrt"], help="the environment PDF [exact]")
+    parser.add_argument("--pdf-weights", choices=["bilinear", "texel", "blur"], help="[bilinear]")
+    parser.add_argument("--pdf-resolution", type=int, help="PDF grid / map resolution [2 up to 2K maps]")
     parser.add_argument("--mesh", help="a mesh file to put in the blob's place (e.g. the 871k-triangle dragon)")
     args = parser.parse_args(argv)
 

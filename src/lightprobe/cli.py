@@ -56,6 +56,10 @@ def render_command(
     sampler: Annotated[
         str | None, typer.Option(help="Random numbers: sobol (Owen-scrambled Sobol') or independent [sobol].")
     ] = None,
+    env_candidates: Annotated[
+        int | None,
+        typer.Option(help="Resample each environment sample from this many candidates (RIS; env maps alone) [1]."),
+    ] = None,
     mis_compensation: Annotated[
         bool | None,
         typer.Option(
@@ -111,6 +115,7 @@ def render_command(
         "n_env": env_samples,
         "seed": seed,
         "sampler": sampler,
+        "env_candidates": env_candidates,
         "mis_compensation": mis_compensation,
         "light_sampler": light_sampler,
         "lights_per_sample": lights_per_sample,

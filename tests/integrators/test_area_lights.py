@@ -14,6 +14,7 @@ from lightprobe.bsdfs import GGXConductor, Lambert, RoughPlastic
 from lightprobe.demo import blob_mesh, light_panels
 from lightprobe.emitters.envmap import EnvironmentMap
 from lightprobe.emitters.procedural import sky_with_sun
+from lightprobe.errors import ParameterError
 from lightprobe.geometry.camera import Camera
 from lightprobe.geometry.mesh import TriangleMesh
 from lightprobe.geometry.scene import Scene
@@ -141,3 +142,20 @@ def test_an_environment_only_scene_is_bit_identical_to_before():
     settings = RenderSettings(spp=8, seed=21, sampler="independent", mis_compensation=False)
     result = render(small_scene((20, 12)), settings)
     assert hashlib.sha256(result.image.tobytes()).hexdigest() == ENV_ONLY_SHA256
+
+
+@pytest.mark.parametrize(
+    ("option", "message"),
+    [({"env_candidates": 2}, "env_candidates applies"), ({"mis_compensation": True}, "mis_compensation applies")],
+)
+def test_environment_only_options_are_refused_with_area_lights(option, message):
+    with pytest.raises(ParameterError, match=message):
+        render(mixed_scene((4, 4), n_panels=3), RenderSettings(spp=1, **option))
+
+
+def test_compensation_is_on_by_default_for_environment_maps_alone_and_off_with_area_lights():
+    from .test_wavefront import small_scene
+
+    assert render(small_scene((4, 4)), RenderSettings(spp=1)).stats["mis_compensation"] is True
+    assert render(small_scene((4, 4)), RenderSettings(spp=1, strategy="env")).stats["mis_compensation"] is False
+    assert render(mixed_scene((4, 4), n_panels=3), RenderSettings(spp=1)).stats["mis_compensation"] is False

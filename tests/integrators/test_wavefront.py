@@ -22,15 +22,17 @@ from lightprobe.peer import find_peers, peer_scene
 from . import STRATEGY_CASES
 
 
-@pytest.mark.parametrize(("strategy", "heuristic"), STRATEGY_CASES)
+@pytest.mark.parametrize(("strategy", "heuristic"), [*STRATEGY_CASES, ("env-resampled", "balance")])
 def test_white_furnace(strategy, heuristic):
     """A Lambertian sphere alone under constant radiance L: every pixel on it is rho L, every other pixel L."""
+    candidates = 4 if strategy.endswith("-resampled") else 1
+    strategy = strategy.removesuffix("-resampled")
     radiance, albedo = 1.5, 0.6
     scene = Scene(
         Camera([0, 0, 4], [0, 0, 0], fov=40, resolution=(24, 24)), EnvironmentMap.from_array(constant(radiance))
     )
     scene.add(Sphere([0, 0, 0], 1.0), Lambert(albedo))
-    result = render(scene, RenderSettings(spp=64, strategy=strategy, heuristic=heuristic))
+    result = render(scene, RenderSettings(spp=64, strategy=strategy, heuristic=heuristic, env_candidates=candidates))
     img, var, n = result.image, result.variance, result.counts
     assert np.all(n == 64)
     on = np.zeros((24, 24), bool)
@@ -89,13 +91,23 @@ def reference():
 
 @pytest.mark.parametrize(
     ("strategy", "heuristic"),
-    [*STRATEGY_CASES, ("mis-compensated", "power"), ("mis-1bsdf-3env", "power"), ("mis-3bsdf-1env", "balance")],
+    [
+        *STRATEGY_CASES,
+        ("mis-compensated", "power"),
+        ("mis-1bsdf-3env", "power"),
+        ("mis-3bsdf-1env", "balance"),
+        ("env-resampled", "balance"),
+        ("mis-resampled", "power"),
+        ("mis-compensated-resampled", "balance"),
+    ],
 )
 def test_every_strategy_converges_to_the_reference(reference, strategy, heuristic):
     """Unequal BSDF and environment sample counts check that the MIS weights use them (sample-count-weighted
-    densities, Veach's n_i p_i)."""
-    compensated = strategy == "mis-compensated"
+    densities, Veach's n_i p_i).  Resampled environment samples (RIS, 4 candidates) alone and under MIS."""
+    compensated = strategy.startswith("mis-compensated")
+    candidates = 4 if strategy.endswith("-resampled") else 1
     counts = {"mis-1bsdf-3env": (1, 3), "mis-3bsdf-1env": (3, 1)}.get(strategy, (1, 1))
+    strategy = strategy.removesuffix("-resampled")
     strategy = "mis" if strategy in ("mis-1bsdf-3env", "mis-3bsdf-1env") else strategy
     # Techniques that find the sun only by chance (hemisphere and BSDF sampling) have heavy-tailed estimates: at
     # 1024 spp their sample variance underestimates the true one where the sun was rarely hit (uniform: max |z| 11,
@@ -108,6 +120,7 @@ def test_every_strategy_converges_to_the_reference(reference, strategy, heuristi
         mis_compensation=compensated,
         n_bsdf=counts[0],
         n_env=counts[1],
+        env_candidates=candidates,
         seed=7,
     )
     result = render(small_scene(), settings)
@@ -240,6 +253,9 @@ def test_bad_settings():
         (RenderSettings(n_bsdf=0, n_env=0), "sample counts"),
         (RenderSettings(strategy="env", mis_compensation=True), "compensation"),
         (RenderSettings(time_limit=-1.0), "time_limit"),
+        (RenderSettings(env_candidates=0), "env_candidates must be from 1 to 64"),
+        (RenderSettings(sampler="halton"), "sampler must be one of"),
+        (RenderSettings(first_sample=-1), "first_sample"),
     ]:
         with pytest.raises(ParameterError, match=match):
             render(scene, settings)

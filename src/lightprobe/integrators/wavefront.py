@@ -82,6 +82,7 @@ class RenderSettings:
     seed: int = 0
     first_sample: int = 0  # sample indices first_sample ... first_sample + spp - 1 (split and resumed renders)
     sampler: str = "sobol"
+    env_candidates: int = 1  # > 1: resampled environment samples (RIS, Talbot et al. 2005) from this many candidates
     mis_compensation: bool | None = None  # None: on for MIS in scenes lit by an environment map alone
     light_sampler: str = "power"
     lights_per_sample: int = 1
@@ -92,7 +93,16 @@ class RenderSettings:
 
     def validate(self) -> None:
         """Raise :class:`ParameterError` naming the first setting of the wrong type or out of range."""
-        for name in ("spp", "n_bsdf", "n_env", "seed", "first_sample", "pass_samples", "lights_per_sample"):
+        for name in (
+            "spp",
+            "n_bsdf",
+            "n_env",
+            "seed",
+            "first_sample",
+            "env_candidates",
+            "pass_samples",
+            "lights_per_sample",
+        ):
             _require(name, getattr(self, name), "integer")
         for name in ("strategy", "heuristic", "sampler", "light_sampler", "light_strategy"):
             _require(name, getattr(self, name), "string")
@@ -113,6 +123,8 @@ class RenderSettings:
                 f"bsdf and env sample counts (n_bsdf, n_env) must be >= 0 with 1 to 64 in all, got {self.n_bsdf} "
                 f"and {self.n_env}"
             )
+        if not 1 <= self.env_candidates <= 64:
+            raise ParameterError(f"env_candidates must be from 1 to 64, got {self.env_candidates!r}")
         if self.sampler not in SAMPLERS:
             raise ParameterError(f"sampler must be one of {list(SAMPLERS)}, got {self.sampler!r}")
         if self.light_sampler not in SELECTORS:
@@ -293,6 +305,85 @@ def _env_sample_stage(env, compensated, m, frame, state, env_u, wdir, tpdf, uv):
 
 
 @jit_parallel
+def _env_resample_stage(
+    s,
+    env,
+    compensated,
+    m,
+    env_candidates,
+    sampler,
+    seed,
+    pixel_start,
+    spp_pass,
+    sample_start,
+    frame,
+    wo_local,
+    material,
+    state,
+    env_u,
+    wdir,
+    tpdf,
+    uv,
+    epdf,
+):
+    """Environment samples by resampled importance sampling (Talbot, Cline and Egbert 2005): M candidates x_i from
+    the environment's PDF p, one kept with probability proportional to w_i = p^(x_i) / p(x_i), where the target
+    p^ = luminance(f L) cos is the product the light sample estimates (map x BSDF x cosine, without visibility).
+    The kept y is weighted by W = (1/M) sum w_i / p^(y), unbiased wherever p^ > 0 covers f L cos (it does: the
+    luminance weights are positive).  ``tpdf`` gets the effective density 1 / W, ``epdf`` the source density p(y)
+    for the MIS weights: weights from p and the BSDF's pdf still sum to one at every direction, which is all MIS
+    needs to stay unbiased (Veach 1997, 9.2).  Candidate i > 0 of slot j takes the random numbers of virtual slot
+    64 + j M + i (past every real slot); the choice uses each candidate's third number (weighted reservoir
+    sampling), so the kept sample is a pure function of the sample's coordinates."""
+    for r in prange(state.shape[0]):
+        if state[r] != SLOT_ENV:
+            continue
+        k = r // m
+        j = r % m
+        rs = sample_state(sampler, seed, pixel_start + k // spp_pass, sample_start + k % spp_pass)
+        ts = (frame[k, 0], frame[k, 1], frame[k, 2])
+        tt = (frame[k, 3], frame[k, 4], frame[k, 5])
+        ns = (frame[k, 6], frame[k, 7], frame[k, 8])
+        wo = (wo_local[k, 0], wo_local[k, 1], wo_local[k, 2])
+        mk = s.material_kind[material[k]]
+        mp = s.material_params[material[k]]
+        wsum = 0.0
+        kept_target = 0.0
+        kept = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)  # direction, source pdf, u, v
+        for i in range(env_candidates):
+            if i == 0:
+                u0, u1, uc = env_u[r, 0], env_u[r, 1], uniform(rs, 4 + 3 * j)
+            else:
+                v = 64 + j * env_candidates + i
+                u0, u1, uc = uniform(rs, 2 + 3 * v), uniform(rs, 3 + 3 * v), uniform(rs, 4 + 3 * v)
+            wx, wy, wz, pdf, u, y, cos_theta = env_sample_full(env, compensated, u0, u1)
+            if pdf <= 0.0:
+                continue
+            wi = to_local(ts, tt, ns, wx, wy, wz)
+            if wi[2] <= 0.0:
+                continue
+            f = bsdf_eval(mk, mp, wo, wi)
+            vv = env_sample_coords(env, y, cos_theta)
+            lr, lg, lb = env_lookup(env, u, vv)
+            target = (0.212671 * f[0] * lr + 0.715160 * f[1] * lg + 0.072169 * f[2] * lb) * wi[2]
+            if not target > 0.0:
+                continue
+            w = target / pdf
+            wsum += w
+            if uc * wsum < w:  # keep candidate i with probability w_i / (w_0 + ... + w_i)
+                kept_target = target
+                kept = (wx, wy, wz, pdf, u, vv)
+        if wsum <= 0.0 or not math.isfinite(wsum):
+            state[r] = SLOT_NONE
+            continue
+        wdir[r, 0], wdir[r, 1], wdir[r, 2] = kept[0], kept[1], kept[2]
+        tpdf[r] = kept_target * env_candidates / wsum
+        epdf[r] = kept[3]
+        uv[r, 0] = kept[4]
+        uv[r, 1] = kept[5]
+
+
+@jit_parallel
 def _env_lookup_stage(env, compensated, mis, state, wdir, uv, radiance, epdf):
     """Radiance for every live slot, and the environment's density for BSDF samples under MIS."""
     for r in prange(state.shape[0]):
@@ -312,6 +403,7 @@ def _env_lookup_stage(env, compensated, mis, state, wdir, uv, radiance, epdf):
 def _shade_finish(
     s,
     strategy,
+    env_candidates,
     n_bsdf,
     n_env,
     beta,
@@ -371,7 +463,9 @@ def _shade_finish(
                 scale = wi[2] / pdf * inv_m
                 if strategy == MIS:
                     pb = bsdf_pdf(mk, mp, wo, wi)
-                    scale = wi[2] / pdf * mis_weight(n_env, pdf, n_bsdf, pb, beta) / n_env
+                    # a resampled sample's weight uses the density it was drawn from, not its effective one
+                    p_light = epdf[r] if st == SLOT_ENV and env_candidates > 1 else pdf
+                    scale = wi[2] / pdf * mis_weight(n_env, p_light, n_bsdf, pb, beta) / n_env
                 cr, cg, cb = f[0] * lr * scale, f[1] * lg * scale, f[2] * lb * scale
             if cr == 0.0 and cg == 0.0 and cb == 0.0:
                 continue
@@ -572,6 +666,8 @@ def render(
     # scenes lit by an environment map alone keep its measured fast path (decisions.md 12); any emitter, no
     # environment, or several light picks per sample take the general area-light path
     area_path = bool(scene.emitters) or scene.environment is None or settings.lights_per_sample > 1
+    if area_path and settings.env_candidates > 1:
+        raise ParameterError("env_candidates applies to scenes lit by an environment map alone")
     if area_path and settings.mis_compensation:
         raise ParameterError("mis_compensation applies to scenes lit by an environment map alone")
     compensated = settings.mis_compensation
@@ -588,6 +684,7 @@ def render(
         "n_env": settings.n_env,
         "seed": settings.seed,
         "sampler": settings.sampler,
+        "env_candidates": settings.env_candidates,
         "mis_compensation": compensated,
         "light_sampler": settings.light_sampler,
         "lights_per_sample": settings.lights_per_sample,
@@ -606,7 +703,8 @@ def render(
     largest_pass = max(1, band * spp_pass)
     buffers = _pass_buffers(largest_pass, m)  # every pass uses leading views of these: memory bounded by one pass
     strategy = STRATEGIES[settings.strategy]
-    stages = (_shade_setup, _env_sample_stage, _env_lookup_stage, _shade_finish)
+    sample_stage = _env_resample_stage if settings.env_candidates > 1 else _env_sample_stage
+    stages = (_shade_setup, sample_stage, _env_lookup_stage, _shade_finish)
     light_constants = {}
     if area_path:
         from .area_lights import STAGES, slot_buffers
@@ -635,6 +733,7 @@ def render(
         "cam": cam,
         "seed": settings.seed,
         "sampler": SAMPLERS[settings.sampler],
+        "env_candidates": settings.env_candidates,
         "strategy": strategy,
         "n_bsdf": settings.n_bsdf,
         "n_env": settings.n_env,

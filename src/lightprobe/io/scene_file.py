@@ -82,6 +82,7 @@ Example (every key shown; optional ones have their default)::
     env_samples = 1                     # light samples per chosen light (N)
     seed = 0
     sampler = "sobol"                   # sobol (Owen-scrambled Sobol') | independent
+    env_candidates = 1                  # > 1: resampled environment samples (RIS) from this many candidates
     light_sampler = "power"             # uniform | power | bvh
     lights_per_sample = 1               # lights chosen per camera sample (K)
     light_strategy = "solid-angle"      # area | solid-angle | hemisphere | cosine
@@ -117,6 +118,7 @@ RENDER_KEYS = {
     "env_samples",
     "seed",
     "sampler",
+    "env_candidates",
     "mis_compensation",
     "light_sampler",
     "lights_per_sample",
@@ -365,6 +367,7 @@ def _render_defaults(t: _Table) -> dict:
         "env_samples": lambda: t.integer("env_samples", minimum=0),
         "seed": lambda: t.integer("seed", minimum=0),
         "sampler": lambda: t.choice("sampler", list(SAMPLERS)),
+        "env_candidates": lambda: t.integer("env_candidates", minimum=1),
         "mis_compensation": lambda: t.boolean("mis_compensation"),
         "light_sampler": lambda: t.choice("light_sampler", list(SELECTORS)),
         "lights_per_sample": lambda: t.integer("lights_per_sample", minimum=1),
