@@ -158,6 +158,11 @@ def reference_command(
     sampler: Annotated[str | None, typer.Option(help="sobol or independent [sobol].")] = None,
     time_limit: Annotated[float | None, typer.Option(help="Stop this run after this many seconds.")] = None,
     threads: Annotated[int | None, typer.Option(help="Threads [all cores].")] = None,
+    dask: Annotated[bool, typer.Option("--dask", help="Render the chunks on a Dask LocalCluster.")] = False,
+    scheduler: Annotated[
+        str | None, typer.Option(help="Render the chunks on this Dask scheduler (tcp://host:8786).")
+    ] = None,
+    workers: Annotated[int, typer.Option(help="Worker processes of the --dask LocalCluster.")] = 2,
 ) -> None:
     """Render a high-sample reference in checkpointed chunks.  Run the same command again to resume after Ctrl-C,
     a crash or a time limit (bit for bit the same image as an uninterrupted run), or with a larger --spp to extend."""
@@ -178,7 +183,19 @@ def reference_command(
     def chunk_done(done: int, total: int) -> None:
         _echo_err(f"{done}/{total} spp, checkpoint written ({time.perf_counter() - start:.1f} s)")
 
-    result = render_reference(scene, settings, output, chunk=chunk, scene_id=file_id(scene_file), on_chunk=chunk_done)
+    if workers < 1:
+        raise LightprobeError(f"--workers must be >= 1, got {workers}")
+    backend = scheduler or ("local" if dask else None)
+    result = render_reference(
+        scene,
+        settings,
+        output,
+        chunk=chunk,
+        scene_id=file_id(scene_file),
+        on_chunk=chunk_done,
+        dask=backend,
+        workers=workers,
+    )
     stats = result.stats
     spp_done = int(result.counts.min())
     files = write_render(output, result, variance=True)

@@ -96,12 +96,18 @@ def render_reference(
     scene_id: str = "",
     progress: Callable[[dict], None] | None = None,
     on_chunk: Callable[[int, int], None] | None = None,
+    dask: str | None = None,
+    workers: int = 2,
 ) -> RenderResult:
     """Render (or resume, or extend) ``settings.spp`` samples per pixel, checkpointing after every ``chunk``.
 
     ``scene_id`` names the scene in the checkpoint (e.g. a hash of the scene file), so that a checkpoint of
     another scene is refused.  ``settings.time_limit`` bounds this run; the result says how far it got
-    (``stats['spp_done']``) and the checkpoint keeps it.  ``on_chunk(done, spp)`` is called after each checkpoint."""
+    (``stats['spp_done']``) and the checkpoint keeps it.  ``on_chunk(done, spp)`` is called after each checkpoint.
+
+    ``dask``: render the missing chunks as tasks on Dask distributed instead (``"local"``: a LocalCluster of
+    ``workers`` processes; else a scheduler address); they are merged in sample order onto the checkpoint, equal to
+    the single-process result up to float64 rounding, and checkpointed once all have finished."""
     if chunk < 1:
         raise LightprobeError(f"chunk must be >= 1 sample per pixel, got {chunk}")
     settings.validate()
@@ -114,6 +120,17 @@ def render_reference(
     start = time.perf_counter()
     stats: dict = {}
     stopped = False
+    if dask is not None and done < settings.spp:
+        from .distributed import render_on_dask
+
+        rest = dataclasses.replace(settings, spp=settings.spp - done, first_sample=done)
+        merged = render_on_dask(
+            scene, rest, chunk=chunk, scheduler=None if dask == "local" else dask, workers=workers, resume=acc
+        )
+        acc, stats, done = merged.accumulator, merged.stats, settings.spp
+        _save(ckpt, acc, identity)
+        if on_chunk is not None:
+            on_chunk(done, settings.spp)
     while done < settings.spp:
         n = min(chunk, settings.spp - done)
         limit = None

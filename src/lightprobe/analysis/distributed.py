@@ -1,0 +1,90 @@
+"""Sample ranges of a render as tasks on Dask distributed: references beyond one process, or one machine.
+
+A render of samples 0 ... spp - 1 splits into ranges [a, b); each range is one task that renders it from scratch
+(every random number is a pure function of its seed, pixel, sample index and dimension, so a range rendered on any
+worker gives the same numbers) and returns its per-pixel statistics.  The ranges are merged in range order with
+Chan, Golub and LeVeque's pairwise update, so the result does not depend on which worker finished first, and equals
+a single-process render up to float64 rounding.  Dask's scheduler re-runs the task of a worker that is lost; the
+other ranges are kept.  No job queue of our own: a ``LocalCluster`` by default, or any scheduler address.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+from ..errors import LightprobeError
+from ..geometry.scene import Scene
+from ..integrators.wavefront import Accumulator, RenderResult, RenderSettings, render, result_from
+
+__all__ = ["render_on_dask", "sample_ranges"]
+
+
+def sample_ranges(spp: int, chunk: int, first: int = 0) -> list[tuple[int, int]]:
+    """[(first sample, count), ...] covering first ... first + spp - 1 in chunks of at most ``chunk``."""
+    if spp < 1 or chunk < 1:
+        raise LightprobeError(f"spp and chunk must be >= 1, got {spp} and {chunk}")
+    return [(a, min(chunk, first + spp - a)) for a in range(first, first + spp, chunk)]
+
+
+def _render_range(scene: Scene, settings: RenderSettings, first: int, count: int) -> tuple[dict, float]:
+    result = render(scene, dataclasses.replace(settings, spp=count, first_sample=first, time_limit=None))
+    return result.accumulator.to_arrays(), result.stats["seconds"]
+
+
+def render_on_dask(
+    scene: Scene,
+    settings: RenderSettings,
+    *,
+    chunk: int = 16,
+    scheduler: str | None = None,
+    workers: int = 2,
+    threads_per_worker: int = 1,
+    resume: Accumulator | None = None,
+    connect_timeout: float = 20.0,
+) -> RenderResult:
+    """Render ``settings.spp`` samples per pixel (from ``settings.first_sample``) as ranges of ``chunk`` on Dask:
+    the scheduler at ``scheduler`` (e.g. ``tcp://10.0.0.5:8786``), or a ``LocalCluster`` of ``workers`` processes
+    with ``threads_per_worker`` threads each.  ``resume`` is merged in front (its samples must come before).
+    ``connect_timeout``: seconds to wait for a remote scheduler."""
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError:
+        raise LightprobeError("Dask distributed is not installed: pip install 'dask[distributed]'") from None
+    settings.validate()
+    ranges = sample_ranges(settings.spp, chunk, settings.first_sample)
+    cluster = None
+    if scheduler is None:
+        cluster = LocalCluster(
+            n_workers=workers, threads_per_worker=threads_per_worker, processes=True, dashboard_address=None
+        )
+        client = Client(cluster)
+    else:
+        try:
+            client = Client(scheduler, timeout=f"{connect_timeout}s")
+        except OSError as exc:
+            raise LightprobeError(f"cannot reach the Dask scheduler at {scheduler} ({exc})") from None
+    try:
+        per_task = dataclasses.replace(settings, threads=settings.threads or threads_per_worker)
+        scene_on_workers = client.scatter(scene, broadcast=True)
+        futures = [
+            client.submit(_render_range, scene_on_workers, per_task, a, n, key=f"lightprobe-range-{a}-{n}-{id(scene)}")
+            for a, n in ranges
+        ]
+        parts = client.gather(futures)
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    acc = resume
+    for arrays, _ in parts:  # in range order: the merge does not depend on which task finished first
+        part = Accumulator.from_arrays(arrays)
+        acc = part if acc is None else acc.merged(part)
+    width, height = scene.camera.resolution
+    stats = {
+        "ranges": len(ranges),
+        "chunk": chunk,
+        "task_seconds": sum(seconds for _, seconds in parts),
+        "scheduler": scheduler or f"LocalCluster({workers} x {threads_per_worker})",
+        "spp_done": int(acc.count.min()),
+    }
+    return result_from(acc, width, height, stats)
