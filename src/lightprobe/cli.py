@@ -206,6 +206,155 @@ def reference_command(
     )
 
 
+@app.command("compare")
+def compare_command(
+    scene_file: Annotated[Path | None, typer.Argument(metavar="SCENE", help="Scene file (TOML).")] = None,
+    demo: Annotated[bool, typer.Option("--demo", help="Compare on the built-in demo scene.")] = False,
+    strategies: Annotated[
+        str,
+        typer.Option(help="Comma-separated: env, brdf, mis-balance, mis-power, ..., each with /key=value overrides."),
+    ] = "env,brdf,mis-balance,mis-power",
+    equal: Annotated[str, typer.Option(help="spp (equal samples) or time (equal seconds).")] = "spp",
+    spp: Annotated[int, typer.Option(help="Samples per pixel of each strategy (--equal spp).")] = 64,
+    seconds: Annotated[float, typer.Option(help="Seconds of rendering per strategy (--equal time).")] = 10.0,
+    reference: Annotated[
+        Path | None, typer.Option(help="Reference EXR (e.g. from `lightprobe reference`); else one is rendered.")
+    ] = None,
+    reference_spp: Annotated[int, typer.Option(help="Samples per pixel of the rendered reference.")] = 1024,
+    output: Annotated[Path, typer.Option("--output", "-o", help="The HTML report.")] = Path("report.html"),
+    width: Annotated[int | None, typer.Option(help="Override the image width (height keeps the aspect).")] = None,
+    seed: Annotated[int, typer.Option(help="Random seed of the strategies.")] = 0,
+    as_json: Annotated[bool, typer.Option("--json", help="Also print one JSON line per strategy.")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+) -> None:
+    """Render each strategy at equal samples or equal time, measure it against a reference, and write a
+    self-contained HTML report (images with synchronised zoom and crops, error maps, convergence, efficiency)."""
+    import shlex
+
+    from .analysis.report import write_report
+    from .experiments.compare import compare
+    from .integrators.wavefront import RenderSettings, render
+    from .io.images import read_image
+
+    if output.suffix.lower() not in (".html", ".htm"):
+        raise LightprobeError(f"{output}: the report is an .html file")
+    if equal not in ("spp", "time"):
+        raise LightprobeError(f"--equal must be spp or time, got {equal!r}")
+    if demo or scene_file is None:
+        if not demo:
+            raise LightprobeError("give a SCENE file or --demo")
+        from .demo import DEMOS
+
+        scene, defaults, name = DEMOS["default"](), {}, "demo"
+    else:
+        from .io.scene_file import load_scene
+
+        scene, defaults = load_scene(scene_file)
+        name = str(scene_file)
+    if width is not None:
+        if width < 1:
+            raise LightprobeError(f"--width must be >= 1, got {width}")
+        w, h = scene.camera.resolution
+        scene.camera = scene.camera.with_resolution(width, max(1, round(h * width / w)))
+    base = _render_settings(defaults, {"seed": seed, "spp": 1})
+    w, h = scene.camera.resolution
+    if reference is not None:
+        ref = read_image(reference)
+        if ref.shape[:2] != (h, w):
+            raise LightprobeError(f"{reference}: {ref.shape[1]}x{ref.shape[0]} does not match the scene's {w}x{h}")
+        ref_image, ref_var = ref[:, :, :3], (ref[:, :, 3:6] if ref.shape[2] >= 6 else None)
+    else:
+        if reference_spp < 1:
+            raise LightprobeError(f"--reference-spp must be >= 1, got {reference_spp}")
+        _echo_err(f"rendering the reference: {reference_spp} spp, MIS (use --reference to bring your own) ...")
+        ref_settings = RenderSettings(**{**_settings_dict(base), "spp": reference_spp, "seed": seed + 1_000_003})
+        ref_result = render(scene, ref_settings)
+        ref_image, ref_var = ref_result.image, ref_result.variance
+    tokens = [t for t in strategies.split(",") if t.strip()]
+    runs = _compare_with_progress(
+        lambda progress: compare(
+            scene, tokens, ref_image, ref_var, base=base, equal=equal, spp=spp, seconds=seconds, progress=progress
+        ),
+        tokens,
+        quiet=quiet,
+    )
+    command = "lightprobe " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+    settings = {
+        "scene": name,
+        "resolution": [w, h],
+        "equal": equal,
+        "spp": spp if equal == "spp" else None,
+        "seconds": seconds if equal == "time" else None,
+        "reference": str(reference) if reference else f"rendered, {reference_spp} spp",
+        "strategies": {r.label: _strategy_settings(r.settings) for r in runs},
+    }
+    budget = f"{spp} spp each" if equal == "spp" else f"{seconds:g} s each"
+    write_report(
+        output,
+        title=f"lightprobe compare: {name}, {budget}",
+        runs=runs,
+        reference=ref_image,
+        command=command,
+        settings=settings,
+        notes=f"{w}x{h}, equal {equal}: {budget}. Reference: {settings['reference']}.",
+    )
+    for r in runs:
+        m = r.metrics
+        row = {
+            "strategy": r.label,
+            "spp": round(r.spp, 3),
+            "seconds": r.seconds,
+            "mse": m["mse"],
+            "relmse": m["relmse"],
+            "psnr": m["psnr"],
+            "flip": m["flip"],
+            "efficiency": m["efficiency"],
+            "relative_efficiency": m["relative_efficiency"],
+        }
+        if as_json:
+            typer.echo(json.dumps(row))
+    _echo_err(f"wrote {output}")
+
+
+def _settings_dict(settings) -> dict:
+    import dataclasses
+
+    return dataclasses.asdict(settings)
+
+
+def _strategy_settings(settings) -> dict:
+    """A strategy's settings without the fields the comparison sets per round (spp, sample range, time)."""
+    rest = _settings_dict(settings)
+    for key in ("spp", "first_sample", "time_limit", "pass_samples", "threads"):
+        rest.pop(key)
+    return rest
+
+
+def _compare_with_progress(run, tokens: list[str], *, quiet: bool):
+    """Run ``run(progress)`` with a progress bar over the strategies (one line per strategy when not a terminal)."""
+    if quiet or not sys.stderr.isatty():
+        seen = set()
+
+        def log(label, fraction):
+            if label not in seen:
+                seen.add(label)
+                _echo_err(f"rendering {label} ...")
+
+        return run(log)
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+    with Progress(
+        TextColumn("{task.description}"), BarColumn(), TimeElapsedColumn(), transient=True, console=_stderr_console()
+    ) as bar:
+        task = bar.add_task("comparing", total=len(tokens))
+        order = {t.strip(): i for i, t in enumerate(tokens)}
+
+        def update(label, fraction):
+            bar.update(task, completed=order.get(label, 0) + min(fraction, 1.0), description=label)
+
+        return run(update)
+
+
 def _render_settings(defaults: dict, chosen: dict):
     """Settings from a scene file's ``[render]`` table, overridden by the options given (None: not given), checked
     (a :class:`~lightprobe.errors.LightprobeError` naming the setting if one is of the wrong type or range)."""

@@ -1,0 +1,208 @@
+"""Which strategy wins on a scene: each rendered at equal samples or equal time, measured against a reference.
+
+A strategy is a name with optional setting overrides: ``env``, ``brdf``, ``mis`` (= ``mis-power``),
+``mis-balance``, ``mis-compensated``, ``uniform``, ``cosine``, then ``/key=value`` with any ``[render]`` key of a
+scene file, e.g. ``mis-power/sampler=independent`` or ``env/light_sampler=bvh/lights_per_sample=4``.
+
+Each strategy renders in doubling rounds (1, 2, 4, ... samples per pixel), each round continuing the previous one
+(``render(..., resume=...)``), so the convergence curve costs no more than the final image.  In ``time`` mode the
+last round stops at the time budget (at the end of a short pass), so every strategy gets the same seconds of
+rendering; in ``spp`` mode every strategy gets the same samples.  Metrics (``lightprobe.analysis.metrics``) are
+taken against the reference after every round.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..analysis import metrics
+from ..errors import LightprobeError
+from ..geometry.scene import Scene
+from ..integrators.wavefront import RenderSettings, render, result_from
+
+__all__ = ["PRESETS", "StrategyRun", "compare", "parse_strategy"]
+
+PRESETS = {
+    "uniform": {"strategy": "uniform"},
+    "cosine": {"strategy": "cosine"},
+    "brdf": {"strategy": "brdf"},
+    "env": {"strategy": "env"},
+    "mis": {"strategy": "mis", "heuristic": "power"},
+    "mis-power": {"strategy": "mis", "heuristic": "power"},
+    "mis-balance": {"strategy": "mis", "heuristic": "balance"},
+    "mis-compensated": {"strategy": "mis", "mis_compensation": True},
+}
+
+
+def _value(text: str):
+    lowered = text.strip().lower()
+    if lowered in ("true", "false"):
+        return lowered == "true"
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text.strip()
+
+
+def parse_strategy(token: str, base: RenderSettings) -> tuple[str, RenderSettings]:
+    """(label, settings) for a strategy token; a :class:`LightprobeError` names a bad token."""
+    from ..io.scene_file import RENDER_KEYS, settings_fields
+
+    name, *overrides = [part.strip() for part in token.strip().split("/")]
+    if name not in PRESETS:
+        raise LightprobeError(f"unknown strategy {name!r} in {token!r}; use {', '.join(PRESETS)}")
+    changes = dict(PRESETS[name])
+    for item in overrides:
+        key, sep, value = item.partition("=")
+        if not sep or key.strip() not in RENDER_KEYS - {"spp"}:
+            keys = ", ".join(sorted(RENDER_KEYS - {"spp"}))
+            raise LightprobeError(f"strategy {token!r}: {item!r} is not key=value with a key among {keys}")
+        changes.update(settings_fields({key.strip(): _value(value)}))
+    settings = dataclasses.replace(base, **changes)
+    try:
+        settings.validate()
+    except LightprobeError as exc:
+        raise LightprobeError(f"strategy {token!r}: {exc}") from None
+    return token.strip(), settings
+
+
+@dataclass
+class StrategyRun:
+    """One strategy's final image and its convergence: a row per round."""
+
+    label: str
+    settings: RenderSettings
+    image: np.ndarray = field(repr=False)
+    variance: np.ndarray = field(repr=False)
+    seconds: float = 0.0
+    spp: float = 0.0
+    rounds: list[dict] = field(default_factory=list)
+    metrics: dict = field(default_factory=dict)
+
+
+def _measure(image, variance, reference, reference_variance, mask=None) -> dict:
+    b = metrics.bias(image, reference, variance, reference_variance, mask=mask)
+    return {
+        "mse": metrics.mse(image, reference, mask),
+        "relmse": metrics.relmse(image, reference, mask),
+        "psnr": metrics.psnr(image, reference, mask),
+        "mean_variance": metrics.mean_variance(variance, mask),
+        "bias": b.estimate,
+        "bias_low": b.low,
+        "bias_high": b.high,
+    }
+
+
+def run_strategy(
+    scene: Scene,
+    label: str,
+    settings: RenderSettings,
+    reference: np.ndarray,
+    reference_variance: np.ndarray | None,
+    *,
+    equal: str,
+    spp: int,
+    seconds: float,
+    progress: Callable[[str, float], None] | None = None,
+) -> StrategyRun:
+    """Render one strategy in doubling rounds up to ``spp`` samples (``equal='spp'``) or ``seconds`` of rendering
+    (``equal='time'``), measuring after each round."""
+    width, height = scene.camera.resolution
+    acc = None
+    done = 0
+    spent = 0.0
+    target = 1
+    run = StrategyRun(label, settings, np.zeros((height, width, 3), np.float32), np.zeros((height, width, 3)))
+    # short passes in time mode, so that the budget is met within a pass of a few milliseconds
+    pass_samples = max(width * height, 1 << 15) if equal == "time" else settings.pass_samples
+    while True:
+        if equal == "spp":
+            if done >= spp:
+                break
+            n = min(target, spp) - done
+            limit = None
+        else:
+            limit = seconds - spent
+            if limit <= 0.0:
+                break
+            n = max(target - done, 1)
+        part = dataclasses.replace(settings, spp=n, first_sample=done, time_limit=limit, pass_samples=pass_samples)
+        result = render(scene, part, resume=acc)
+        acc = result.accumulator
+        spent += result.stats["seconds"]
+        done = int(acc.count.min())
+        final = result_from(acc, width, height)
+        run.rounds.append(
+            {"spp": float(acc.count.mean()), "seconds": spent, **_measure(final.image, final.variance, reference, None)}
+        )
+        run.image, run.variance = final.image, final.variance
+        if progress is not None:
+            progress(label, spent / seconds if equal == "time" else done / spp)
+        if result.stats["stopped_by_time_limit"] or result.stats["interrupted"]:
+            break  # counts are uneven now: a further round could not continue them in order
+        target *= 2
+    if acc is None:
+        raise LightprobeError(f"strategy {label!r} rendered nothing")
+    run.seconds = spent
+    run.spp = float(acc.count.mean())
+    run.metrics = _measure(run.image, run.variance, reference, reference_variance)
+    run.metrics["flip"] = metrics.flip(run.image, reference)
+    run.metrics["efficiency"] = metrics.efficiency(max(run.metrics["mse"], 1e-300), max(spent, 1e-9))
+    return run
+
+
+def compare(
+    scene: Scene,
+    strategies: list[str],
+    reference: np.ndarray,
+    reference_variance: np.ndarray | None = None,
+    *,
+    base: RenderSettings | None = None,
+    equal: str = "spp",
+    spp: int = 64,
+    seconds: float = 10.0,
+    progress: Callable[[str, float], None] | None = None,
+) -> list[StrategyRun]:
+    """Render every strategy and measure it; each run's ``metrics['relative_efficiency']`` is its efficiency over
+    the best one's."""
+    if equal not in ("spp", "time"):
+        raise LightprobeError(f"equal must be 'spp' or 'time', got {equal!r}")
+    if equal == "spp" and spp < 1:
+        raise LightprobeError(f"spp must be >= 1, got {spp}")
+    if equal == "time" and not seconds > 0:
+        raise LightprobeError(f"seconds must be > 0, got {seconds}")
+    if not strategies:
+        raise LightprobeError("give at least one strategy")
+    width, height = scene.camera.resolution
+    if reference.shape[:2] != (height, width):
+        raise LightprobeError(f"the reference is {reference.shape[1]}x{reference.shape[0]}, the scene {width}x{height}")
+    base = base or RenderSettings()
+    parsed = [parse_strategy(token, base) for token in strategies]
+    runs = []
+    for label, settings in parsed:
+        start = time.perf_counter()
+        runs.append(
+            run_strategy(
+                scene,
+                label,
+                settings,
+                reference,
+                reference_variance,
+                equal=equal,
+                spp=spp,
+                seconds=seconds,
+                progress=progress,
+            )
+        )
+        runs[-1].metrics["wall_seconds"] = time.perf_counter() - start
+    best = max(r.metrics["efficiency"] for r in runs)
+    for r in runs:
+        r.metrics["relative_efficiency"] = r.metrics["efficiency"] / best
+    return runs

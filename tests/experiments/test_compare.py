@@ -1,0 +1,72 @@
+"""lightprobe compare: strategies parsed, rendered at equal samples or equal time, measured."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lightprobe.errors import LightprobeError
+from lightprobe.experiments.compare import compare, parse_strategy
+from lightprobe.integrators.wavefront import RenderSettings, render
+
+from ..integrators.test_wavefront import small_scene
+
+
+@pytest.fixture(scope="module")
+def scene_and_reference():
+    scene = small_scene((32, 24))
+    ref = render(scene, RenderSettings(spp=1024, seed=99))
+    return scene, ref
+
+
+def test_strategy_tokens():
+    base = RenderSettings(seed=3)
+    label, s = parse_strategy("mis-balance", base)
+    assert (label, s.strategy, s.heuristic, s.seed) == ("mis-balance", "mis", "balance", 3)
+    _, s = parse_strategy("mis-power/sampler=independent/bsdf_samples=2", base)
+    assert (s.heuristic, s.sampler, s.n_bsdf) == ("power", "independent", 2)
+    _, s = parse_strategy("env/env_candidates=4", base)
+    assert (s.strategy, s.env_candidates) == ("env", 4)
+    for token, message in [
+        ("best", "unknown strategy 'best'"),
+        ("mis/colour=red", "is not key=value with a key among"),
+        ("mis/bsdf_samples=0/env_samples=0", "sample counts"),
+        ("mis/spp=4", "is not key=value"),
+    ]:
+        with pytest.raises(LightprobeError, match=message):
+            parse_strategy(token, base)
+
+
+def test_equal_samples(scene_and_reference):
+    scene, ref = scene_and_reference
+    runs = compare(scene, ["brdf", "env", "mis-power"], ref.image, ref.variance, equal="spp", spp=16)
+    for r in runs:
+        assert r.spp == 16 and [row["spp"] for row in r.rounds] == [1, 2, 4, 8, 16]
+        assert r.image.shape == (24, 32, 3) and np.isfinite(r.image).all()
+        assert r.rounds[-1]["mse"] == pytest.approx(r.metrics["mse"])
+        assert set(r.metrics) >= {"mse", "relmse", "psnr", "flip", "bias", "efficiency", "relative_efficiency"}
+    by = {r.label: r for r in runs}
+    assert max(r.metrics["relative_efficiency"] for r in runs) == 1.0
+    assert by["mis-power"].metrics["mse"] < min(by["brdf"].metrics["mse"], by["env"].metrics["mse"])
+    # the convergence is real: 16 spp has less error than 1 spp
+    assert by["mis-power"].rounds[-1]["mse"] < by["mis-power"].rounds[0]["mse"]
+
+
+def test_equal_time_spends_equal_time(scene_and_reference):
+    scene, ref = scene_and_reference
+    budget = 1.0
+    runs = compare(scene, ["env", "mis-power", "mis-power/env_candidates=8"], ref.image, equal="time", seconds=budget)
+    for r in runs:
+        assert budget <= r.seconds <= 1.1 * budget, (r.label, r.seconds)
+    spp = {r.label: r.spp for r in runs}
+    assert spp["mis-power/env_candidates=8"] < spp["mis-power"]  # a costlier strategy gets fewer samples
+
+
+def test_bad_comparisons(scene_and_reference):
+    scene, ref = scene_and_reference
+    with pytest.raises(LightprobeError, match="equal must be"):
+        compare(scene, ["env"], ref.image, equal="quality")
+    with pytest.raises(LightprobeError, match="the reference is 8x8"):
+        compare(scene, ["env"], np.zeros((8, 8, 3)))
+    with pytest.raises(LightprobeError, match="at least one strategy"):
+        compare(scene, [], ref.image)
