@@ -484,6 +484,115 @@ def _lecture_experiment(name: str, run, as_json: bool, output: Path, options: di
     typer.echo(f"wrote the images and {output / (name + '.json')}", err=True)
 
 
+def _seed_experiment(name: str, rows, as_json: bool, output: Path, summary: str = "") -> None:
+    from dataclasses import asdict
+
+    if as_json:
+        for r in rows:
+            typer.echo(json.dumps(asdict(r)))
+    else:
+        typer.echo("| map | material | strategy | spp | seconds | MSE | relMSE | efficiency |")
+        typer.echo("|---|---|---|---|---|---|---|---|")
+        for r in rows:
+            typer.echo(
+                f"| {r.map} | {r.material} | {r.strategy} | {r.spp:g} | {r.seconds:.3f} | {r.mse:.3g} | "
+                f"{r.relmse:.3g} | {r.efficiency:.3g} |"
+            )
+    if summary:
+        typer.echo(summary, err=True)
+    _echo_err(f"wrote {output / 'index.html'}, a report per cell and {output / 'rows.json'}")
+
+
+def _floats(text: str, option: str) -> list[float]:
+    try:
+        values = [float(v) for v in _split(text)]
+    except ValueError:
+        raise LightprobeError(f"{option} must be comma-separated numbers, got {text!r}") from None
+    if not values:
+        raise LightprobeError(f"{option} is empty")
+    return values
+
+
+@experiment_app.command("krivanek-mis")
+def experiment_krivanek_mis(
+    maps: Annotated[str, typer.Option(help="Comma-separated map names or files [sky-sun,sky without data].")] = (
+        "sunrise,studio,overcast,city"
+    ),
+    exponents: Annotated[str, typer.Option(help="Comma-separated Phong exponents.")] = "1,10,100,1000",
+    spp: Annotated[int, typer.Option(help="Samples per pixel of each strategy.")] = 64,
+    reference_spp: Annotated[int, typer.Option(help="Samples per pixel of each cell's MIS reference.")] = 1024,
+    width: Annotated[int, typer.Option(help="Image width (height 3/4 of it).")] = 96,
+    seed: Annotated[int, typer.Option(help="Random seed.")] = 1,
+    as_json: Annotated[bool, typer.Option("--json", help="Print JSON rows instead of a table.")] = False,
+    output: Annotated[Path, typer.Option("--output", "-o", help="Folder for the reports.")] = Path("krivanek-mis"),
+) -> None:
+    """BRDF vs environment sampling vs MIS on a rendered Phong sphere, per map and exponent (the seed's claim)."""
+    from .experiments.seeds import krivanek_mis
+
+    if spp < 1 or reference_spp < 1 or width < 4:
+        raise LightprobeError("--spp and --reference-spp must be >= 1 and --width >= 4")
+    rows = krivanek_mis(
+        _maps_or_procedural(maps),
+        _floats(exponents, "--exponents"),
+        output,
+        spp=spp,
+        reference_spp=reference_spp,
+        width=width,
+        seed=seed,
+        progress=_echo_err,
+    )
+    _seed_experiment("krivanek-mis", rows, as_json, output)
+
+
+@experiment_app.command("pbrt-envmap-vs-cosine")
+def experiment_pbrt_envmap_vs_cosine(
+    maps: Annotated[str, typer.Option(help="Comma-separated map names or files [sky-sun,sky without data].")] = (
+        "sunrise,overcast,sky-sun,sky"
+    ),
+    spp: Annotated[int, typer.Option(help="Samples per pixel of each strategy.")] = 64,
+    reference_spp: Annotated[int, typer.Option(help="Samples per pixel of each cell's MIS reference.")] = 1024,
+    width: Annotated[int, typer.Option(help="Image width (height 3/4 of it).")] = 96,
+    seed: Annotated[int, typer.Option(help="Random seed.")] = 1,
+    as_json: Annotated[bool, typer.Option("--json", help="Print JSON rows instead of a table.")] = False,
+    output: Annotated[Path, typer.Option("--output", "-o", help="Folder for the reports.")] = Path(
+        "pbrt-envmap-vs-cosine"
+    ),
+) -> None:
+    """Cosine-weighted vs environment importance sampling of a diffuse scene under spiky and soft maps (pbrt)."""
+    from .experiments.seeds import pbrt_envmap_vs_cosine, reduction_factors
+
+    if spp < 1 or reference_spp < 1 or width < 4:
+        raise LightprobeError("--spp and --reference-spp must be >= 1 and --width >= 4")
+    rows = pbrt_envmap_vs_cosine(
+        _maps_or_procedural(maps),
+        output,
+        spp=spp,
+        reference_spp=reference_spp,
+        width=width,
+        seed=seed,
+        progress=_echo_err,
+    )
+    factors = ", ".join(f"{m} {f:.3g}x" for m, f in reduction_factors(rows).items())
+    _seed_experiment(
+        "pbrt-envmap-vs-cosine", rows, as_json, output, f"variance reduction (MSE cosine / env): {factors}"
+    )
+
+
+def _maps_or_procedural(text: str) -> list[str]:
+    """The maps asked for; real ones are replaced by the procedural pair when ../shared/data is absent."""
+    from .data import NAMED_ENVMAPS, data_dir
+
+    names = _split(text)
+    if not names:
+        raise LightprobeError("--maps is empty")
+    root = data_dir()
+    missing = [n for n in names if n in NAMED_ENVMAPS and (root is None or not (root / "envmaps").exists())]
+    if missing:
+        _echo_err(f"maps not found ({', '.join(missing)}; ../shared/data absent): using sky-sun and sky instead")
+        names = [n for n in names if n not in missing] or ["sky-sun", "sky"]
+    return list(dict.fromkeys(names))
+
+
 @experiment_app.command("lecture-area-sampling")
 def experiment_lecture_area_sampling(
     spp: Annotated[int, typer.Option(help="Camera samples per pixel.")] = 4,

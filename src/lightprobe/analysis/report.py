@@ -210,9 +210,11 @@ def write_report(
             f"<figcaption>{html.escape(label)}</figcaption></figure>"
         )
     parts.append("</div><h2>Crops</h2><div class='grid'>")
+    crop_w = min(240, shown)
+    crop_h = max(1, round(crop_w * reference.shape[0] / reference.shape[1]))  # the crop keeps the image's aspect
     for i, (label, _) in enumerate(views):
         parts.append(
-            f'<figure><canvas class="crop" width="{shown // 2 * 2}" height="{shown // 2 * 2}" '
+            f'<figure><canvas class="crop" width="{crop_w}" height="{crop_h}" '
             f'data-source="view{i}"></canvas><figcaption>{html.escape(label)}</figcaption></figure>'
         )
     parts.append(f"</div><h2>Relative error |x - ref| / (ref + 0.01), 0 to {vmax:.3g} (magma)</h2><div class='grid'>")
