@@ -415,3 +415,5 @@ def test_lecture_experiments_write_rows_and_images(capsys, tmp_path, name, optio
     assert min(r["mse_ratio_to_best"] for r in rows) == 1.0
     assert (out / f"{name}.json").exists() and (out / f"{name}-reference.png").exists()
     assert len(list(out.glob("*.png"))) == len(rows) + 1
+    page = (out / "index.html").read_text()
+    assert page.count("data:image/png;base64,") == len(rows) + 1 and all(r["strategy"] in page for r in rows)

@@ -481,7 +481,18 @@ def _lecture_experiment(name: str, run, as_json: bool, output: Path, options: di
     else:
         typer.echo(to_markdown(rows))
     (output / f"{name}.json").write_text(to_json_lines(rows) + "\n")
-    typer.echo(f"wrote the images and {output / (name + '.json')}", err=True)
+    from dataclasses import asdict
+
+    from .analysis.report import write_gallery
+
+    report = write_gallery(
+        output / "index.html",
+        title=f"lightprobe experiment {name}",
+        rows=[asdict(r) for r in rows],
+        images=sorted(output.glob(f"{name}-*.png")),
+        notes=f"Options: {options}.",
+    )
+    typer.echo(f"wrote the images, {output / (name + '.json')} and {report}", err=True)
 
 
 def _seed_experiment(name: str, rows, as_json: bool, output: Path, summary: str = "") -> None:

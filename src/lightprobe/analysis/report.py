@@ -21,7 +21,7 @@ import numpy as np
 
 from ..io.images import linear_to_srgb
 
-__all__ = ["write_report"]
+__all__ = ["write_gallery", "write_report"]
 
 
 def _png(rgb8: np.ndarray) -> str:
@@ -257,4 +257,33 @@ def write_report(
         os.replace(tmp, p)
     finally:
         tmp.unlink(missing_ok=True)
+    return p
+
+
+def write_gallery(
+    path: str | os.PathLike, *, title: str, rows: list[dict], images: list[Path], notes: str = ""
+) -> Path:
+    """A self-contained page of PNG images (embedded) under a table of ``rows`` (dicts with the same keys), for
+    experiments that write their images themselves (the lecture's)."""
+    p = Path(path)
+    keys = list(rows[0]) if rows else []
+    parts = [
+        "<!doctype html>",
+        f'<html lang="en"><head><meta charset="utf-8"><title>{html.escape(title)}</title><style>{_STYLE}</style>',
+        f"</head><body><h1>{html.escape(title)}</h1>",
+        f"<p>{html.escape(notes)}</p>" if notes else "",
+        "<table><tr>" + "".join(f"<th>{html.escape(k)}</th>" for k in keys) + "</tr>",
+    ]
+    for row in rows:
+        cells = "".join(f"<td>{html.escape(_fmt(row[k], '.4g'))}</td>" for k in keys)
+        parts.append(f"<tr>{cells}</tr>")
+    parts.append("</table><div class='grid'>")
+    for image in images:
+        uri = "data:image/png;base64," + base64.b64encode(Path(image).read_bytes()).decode("ascii")
+        parts.append(
+            f'<figure><img width="320" src="{uri}" alt="{html.escape(image.stem)}">'
+            f"<figcaption>{html.escape(image.stem)}</figcaption></figure>"
+        )
+    parts.append("</div></body></html>")
+    p.write_text("\n".join(parts), encoding="utf-8")
     return p
