@@ -417,3 +417,16 @@ def test_lecture_experiments_write_rows_and_images(capsys, tmp_path, name, optio
     assert len(list(out.glob("*.png"))) == len(rows) + 1
     page = (out / "index.html").read_text()
     assert page.count("data:image/png;base64,") == len(rows) + 1 and all(r["strategy"] in page for r in rows)
+
+
+def test_render_writes_an_object_id_pass_on_request(tmp_path):
+    out = tmp_path / "r.exr"
+    ids_path = tmp_path / "ids.exr"
+    args = ["render", "--demo", "--width", "48", "--spp", "1", "-o", str(out), "-q", "--object-ids", str(ids_path)]
+    assert main(args) == 0
+    ids = read_image(ids_path)[:, :, 0]
+    names = json.loads((tmp_path / "ids.exr.json").read_text())["objects"]
+    assert ids.shape == (30, 48) and ids.min() == -1  # the sky
+    seen = {int(v) for v in np.unique(ids)} - {-1}
+    assert seen and all(0 <= v < len(names) for v in seen) and len(seen) >= 3  # ground, blob, spheres
+    assert main(["render", "--demo", "-o", str(out), "--object-ids", str(tmp_path / "ids.png")]) != 0

@@ -82,6 +82,10 @@ def render_command(
     variance: Annotated[bool, typer.Option(help="Add variance.R/G/B channels to an EXR.")] = False,
     exposure: Annotated[float, typer.Option(help="PNG exposure in stops.")] = 0.0,
     png: Annotated[Path | None, typer.Option(help="Also write a tone-mapped PNG preview here.")] = None,
+    object_ids: Annotated[
+        Path | None,
+        typer.Option(help="Also write an object-id pass here (.exr, channel object_id; -1 = background)."),
+    ] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
 ) -> None:
     """Render a scene (or a built-in demo) with direct illumination from its environment map and area lights."""
@@ -91,6 +95,8 @@ def render_command(
     if not demo and scene_file is None:
         raise LightprobeError("give a SCENE file or --demo [NAME]")
     check_output(output, variance=variance, png=png)
+    if object_ids is not None and object_ids.suffix.lower() != ".exr":
+        raise LightprobeError(f"{object_ids}: the object-id pass is written as .exr")
     if demo:
         from .demo import DEMOS
 
@@ -131,6 +137,8 @@ def render_command(
     if not result.counts.any():
         raise LightprobeError(f"interrupted before the first sample was taken; {output} was not written")
     files = write_render(output, result, variance=variance, exposure=exposure, png=png)
+    if object_ids is not None:
+        files += _write_object_ids(object_ids, scene)
     note = ""
     if stats["interrupted"]:
         note = " (interrupted: the image holds the samples accumulated so far)"
@@ -271,9 +279,22 @@ def compare_command(
         ref_result = render(scene, ref_settings)
         ref_image, ref_var = ref_result.image, ref_result.variance
     tokens = [t for t in strategies.split(",") if t.strip()]
+    from .analysis.masks import object_id_pass
+
+    ids, names = object_id_pass(scene)
+    masks = {f"{i}: {n}": ids == i for i, n in enumerate(names)}
     runs = _compare_with_progress(
         lambda progress: compare(
-            scene, tokens, ref_image, ref_var, base=base, equal=equal, spp=spp, seconds=seconds, progress=progress
+            scene,
+            tokens,
+            ref_image,
+            ref_var,
+            base=base,
+            equal=equal,
+            spp=spp,
+            seconds=seconds,
+            progress=progress,
+            masks=masks,
         ),
         tokens,
         quiet=quiet,
@@ -353,6 +374,20 @@ def _compare_with_progress(run, tokens: list[str], *, quiet: bool):
             bar.update(task, completed=order.get(label, 0) + min(fraction, 1.0), description=label)
 
         return run(update)
+
+
+def _write_object_ids(path: Path, scene) -> list[Path]:
+    """The object-id pass (index in the scene's objects, -1 where the environment is seen) and its names."""
+    import numpy as np
+
+    from .analysis.masks import object_id_pass
+    from .io.images import write_image
+
+    ids, names = object_id_pass(scene)
+    written = [write_image(path, ids.astype(np.float32)[:, :, None], channel_names=["object_id"])]
+    meta = path.with_name(path.name + ".json")
+    meta.write_text(json.dumps({"objects": names, "background": -1}, indent=2) + "\n")
+    return [*written, meta]
 
 
 def _render_settings(defaults: dict, chosen: dict):
@@ -536,6 +571,9 @@ def experiment_krivanek_mis(
     seed: Annotated[int, typer.Option(help="Random seed.")] = 1,
     as_json: Annotated[bool, typer.Option("--json", help="Print JSON rows instead of a table.")] = False,
     output: Annotated[Path, typer.Option("--output", "-o", help="Folder for the reports.")] = Path("krivanek-mis"),
+    dask: Annotated[bool, typer.Option("--dask", help="Run the cells as tasks on a Dask LocalCluster.")] = False,
+    scheduler: Annotated[str | None, typer.Option(help="Run the cells on this Dask scheduler.")] = None,
+    workers: Annotated[int, typer.Option(help="Worker processes of the --dask LocalCluster.")] = 2,
 ) -> None:
     """BRDF vs environment sampling vs MIS on a rendered Phong sphere, per map and exponent (the seed's claim)."""
     from .experiments.seeds import krivanek_mis
@@ -551,6 +589,8 @@ def experiment_krivanek_mis(
         width=width,
         seed=seed,
         progress=_echo_err,
+        dask=scheduler or ("local" if dask else None),
+        workers=workers,
     )
     _seed_experiment("krivanek-mis", rows, as_json, output)
 
@@ -568,6 +608,9 @@ def experiment_pbrt_envmap_vs_cosine(
     output: Annotated[Path, typer.Option("--output", "-o", help="Folder for the reports.")] = Path(
         "pbrt-envmap-vs-cosine"
     ),
+    dask: Annotated[bool, typer.Option("--dask", help="Run the cells as tasks on a Dask LocalCluster.")] = False,
+    scheduler: Annotated[str | None, typer.Option(help="Run the cells on this Dask scheduler.")] = None,
+    workers: Annotated[int, typer.Option(help="Worker processes of the --dask LocalCluster.")] = 2,
 ) -> None:
     """Cosine-weighted vs environment importance sampling of a diffuse scene under spiky and soft maps (pbrt)."""
     from .experiments.seeds import pbrt_envmap_vs_cosine, reduction_factors
@@ -582,6 +625,8 @@ def experiment_pbrt_envmap_vs_cosine(
         width=width,
         seed=seed,
         progress=_echo_err,
+        dask=scheduler or ("local" if dask else None),
+        workers=workers,
     )
     factors = ", ".join(f"{m} {f:.3g}x" for m, f in reduction_factors(rows).items())
     _seed_experiment(

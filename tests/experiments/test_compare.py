@@ -70,3 +70,17 @@ def test_bad_comparisons(scene_and_reference):
         compare(scene, ["env"], np.zeros((8, 8, 3)))
     with pytest.raises(LightprobeError, match="at least one strategy"):
         compare(scene, [], ref.image)
+
+
+def test_per_object_metrics(scene_and_reference):
+    from lightprobe.analysis import metrics
+    from lightprobe.analysis.masks import object_id_pass
+
+    scene, ref = scene_and_reference
+    ids, names = object_id_pass(scene)
+    masks = {name: ids == i for i, name in enumerate(names)}
+    (run,) = compare(scene, ["mis-power"], ref.image, ref.variance, spp=4, masks=masks)
+    seen = {name for name, mask in masks.items() if mask.any()}
+    assert set(run.metrics["objects"]) == seen and len(seen) >= 2
+    for name in seen:
+        assert run.metrics["objects"][name]["mse"] == pytest.approx(metrics.mse(run.image, ref.image, masks[name]))

@@ -40,3 +40,17 @@ def test_krivanek_mis(tmp_path):
     best = min(mse[("phong n=1", "brdf")], mse[("phong n=1", "env")])
     assert mse[("phong n=1", "mis-balance")] < 3 * best and mse[("phong n=1", "mis-power")] < 3 * best
     assert {m for m, _ in mse} == {"phong n=1", "phong n=1000"} and len(mse) == 8
+
+
+def test_cells_as_dask_tasks_give_the_same_rows(tmp_path):
+    import pytest
+
+    pytest.importorskip("distributed", reason="Dask distributed is not installed")
+    common = ["experiment", "pbrt-envmap-vs-cosine", "--maps", "sky-sun,sky", "--width", "16", "--spp", "4"]
+    common += ["--reference-spp", "32"]
+    assert main([*common, "-o", str(tmp_path / "here")]) == 0
+    assert main([*common, "-o", str(tmp_path / "dask"), "--dask", "--workers", "2"]) == 0
+    here, there = _rows(tmp_path / "here"), _rows(tmp_path / "dask")
+    assert [(r["map"], r["strategy"]) for r in here] == [(r["map"], r["strategy"]) for r in there]
+    assert [r["mse"] for r in here] == [r["mse"] for r in there]  # the same renders, bit for bit
+    assert all((tmp_path / "dask" / r["report"]).exists() for r in there)

@@ -242,6 +242,19 @@ def write_report(
             f"{_fmt(m['bias_high'], '.2g')})</td><td>{_fmt(m['efficiency'], '.3g')}</td>"
             f"<td>{_fmt(m['relative_efficiency'], '.2f')}</td></tr>"
         )
+    objects = sorted({name for r in runs for name in r.metrics.get("objects", {})})
+    if objects:
+        parts.append(
+            "</table><h2>MSE per object (pixel centres that see it)</h2><table><tr><th>strategy</th>"
+            + "".join(f"<th>{html.escape(o)}</th>" for o in objects)
+            + "</tr>"
+        )
+        for r in runs:
+            cells = "".join(
+                f"<td>{_fmt(r.metrics['objects'][o]['mse'], '.3g') if o in r.metrics['objects'] else '-'}</td>"
+                for o in objects
+            )
+            parts.append(f"<tr><td>{html.escape(r.label)}</td>{cells}</tr>")
     parts += [
         "</table>",
         "<h2>Reproduce</h2>",

@@ -111,9 +111,10 @@ def run_strategy(
     spp: int,
     seconds: float,
     progress: Callable[[str, float], None] | None = None,
+    masks: dict[str, np.ndarray] | None = None,
 ) -> StrategyRun:
     """Render one strategy in doubling rounds up to ``spp`` samples (``equal='spp'``) or ``seconds`` of rendering
-    (``equal='time'``), measuring after each round."""
+    (``equal='time'``), measuring after each round; ``masks`` (name -> (H, W) bool) add per-object metrics."""
     width, height = scene.camera.resolution
     acc = None
     done = 0
@@ -155,6 +156,11 @@ def run_strategy(
     run.metrics = _measure(run.image, run.variance, reference, reference_variance)
     run.metrics["flip"] = metrics.flip(run.image, reference)
     run.metrics["efficiency"] = metrics.efficiency(max(run.metrics["mse"], 1e-300), max(spent, 1e-9))
+    run.metrics["objects"] = {
+        name: _measure(run.image, run.variance, reference, reference_variance, mask)
+        for name, mask in (masks or {}).items()
+        if mask.any()
+    }
     return run
 
 
@@ -169,9 +175,11 @@ def compare(
     spp: int = 64,
     seconds: float = 10.0,
     progress: Callable[[str, float], None] | None = None,
+    masks: dict[str, np.ndarray] | None = None,
 ) -> list[StrategyRun]:
     """Render every strategy and measure it; each run's ``metrics['relative_efficiency']`` is its efficiency over
-    the best one's."""
+    the best one's, and ``metrics['objects'][name]`` its metrics on each of ``masks`` (e.g. from
+    :func:`lightprobe.analysis.masks.object_id_pass`)."""
     if equal not in ("spp", "time"):
         raise LightprobeError(f"equal must be 'spp' or 'time', got {equal!r}")
     if equal == "spp" and spp < 1:
@@ -199,6 +207,7 @@ def compare(
                 spp=spp,
                 seconds=seconds,
                 progress=progress,
+                masks=masks,
             )
         )
         runs[-1].metrics["wall_seconds"] = time.perf_counter() - start

@@ -17,6 +17,7 @@ Without ``../shared/data`` the maps are procedural: a sky with a 2-degree sun (s
 
 from __future__ import annotations
 
+import functools
 import html
 import json
 import warnings
@@ -52,6 +53,7 @@ class Row:
     report: str
 
 
+@functools.lru_cache(maxsize=2)  # one map serves every cell of a row (and stays loaded in a Dask worker)
 def environment(name: str) -> EnvironmentMap:
     """A named real map (``lightprobe.data.NAMED_ENVMAPS``), a file, or the procedural ``sky-sun`` / ``sky``."""
     if name == "sky-sun":
@@ -79,31 +81,37 @@ def _sphere_scene(env: EnvironmentMap, bsdf, width: int, *, ground: bool) -> Sce
     return scene
 
 
+def _material(spec: tuple[str, float]):
+    kind, value = spec
+    return Phong(0.0, 1.0, value) if kind == "phong" else Lambert(value)
+
+
 def _cell(
     experiment: str,
-    scene: Scene,
     map_name: str,
-    material: str,
+    material: tuple[str, float],
     strategies: list[str],
     *,
     spp: int,
     reference_spp: int,
     seed: int,
+    width: int,
     out: Path,
-    progress: Callable[[str], None] | None,
 ) -> list[Row]:
-    if progress is not None:
-        progress(f"{experiment}: {map_name}, {material}")
+    """One (map, material) cell: its scene, reference, comparison and report.  Self-contained (it builds its own
+    scene), so that it can run as a Dask task."""
+    scene = _sphere_scene(environment(map_name), _material(material), width, ground=material[0] == "lambert")
+    label = f"{material[0]} {'n=' if material[0] == 'phong' else ''}{material[1]:g}"
     ref = render(scene, RenderSettings(spp=reference_spp, seed=seed + 1_000_003))
     runs = compare(scene, strategies, ref.image, ref.variance, base=RenderSettings(seed=seed), spp=spp)
-    name = f"{map_name}-{material}".replace("/", "_").replace(" ", "_")
+    name = f"{map_name}-{label}".replace("/", "_").replace(" ", "_")
     report = out / f"{name}.html"
     write_report(
         report,
-        title=f"{experiment}: {map_name}, {material}, {spp} spp each",
+        title=f"{experiment}: {map_name}, {label}, {spp} spp each",
         runs=runs,
         reference=ref.image,
-        command=f"lightprobe experiment {experiment} (cell {map_name}, {material})",
+        command=f"lightprobe experiment {experiment} (cell {map_name}, {label})",
         settings={"spp": spp, "reference_spp": reference_spp, "seed": seed, "resolution": scene.camera.resolution},
         notes=f"Reference: MIS, {reference_spp} spp.",
     )
@@ -111,7 +119,7 @@ def _cell(
         Row(
             experiment,
             map_name,
-            material,
+            label,
             r.label,
             r.spp,
             r.seconds,
@@ -122,6 +130,39 @@ def _cell(
         )
         for r in runs
     ]
+
+
+def _run_cells(cells: list[dict], dask: str | None, workers: int, progress: Callable[[str], None] | None):
+    """Every cell here, in order, or as tasks on Dask distributed (``"local"``: a LocalCluster of ``workers``
+    processes with one thread each; else a scheduler address whose workers share this file system)."""
+    if dask is None:
+        rows: list[Row] = []
+        for cell in cells:
+            if progress is not None:
+                progress(f"{cell['experiment']}: {cell['map_name']}, {cell['material'][0]} {cell['material'][1]:g}")
+            rows += _cell(**cell)
+        return rows
+    from distributed import Client, LocalCluster
+
+    cluster = None
+    if dask == "local":
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
+        client = Client(cluster)
+    else:
+        try:
+            client = Client(dask, timeout="20s")
+        except OSError as exc:
+            raise LightprobeError(f"cannot reach the Dask scheduler at {dask} ({exc})") from None
+    try:
+        if progress is not None:
+            progress(f"{len(cells)} cells as Dask tasks on {dask if dask != 'local' else f'{workers} local workers'}")
+        futures = [client.submit(_cell, **cell, pure=False) for cell in cells]
+        parts = client.gather(futures)
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    return [row for part in parts for row in part]  # in cell order, whatever finished first
 
 
 def _index(out: Path, title: str, rows: list[Row], summary: str) -> Path:
@@ -156,27 +197,22 @@ def krivanek_mis(
     width: int = 96,
     seed: int = 1,
     progress: Callable[[str], None] | None = None,
+    dask: str | None = None,
+    workers: int = 2,
 ) -> list[Row]:
-    """Rows for every (map, Phong exponent, strategy); reports in ``out``."""
+    """Rows for every (map, Phong exponent, strategy); reports in ``out``; cells on Dask with ``dask``."""
     out.mkdir(parents=True, exist_ok=True)
-    rows: list[Row] = []
     for map_name in maps:
-        env = environment(map_name)
-        for n in exponents:
-            scene = _sphere_scene(env, Phong(0.0, 1.0, n), width, ground=False)
-            strategies = ["brdf", "env", "mis-balance", "mis-power"]
-            rows += _cell(
-                "krivanek-mis",
-                scene,
-                map_name,
-                f"phong n={n:g}",
-                strategies,
-                spp=spp,
-                reference_spp=reference_spp,
-                seed=seed,
-                out=out,
-                progress=progress,
-            )
+        environment(map_name)  # a missing map fails here, before any work
+    options = {"spp": spp, "reference_spp": reference_spp, "seed": seed, "width": width, "out": out}
+    strategies = ["brdf", "env", "mis-balance", "mis-power"]
+    cells = [
+        {"experiment": "krivanek-mis", "map_name": m, "material": ("phong", float(n)), "strategies": strategies}
+        | options
+        for m in maps
+        for n in exponents
+    ]
+    rows = _run_cells(cells, dask, workers, progress)
     _index(out, "krivanek-mis", rows, "Phong sphere (rho_d 0, rho_s 1) per map and exponent; equal samples.")
     return rows
 
@@ -190,24 +226,21 @@ def pbrt_envmap_vs_cosine(
     width: int = 96,
     seed: int = 1,
     progress: Callable[[str], None] | None = None,
+    dask: str | None = None,
+    workers: int = 2,
 ) -> list[Row]:
     """Rows for cosine and environment sampling of a diffuse scene under each map; reports in ``out``."""
     out.mkdir(parents=True, exist_ok=True)
-    rows: list[Row] = []
     for map_name in maps:
-        scene = _sphere_scene(environment(map_name), Lambert(0.7), width, ground=True)
-        rows += _cell(
-            "pbrt-envmap-vs-cosine",
-            scene,
-            map_name,
-            "lambert 0.7",
-            ["cosine", "env"],
-            spp=spp,
-            reference_spp=reference_spp,
-            seed=seed,
-            out=out,
-            progress=progress,
-        )
+        environment(map_name)
+    options = {"spp": spp, "reference_spp": reference_spp, "seed": seed, "width": width, "out": out}
+    cells = [
+        {"experiment": "pbrt-envmap-vs-cosine", "map_name": m, "material": ("lambert", 0.7)}
+        | {"strategies": ["cosine", "env"]}
+        | options
+        for m in maps
+    ]
+    rows = _run_cells(cells, dask, workers, progress)
     _index(out, "pbrt-envmap-vs-cosine", rows, "Diffuse scene; variance reduction = MSE(cosine) / MSE(env).")
     return rows
 
