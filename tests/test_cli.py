@@ -412,6 +412,7 @@ def test_lecture_experiments_write_rows_and_images(capsys, tmp_path, name, optio
     assert labels <= {r["strategy"] for r in rows}
     for r in rows:
         assert r["mse"] > 0 and r["seconds"] > 0 and r["rays"] > 0 and r["mse_ratio_to_best"] >= 1.0
+        assert r["efficiency"] == pytest.approx(1 / (r["mse"] * r["seconds"]))
     assert min(r["mse_ratio_to_best"] for r in rows) == 1.0
     assert (out / f"{name}.json").exists() and (out / f"{name}-reference.png").exists()
     assert len(list(out.glob("*.png"))) == len(rows) + 1

@@ -45,6 +45,7 @@ class Row:
     mse: float
     relmse: float
     mse_ratio_to_best: float = 1.0
+    efficiency: float = 0.0  # 1 / (MSE x seconds)
 
 
 def _errors(image: np.ndarray, reference: np.ndarray) -> tuple[float, float]:
@@ -88,7 +89,16 @@ def _reference(scene, spp: int, seed: int, out_dir: Path | None, name: str, **op
 
 def _ratios(rows: list[Row]) -> list[Row]:
     best = min(r.mse for r in rows)
-    return [Row(**{**asdict(r), "mse_ratio_to_best": r.mse / best if best > 0 else float("inf")}) for r in rows]
+    return [
+        Row(
+            **{
+                **asdict(r),
+                "mse_ratio_to_best": r.mse / best if best > 0 else float("inf"),
+                "efficiency": 1.0 / (r.mse * r.seconds) if r.mse > 0 and r.seconds > 0 else float("inf"),
+            }
+        )
+        for r in rows
+    ]
 
 
 def area_sampling(
