@@ -10,13 +10,14 @@ other ranges are kept.  No job queue of our own: a ``LocalCluster`` by default, 
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 
 from ..errors import LightprobeError
 from ..geometry.scene import Scene
 from ..integrators.wavefront import Accumulator, RenderResult, RenderSettings, render, result_from
 
-__all__ = ["render_on_dask", "sample_ranges"]
+__all__ = ["dask_client", "render_on_dask", "sample_ranges"]
 
 
 def sample_ranges(spp: int, chunk: int, first: int = 0) -> list[tuple[int, int]]:
@@ -29,6 +30,33 @@ def sample_ranges(spp: int, chunk: int, first: int = 0) -> list[tuple[int, int]]
 def _render_range(scene: Scene, settings: RenderSettings, first: int, count: int) -> tuple[dict, float]:
     result = render(scene, dataclasses.replace(settings, spp=count, first_sample=first, time_limit=None))
     return result.accumulator.to_arrays(), result.stats["seconds"]
+
+
+@contextlib.contextmanager
+def dask_client(scheduler: str | None, workers: int = 2, threads_per_worker: int = 1, connect_timeout: float = 20.0):
+    """A Dask client: of the scheduler at ``scheduler``, or of a ``LocalCluster`` of ``workers`` processes (closed
+    on exit).  One :class:`LightprobeError` line when Dask is missing or the scheduler cannot be reached."""
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError:
+        raise LightprobeError("Dask distributed is not installed: pip install 'dask[distributed]'") from None
+    cluster = None
+    if scheduler is None:
+        cluster = LocalCluster(
+            n_workers=workers, threads_per_worker=threads_per_worker, processes=True, dashboard_address=None
+        )
+        client = Client(cluster)
+    else:
+        try:
+            client = Client(scheduler, timeout=f"{connect_timeout}s")
+        except OSError as exc:
+            raise LightprobeError(f"cannot reach the Dask scheduler at {scheduler} ({exc})") from None
+    try:
+        yield client
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
 
 
 def render_on_dask(
@@ -46,35 +74,14 @@ def render_on_dask(
     the scheduler at ``scheduler`` (e.g. ``tcp://10.0.0.5:8786``), or a ``LocalCluster`` of ``workers`` processes
     with ``threads_per_worker`` threads each.  ``resume`` is merged in front (its samples must come before).
     ``connect_timeout``: seconds to wait for a remote scheduler."""
-    try:
-        from distributed import Client, LocalCluster
-    except ImportError:
-        raise LightprobeError("Dask distributed is not installed: pip install 'dask[distributed]'") from None
     settings.validate()
     ranges = sample_ranges(settings.spp, chunk, settings.first_sample)
-    cluster = None
-    if scheduler is None:
-        cluster = LocalCluster(
-            n_workers=workers, threads_per_worker=threads_per_worker, processes=True, dashboard_address=None
-        )
-        client = Client(cluster)
-    else:
-        try:
-            client = Client(scheduler, timeout=f"{connect_timeout}s")
-        except OSError as exc:
-            raise LightprobeError(f"cannot reach the Dask scheduler at {scheduler} ({exc})") from None
-    try:
+    with dask_client(scheduler, workers, threads_per_worker, connect_timeout) as client:
         per_task = dataclasses.replace(settings, threads=settings.threads or threads_per_worker)
         scene_on_workers = client.scatter(scene, broadcast=True)
-        futures = [
-            client.submit(_render_range, scene_on_workers, per_task, a, n, key=f"lightprobe-range-{a}-{n}-{id(scene)}")
-            for a, n in ranges
-        ]
+        # pure=False: every call gets fresh task keys, never another render's cached result
+        futures = [client.submit(_render_range, scene_on_workers, per_task, a, n, pure=False) for a, n in ranges]
         parts = client.gather(futures)
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
     acc = resume
     for arrays, _ in parts:  # in range order: the merge does not depend on which task finished first
         part = Accumulator.from_arrays(arrays)

@@ -25,6 +25,7 @@ import numpy as np
 from .._numba import jit, jit_parallel, prange
 from ..color import LUMINANCE_WEIGHTS
 from ..sampling.distributions import PiecewiseConstant2D
+from .mappings import bilinear_latlong_weights
 
 __all__ = ["WEIGHT_MODES", "build_distributions", "luminance_f32"]
 
@@ -64,19 +65,11 @@ def _fill_hat_taps(cells, texels, k, periodic, index, weight):
         n = 0
         for a in range(k):
             pos = (c + (a + 0.5) / k) / cells
+            # the lookup's own weights along one axis (the other axis a single texel)
             if periodic:
-                fx = pos * texels - 0.5
-                lo_f = math.floor(fx)
-                t = fx - lo_f
-                lo = int(lo_f) % texels
-                hi = (lo + 1) % texels
-            elif texels > 1:
-                fy = min(max(pos, 0.0), 1.0) * (texels - 1)
-                lo = min(int(fy), texels - 2)
-                t = fy - lo
-                hi = lo + 1
+                _, _, lo, hi, _, t = bilinear_latlong_weights(1, texels, pos, 0.0)
             else:
-                lo, hi, t = 0, 0, 0.0
+                lo, hi, _, _, t, _ = bilinear_latlong_weights(texels, 1, 0.5, pos)
             for texel, wt in ((lo, (1.0 - t) / k), (hi, t / k)):
                 found = False
                 for m in range(n):  # merge taps on the same texel

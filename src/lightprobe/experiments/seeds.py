@@ -142,26 +142,12 @@ def _run_cells(cells: list[dict], dask: str | None, workers: int, progress: Call
                 progress(f"{cell['experiment']}: {cell['map_name']}, {cell['material'][0]} {cell['material'][1]:g}")
             rows += _cell(**cell)
         return rows
-    from distributed import Client, LocalCluster
+    from ..analysis.distributed import dask_client
 
-    cluster = None
-    if dask == "local":
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None)
-        client = Client(cluster)
-    else:
-        try:
-            client = Client(dask, timeout="20s")
-        except OSError as exc:
-            raise LightprobeError(f"cannot reach the Dask scheduler at {dask} ({exc})") from None
-    try:
-        if progress is not None:
-            progress(f"{len(cells)} cells as Dask tasks on {dask if dask != 'local' else f'{workers} local workers'}")
-        futures = [client.submit(_cell, **cell, pure=False) for cell in cells]
-        parts = client.gather(futures)
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
+    if progress is not None:
+        progress(f"{len(cells)} cells as Dask tasks on {dask if dask != 'local' else f'{workers} local workers'}")
+    with dask_client(None if dask == "local" else dask, workers) as client:
+        parts = client.gather([client.submit(_cell, **cell, pure=False) for cell in cells])
     return [row for part in parts for row in part]  # in cell order, whatever finished first
 
 
@@ -187,6 +173,31 @@ def _index(out: Path, title: str, rows: list[Row], summary: str) -> Path:
     return path
 
 
+def _experiment(
+    name: str,
+    maps: list[str],
+    materials: list[tuple[str, float]],
+    strategies: list[str],
+    out: Path,
+    summary: str,
+    options: dict,
+    dask: str | None,
+    workers: int,
+    progress: Callable[[str], None] | None,
+) -> list[Row]:
+    out.mkdir(parents=True, exist_ok=True)
+    for map_name in maps:
+        environment(map_name)  # a missing map fails here, before any work
+    cells = [
+        {"experiment": name, "map_name": m, "material": material, "strategies": strategies, "out": out, **options}
+        for m in maps
+        for material in materials
+    ]
+    rows = _run_cells(cells, dask, workers, progress)
+    _index(out, name, rows, summary)
+    return rows
+
+
 def krivanek_mis(
     maps: list[str],
     exponents: list[float],
@@ -201,20 +212,18 @@ def krivanek_mis(
     workers: int = 2,
 ) -> list[Row]:
     """Rows for every (map, Phong exponent, strategy); reports in ``out``; cells on Dask with ``dask``."""
-    out.mkdir(parents=True, exist_ok=True)
-    for map_name in maps:
-        environment(map_name)  # a missing map fails here, before any work
-    options = {"spp": spp, "reference_spp": reference_spp, "seed": seed, "width": width, "out": out}
-    strategies = ["brdf", "env", "mis-balance", "mis-power"]
-    cells = [
-        {"experiment": "krivanek-mis", "map_name": m, "material": ("phong", float(n)), "strategies": strategies}
-        | options
-        for m in maps
-        for n in exponents
-    ]
-    rows = _run_cells(cells, dask, workers, progress)
-    _index(out, "krivanek-mis", rows, "Phong sphere (rho_d 0, rho_s 1) per map and exponent; equal samples.")
-    return rows
+    return _experiment(
+        "krivanek-mis",
+        maps,
+        [("phong", float(n)) for n in exponents],
+        ["brdf", "env", "mis-balance", "mis-power"],
+        out,
+        "Phong sphere (rho_d 0, rho_s 1) per map and exponent; equal samples.",
+        {"spp": spp, "reference_spp": reference_spp, "seed": seed, "width": width},
+        dask,
+        workers,
+        progress,
+    )
 
 
 def pbrt_envmap_vs_cosine(
@@ -230,19 +239,18 @@ def pbrt_envmap_vs_cosine(
     workers: int = 2,
 ) -> list[Row]:
     """Rows for cosine and environment sampling of a diffuse scene under each map; reports in ``out``."""
-    out.mkdir(parents=True, exist_ok=True)
-    for map_name in maps:
-        environment(map_name)
-    options = {"spp": spp, "reference_spp": reference_spp, "seed": seed, "width": width, "out": out}
-    cells = [
-        {"experiment": "pbrt-envmap-vs-cosine", "map_name": m, "material": ("lambert", 0.7)}
-        | {"strategies": ["cosine", "env"]}
-        | options
-        for m in maps
-    ]
-    rows = _run_cells(cells, dask, workers, progress)
-    _index(out, "pbrt-envmap-vs-cosine", rows, "Diffuse scene; variance reduction = MSE(cosine) / MSE(env).")
-    return rows
+    return _experiment(
+        "pbrt-envmap-vs-cosine",
+        maps,
+        [("lambert", 0.7)],
+        ["cosine", "env"],
+        out,
+        "Diffuse scene; variance reduction = MSE(cosine) / MSE(env).",
+        {"spp": spp, "reference_spp": reference_spp, "seed": seed, "width": width},
+        dask,
+        workers,
+        progress,
+    )
 
 
 def reduction_factors(rows: list[Row]) -> dict[str, float]:
