@@ -105,6 +105,7 @@ def run_one(args) -> dict:
         n_bsdf=args.bsdf_samples,
         n_env=args.env_samples,
         env_candidates=args.env_candidates,
+        **({"pass_samples": args.pass_samples} if args.pass_samples else {}),
     )
     tracer = RayTracer(scene.compile(), threads=args.threads or os.cpu_count() or 1)
     if args.profile:
@@ -177,6 +178,7 @@ def main(argv=None) -> int:
     parser.add_argument("--env-samples", type=int, default=1)
     parser.add_argument("--env-candidates", type=int, default=1, help="RIS candidates per environment sample")
     parser.add_argument("--threads", type=int)
+    parser.add_argument("--pass-samples", type=int, help="camera samples per wavefront pass [the renderer's default]")
     parser.add_argument("--reference", help="EXR to compute relMSE against")
     parser.add_argument("--out", help="write the render here")
     parser.add_argument("--profile", action="store_true", help="add seconds per kernel (warm-up excluded)")

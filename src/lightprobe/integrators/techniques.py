@@ -27,9 +27,12 @@ NONE, VISIBLE, TEST_MESH, BLOCKED = 0, 1, 2, 3
 @jit_inline
 def sample_direction(technique, mk, mp, wo, u0, u1, u2):
     """A local direction from BSDF (``BRDF``) or hemisphere (``UNIFORM``, ``COSINE``) sampling:
-    (slot state, wi, pdf, BSDF sample weight f cos / pdf); state ``SLOT_NONE`` when the technique declines."""
+    (slot state, wi, pdf, BSDF sample weight f cos / pdf); state ``SLOT_NONE`` when the technique declines.
+    (u0, u1) is the slot's 2D pair and u2 its 1D choice (the sampler's layout, ``sampling/rng.py``); the BSDFs take
+    the lobe choice first, so the pair must reach them as their direction (u1, u2), or a QMC sampler's 2D
+    stratification is lost for BSDF directions."""
     if technique == BRDF:
-        wi, pdf, w = bsdf_sample(mk, mp, wo, u0, u1, u2)
+        wi, pdf, w = bsdf_sample(mk, mp, wo, u2, u0, u1)
         if pdf <= 0.0 or (w[0] == 0.0 and w[1] == 0.0 and w[2] == 0.0):
             return SLOT_NONE, wi, 0.0, w
         return SLOT_BSDF, wi, pdf, w
