@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 import pytest
 from scipy import stats
@@ -84,3 +85,19 @@ def test_owen_scramble_is_a_nested_bijection():
     # Owen scrambling permutes each level of the tree: the output's top b bits depend only on the input's top b bits
     top = np.array([rng.owen_scramble(v | np.uint64(0xFFFF), np.uint64(0x1234567)) for v in values[:4096]], np.uint64)
     assert np.array_equal(out >> np.uint64(16), top >> np.uint64(16))
+
+
+@numba.njit
+def _pairs_both_ways(sampler, seed, pixel, sample, dim):
+    state = rng.sample_state(sampler, seed, pixel, sample)
+    return rng.uniform_2d(state, dim), (rng.uniform(state, dim), rng.uniform(state, dim + 1))
+
+
+@pytest.mark.parametrize("sampler", [SOBOL, INDEPENDENT])
+def test_uniform_2d_gives_the_numbers_of_two_uniform_calls(sampler):
+    """The renderer draws each pair with one call; the numbers (and so every image) are those of the per-dimension
+    function that the purity, stratification and split-and-merge tests check."""
+    for pixel, sample in [(0, 0), (12345, 17), (7, 1 << 20), (99, (1 << 32) + 3)]:
+        for a, _ in PAIRS:
+            paired, single = _pairs_both_ways(sampler, 5, pixel, sample, a)
+            assert paired == single, (pixel, sample, a)

@@ -40,7 +40,7 @@ from ..geometry.intersect import (
     ray_offset,
 )
 from ..sampling.mis import mis_weight
-from ..sampling.rng import sample_state, uniform
+from ..sampling.rng import sample_state, uniform, uniform_2d
 from .techniques import (
     BLOCKED,
     BRDF,
@@ -162,8 +162,7 @@ def _lights_setup(
         rs = sample_state(sampler, seed, pixel_start + k // spp_pass, sample_start + k % spp_pass)
         for j in range(m):
             r = base + j
-            u0 = uniform(rs, 2 + 3 * j)
-            u1 = uniform(rs, 3 + 3 * j)
+            u0, u1 = uniform_2d(rs, 2 + 3 * j)
             technique = strategy
             if strategy == MIS:
                 technique = BRDF if j < n_bsdf else ENV

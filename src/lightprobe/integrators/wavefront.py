@@ -48,7 +48,7 @@ from ..geometry.intersect import MISS, closest_analytic, may_hit_mesh, occluded_
 from ..geometry.raytracer import RayTracer
 from ..geometry.scene import Scene
 from ..sampling.mis import mis_weight
-from ..sampling.rng import SAMPLERS, sample_state, uniform
+from ..sampling.rng import SAMPLERS, sample_state, uniform, uniform_2d
 from .techniques import (
     BLOCKED,
     BRDF,
@@ -191,7 +191,8 @@ def _camera_pass(
     for k in prange(dirs.shape[0]):
         pixel = pixel_start + k // spp_pass
         rs = sample_state(sampler, seed, pixel, sample_start + k % spp_pass)
-        dx, dy, dz = camera_ray(cam, pixel, uniform(rs, 0), uniform(rs, 1))
+        u0, u1 = uniform_2d(rs, 0)
+        dx, dy, dz = camera_ray(cam, pixel, u0, u1)
         dirs[k, 0], dirs[k, 1], dirs[k, 2] = dx, dy, dz
         t[k], kind[k], index[k] = closest_analytic(s, ox, oy, oz, dx, dy, dz, np.inf)
         needs_mesh[k] = may_hit_mesh(s, ox, oy, oz, dx, dy, dz, t[k])
@@ -264,9 +265,7 @@ def _shade_setup(
         rs = sample_state(sampler, seed, pixel_start + k // spp_pass, sample_start + k % spp_pass)
         for j in range(m):
             r = base + j
-            u0 = uniform(rs, 2 + 3 * j)
-            u1 = uniform(rs, 3 + 3 * j)
-            u2 = uniform(rs, 4 + 3 * j)
+            u0, u1 = uniform_2d(rs, 2 + 3 * j)
             technique = strategy
             if strategy == MIS:
                 technique = BRDF if j < n_bsdf else ENV
@@ -275,7 +274,7 @@ def _shade_setup(
                 env_u[r, 1] = u1
                 state[r] = SLOT_ENV
                 continue
-            st, wi, pdf, w = sample_direction(technique, mk, mp, wo, u0, u1, u2)
+            st, wi, pdf, w = sample_direction(technique, mk, mp, wo, u0, u1, uniform(rs, 4 + 3 * j))
             if st == SLOT_NONE:
                 continue
             if st == SLOT_BSDF:
@@ -355,7 +354,7 @@ def _env_resample_stage(
                 u0, u1, uc = env_u[r, 0], env_u[r, 1], uniform(rs, 4 + 3 * j)
             else:
                 v = 64 + j * env_candidates + i
-                u0, u1, uc = uniform(rs, 2 + 3 * v), uniform(rs, 3 + 3 * v), uniform(rs, 4 + 3 * v)
+                (u0, u1), uc = uniform_2d(rs, 2 + 3 * v), uniform(rs, 4 + 3 * v)
             wx, wy, wz, pdf, u, y, cos_theta = env_sample_full(env, compensated, u0, u1)
             if pdf <= 0.0:
                 continue

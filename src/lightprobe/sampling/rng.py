@@ -30,6 +30,7 @@ __all__ = [
     "sampler_batch",
     "sobol_2d",
     "uniform",
+    "uniform_2d",
     "uniform_batch",
 ]
 
@@ -166,19 +167,31 @@ def _pair_of(dim):
 
 
 @jit
+def _pair_scramble(pkey, sample, pair):
+    """One hash per (pixel, pair) -- its low 32 bits shuffle the sample index, its high 32 scramble x, and a second
+    hash of it scrambles y -- and the shuffled index.  Sample indices of 2^32 and beyond (never reached in
+    practice) start a fresh scramble."""
+    h = _mix(pkey + np.uint64(pair + 1) * _DIM + (np.uint64(sample) >> _S32) * _GOLDEN)
+    return h, owen_scramble(np.uint64(sample) & _U32, h)
+
+
+@jit
+def _sobol_x(h, index):
+    # owen_scramble(reverse(index), h >> 32) without reversing twice
+    return float(_reverse32(_laine_karras(index, h >> _S32))) * _INV32
+
+
+@jit
+def _sobol_y_scrambled(h, index):
+    return float(owen_scramble(_sobol_y(index), _mix(h))) * _INV32
+
+
+@jit
 def sobol_uniform(pkey, sample, dim):
     """Dimension ``dim`` of sample ``sample`` of the padded Owen-scrambled Sobol' sampler in one pixel."""
     pair, c = _pair_of(dim)
-    # one hash per (pixel, pair): its low 32 bits shuffle the sample index, its high 32 scramble x, and a second
-    # hash scrambles y.  Sample indices of 2^32 and beyond (never reached in practice) start a fresh scramble.
-    h = _mix(pkey + np.uint64(pair + 1) * _DIM + (np.uint64(sample) >> _S32) * _GOLDEN)
-    index = owen_scramble(np.uint64(sample) & _U32, h)
-    seed = h >> _S32 if c == 0 else _mix(h)
-    if c == 0:  # owen_scramble(reverse(index)) without reversing twice
-        bits = _reverse32(_laine_karras(index, seed))
-    else:
-        bits = owen_scramble(_sobol_y(index), seed)
-    return float(bits) * _INV32
+    h, index = _pair_scramble(pkey, sample, pair)
+    return _sobol_x(h, index) if c == 0 else _sobol_y_scrambled(h, index)
 
 
 @jit
@@ -195,6 +208,18 @@ def uniform(state, dim):
     if sampler == SOBOL:
         return sobol_uniform(pkey, sample, dim)
     return random_uniform(key, dim)
+
+
+@jit
+def uniform_2d(state, dim):
+    """Dimensions ``dim`` and ``dim + 1`` of a sample, where ``dim`` begins a 2D pair of the layout (0, or 2 + 3j):
+    the numbers two :func:`uniform` calls give, with the pair's hash and index shuffle computed once."""
+    sampler, key, pkey, sample = state
+    if sampler == SOBOL:
+        pair, _ = _pair_of(dim)
+        h, index = _pair_scramble(pkey, sample, pair)
+        return _sobol_x(h, index), _sobol_y_scrambled(h, index)
+    return random_uniform(key, dim), random_uniform(key, dim + 1)
 
 
 @jit_parallel
