@@ -7,13 +7,13 @@ says which technique made its direction.  Shadow-ray flags say what became of th
 
 from __future__ import annotations
 
-from .._numba import jit_inline
+from .._numba import jit, jit_inline
 from ..bsdfs.dispatch import bsdf_sample
 from ..geometry.frame import coordinate_system, to_local
 from ..geometry.intersect import surface
 from ..sampling.kernels import INV_2PI, cosine_hemisphere_pdf, square_to_cosine_hemisphere, square_to_uniform_hemisphere
 
-__all__ = ["STRATEGIES", "sample_direction", "store_shading_frame"]
+__all__ = ["STRATEGIES", "load_shading_frame", "sample_direction", "store_shading_frame"]
 
 #: the renderer's strategies (``env`` samples the lights: the environment and any area lights)
 STRATEGIES = {"uniform": 0, "cosine": 1, "brdf": 2, "env": 3, "mis": 4}
@@ -70,3 +70,14 @@ def store_shading_frame(s, k, hit, ox, oy, oz, dx, dy, dz, point, gnormal, frame
         wo_local[k, c] = wo[c]
     material[k] = mat
     return p, ng, wo
+
+
+@jit
+def load_shading_frame(frame, wo_local, k):
+    """What :func:`store_shading_frame` stored for camera sample k: its shading frame (s, t, n) and local ``wo``.
+    (The material stays with the caller: Numba's parfor array analysis rejects an inlined function that returns the
+    material's parameter block, an array view, in a tuple -- "Dimension mismatch".)"""
+    ts = (frame[k, 0], frame[k, 1], frame[k, 2])
+    tt = (frame[k, 3], frame[k, 4], frame[k, 5])
+    ns = (frame[k, 6], frame[k, 7], frame[k, 8])
+    return ts, tt, ns, (wo_local[k, 0], wo_local[k, 1], wo_local[k, 2])

@@ -61,6 +61,7 @@ from .techniques import (
     STRATEGIES,
     TEST_MESH,
     VISIBLE,
+    load_shading_frame,
     sample_direction,
     store_shading_frame,
 )
@@ -257,11 +258,8 @@ def _shade_setup(
         _, _, wo = store_shading_frame(s, k, hit, ox, oy, oz, dx, dy, dz, point, gnormal, frame, wo_local, material)
         if wo[2] <= 0.0:
             continue
-        ts = (frame[k, 0], frame[k, 1], frame[k, 2])
-        tt = (frame[k, 3], frame[k, 4], frame[k, 5])
-        ns = (frame[k, 6], frame[k, 7], frame[k, 8])
-        mk = s.material_kind[material[k]]
-        mp = s.material_params[material[k]]
+        ts, tt, ns, wo = load_shading_frame(frame, wo_local, k)
+        mk, mp = s.material_kind[material[k]], s.material_params[material[k]]
         rs = sample_state(sampler, seed, pixel_start + k // spp_pass, sample_start + k % spp_pass)
         for j in range(m):
             r = base + j
@@ -340,12 +338,8 @@ def _env_resample_stage(
         k = r // m
         j = r % m
         rs = sample_state(sampler, seed, pixel_start + k // spp_pass, sample_start + k % spp_pass)
-        ts = (frame[k, 0], frame[k, 1], frame[k, 2])
-        tt = (frame[k, 3], frame[k, 4], frame[k, 5])
-        ns = (frame[k, 6], frame[k, 7], frame[k, 8])
-        wo = (wo_local[k, 0], wo_local[k, 1], wo_local[k, 2])
-        mk = s.material_kind[material[k]]
-        mp = s.material_params[material[k]]
+        ts, tt, ns, wo = load_shading_frame(frame, wo_local, k)
+        mk, mp = s.material_kind[material[k]], s.material_params[material[k]]
         wsum = 0.0
         kept_target = 0.0
         kept = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)  # direction, source pdf, u, v
@@ -432,12 +426,8 @@ def _shade_finish(
             flags[base + j] = NONE
         if material[k] < 0:
             continue
-        ts = (frame[k, 0], frame[k, 1], frame[k, 2])
-        tt = (frame[k, 3], frame[k, 4], frame[k, 5])
-        ns = (frame[k, 6], frame[k, 7], frame[k, 8])
-        wo = (wo_local[k, 0], wo_local[k, 1], wo_local[k, 2])
-        mk = s.material_kind[material[k]]
-        mp = s.material_params[material[k]]
+        ts, tt, ns, wo = load_shading_frame(frame, wo_local, k)
+        mk, mp = s.material_kind[material[k]], s.material_params[material[k]]
         for j in range(m):
             r = base + j
             st = state[r]
