@@ -94,14 +94,14 @@ def main() -> int:
     reference = _reference(py, kit, cache)
     here = Path(__file__).resolve().parent
     rows = []
-    for _ in range(args.reps):
+    for rep in range(args.reps):
         for spp in args.spp:
             for sampler in args.lightprobe_samplers:
                 cmd = [sys.executable, str(here / "peer_scene.py"), "--spp", str(spp), "--sampler", sampler]
                 if reference is not None:
                     cmd += ["--reference", str(reference)]
                 r = _run_json(cmd)
-                rows.append({"renderer": "lightprobe", "sampler": sampler, "spp": spp, **_pick(r)})
+                rows.append({"renderer": "lightprobe", "sampler": sampler, "spp": spp, "rep": rep, **_pick(r)})
                 print(json.dumps(rows[-1]), flush=True)
             if py is None:
                 continue
@@ -111,10 +111,13 @@ def main() -> int:
                 if reference is not None:
                     cmd += ["--reference", str(reference)]
                 r = _run_json(cmd)
-                rows.append({"renderer": "mitsuba 3", "sampler": sampler, "spp": spp, **_pick(r)})
+                rows.append({"renderer": "mitsuba 3", "sampler": sampler, "spp": spp, "rep": rep, **_pick(r)})
                 print(json.dumps(rows[-1]), flush=True)
     best = _best(rows)
     print(_table(best))
+    verdict = _verdict(rows, best)
+    if verdict:
+        print(verdict)
     if args.plot:
         _plot(best, args.plot)
     return 0
@@ -150,6 +153,41 @@ def _best(rows: list[dict]) -> list[dict]:
             eff / base["efficiency"] if eff and base and base.get("efficiency") else None
         )
     return sorted(best.values(), key=lambda r: (r["spp"], r["renderer"], r["sampler"]))
+
+
+TARGET_VS_BEST, TARGET_VS_INDEPENDENT = 1.0, 2.0  # issue 9's targets for lightprobe's default sampler
+
+
+def _verdict(rows: list[dict], best: list[dict], default: str = "sobol") -> str:
+    """Issue 9's targets, per spp, for lightprobe's default sampler: efficiency >= 1x Mitsuba's best sampler and
+    >= 2x Mitsuba ``independent`` (from the table's fastest runs), with the second ratio's range over the
+    repetitions (each repetition's own two runs) because the machine's timing drifts."""
+    lines = []
+    for spp in sorted({r["spp"] for r in best}):
+        at = {(r["renderer"], r["sampler"]): r for r in best if r["spp"] == spp}
+        ours = at.get(("lightprobe", default))
+        mitsuba = [r for (renderer, _), r in at.items() if renderer == "mitsuba 3" and r.get("efficiency")]
+        independent = at.get(("mitsuba 3", "independent"))
+        if not ours or not ours.get("efficiency") or not mitsuba or not independent:
+            continue
+        top = max(mitsuba, key=lambda r: r["efficiency"])
+        vs_best = ours["efficiency"] / top["efficiency"]
+        vs_ind = ours["efficiency"] / independent["efficiency"]
+        per_rep = []
+        for rep in sorted({r.get("rep") for r in rows}):
+            a = [r for r in rows if r.get("rep") == rep and r["spp"] == spp and r.get("efficiency")]
+            o = [r for r in a if (r["renderer"], r["sampler"]) == ("lightprobe", default)]
+            i = [r for r in a if (r["renderer"], r["sampler"]) == ("mitsuba 3", "independent")]
+            if o and i:
+                per_rep.append(o[0]["efficiency"] / i[0]["efficiency"])
+        spread = f" (repetitions: {min(per_rep):.2f}-{max(per_rep):.2f}x)" if len(per_rep) > 1 else ""
+        lines.append(
+            f"{spp} spp: lightprobe {default} = {vs_best:.2f}x Mitsuba's best ({top['sampler']}): target >= "
+            f"{TARGET_VS_BEST:g}x {'met' if vs_best >= TARGET_VS_BEST else 'NOT met'}; = {vs_ind:.2f}x Mitsuba "
+            f"independent{spread}: target >= {TARGET_VS_INDEPENDENT:g}x "
+            f"{'met' if vs_ind >= TARGET_VS_INDEPENDENT else 'NOT met'}"
+        )
+    return "\n".join(lines)
 
 
 def _table(rows: list[dict]) -> str:
