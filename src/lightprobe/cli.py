@@ -28,6 +28,26 @@ envmap_app = typer.Typer(no_args_is_help=True, help="Inspect and convert environ
 app.add_typer(experiment_app, name="experiment")
 app.add_typer(envmap_app, name="envmap")
 
+# options shared by the experiment commands (one declaration, one help text)
+SeedOption = Annotated[int, typer.Option(help="Random seed.")]
+JsonOption = Annotated[bool, typer.Option("--json", help="Print JSON rows instead of a table.")]
+CellSppOption = Annotated[int, typer.Option(help="Samples per pixel of each strategy.")]
+CellReferenceSppOption = Annotated[int, typer.Option(help="Samples per pixel of each cell's MIS reference.")]
+CellWidthOption = Annotated[int, typer.Option(help="Image width (height 3/4 of it).")]
+CellDaskOption = Annotated[bool, typer.Option("--dask", help="Run the cells as tasks on a Dask LocalCluster.")]
+CellSchedulerOption = Annotated[str | None, typer.Option(help="Run the cells on this Dask scheduler.")]
+WorkersOption = Annotated[int, typer.Option(help="Worker processes of the --dask LocalCluster.")]
+
+
+def _check_sizes(spp: int, reference_spp: int, width: int) -> None:
+    if spp < 1 or reference_spp < 1 or width < 4:
+        raise LightprobeError("--spp and --reference-spp must be >= 1 and --width >= 4")
+
+
+def _dask_backend(dask: bool, scheduler: str | None) -> str | None:
+    """Where Dask work goes: a scheduler's address, "local" for a LocalCluster of our own, or None (in-process)."""
+    return scheduler or ("local" if dask else None)
+
 
 def _split(text: str) -> list[str]:
     return [t.strip() for t in text.split(",") if t.strip()]
@@ -170,7 +190,7 @@ def reference_command(
     scheduler: Annotated[
         str | None, typer.Option(help="Render the chunks on this Dask scheduler (tcp://host:8786).")
     ] = None,
-    workers: Annotated[int, typer.Option(help="Worker processes of the --dask LocalCluster.")] = 2,
+    workers: WorkersOption = 2,
 ) -> None:
     """Render a high-sample reference in checkpointed chunks.  Run the same command again to resume after Ctrl-C,
     a crash or a time limit (bit for bit the same image as an uninterrupted run), or with a larger --spp to extend."""
@@ -193,7 +213,7 @@ def reference_command(
 
     if workers < 1:
         raise LightprobeError(f"--workers must be >= 1, got {workers}")
-    backend = scheduler or ("local" if dask else None)
+    backend = _dask_backend(dask, scheduler)
     result = render_reference(
         scene,
         settings,
@@ -484,7 +504,7 @@ def experiment_shading_point(
     ] = "constant,overcast,sunrise,studio",
     exponents: Annotated[str, typer.Option(help="Comma-separated Phong exponents.")] = "1,10,100,1000,10000",
     samples: Annotated[int, typer.Option(help="Directions per estimator.")] = 200_000,
-    seed: Annotated[int, typer.Option(help="Random seed.")] = 1,
+    seed: SeedOption = 1,
     output: Annotated[Path | None, typer.Option("--output", "-o", help="Also write the table (Markdown).")] = None,
 ) -> None:
     """Variance of every estimator at one shading point, at equal numbers of directions (the seed's MIS claim)."""
@@ -565,21 +585,20 @@ def experiment_krivanek_mis(
         "sunrise,studio,overcast,city"
     ),
     exponents: Annotated[str, typer.Option(help="Comma-separated Phong exponents.")] = "1,10,100,1000",
-    spp: Annotated[int, typer.Option(help="Samples per pixel of each strategy.")] = 64,
-    reference_spp: Annotated[int, typer.Option(help="Samples per pixel of each cell's MIS reference.")] = 1024,
-    width: Annotated[int, typer.Option(help="Image width (height 3/4 of it).")] = 96,
-    seed: Annotated[int, typer.Option(help="Random seed.")] = 1,
-    as_json: Annotated[bool, typer.Option("--json", help="Print JSON rows instead of a table.")] = False,
+    spp: CellSppOption = 64,
+    reference_spp: CellReferenceSppOption = 1024,
+    width: CellWidthOption = 96,
+    seed: SeedOption = 1,
+    as_json: JsonOption = False,
     output: Annotated[Path, typer.Option("--output", "-o", help="Folder for the reports.")] = Path("krivanek-mis"),
-    dask: Annotated[bool, typer.Option("--dask", help="Run the cells as tasks on a Dask LocalCluster.")] = False,
-    scheduler: Annotated[str | None, typer.Option(help="Run the cells on this Dask scheduler.")] = None,
-    workers: Annotated[int, typer.Option(help="Worker processes of the --dask LocalCluster.")] = 2,
+    dask: CellDaskOption = False,
+    scheduler: CellSchedulerOption = None,
+    workers: WorkersOption = 2,
 ) -> None:
     """BRDF vs environment sampling vs MIS on a rendered Phong sphere, per map and exponent (the seed's claim)."""
     from .experiments.seeds import krivanek_mis
 
-    if spp < 1 or reference_spp < 1 or width < 4:
-        raise LightprobeError("--spp and --reference-spp must be >= 1 and --width >= 4")
+    _check_sizes(spp, reference_spp, width)
     rows = krivanek_mis(
         _maps_or_procedural(maps),
         _floats(exponents, "--exponents"),
@@ -589,7 +608,7 @@ def experiment_krivanek_mis(
         width=width,
         seed=seed,
         progress=_echo_err,
-        dask=scheduler or ("local" if dask else None),
+        dask=_dask_backend(dask, scheduler),
         workers=workers,
     )
     _seed_experiment("krivanek-mis", rows, as_json, output)
@@ -600,23 +619,22 @@ def experiment_pbrt_envmap_vs_cosine(
     maps: Annotated[str, typer.Option(help="Comma-separated map names or files [sky-sun,sky without data].")] = (
         "sunrise,overcast,sky-sun,sky"
     ),
-    spp: Annotated[int, typer.Option(help="Samples per pixel of each strategy.")] = 64,
-    reference_spp: Annotated[int, typer.Option(help="Samples per pixel of each cell's MIS reference.")] = 1024,
-    width: Annotated[int, typer.Option(help="Image width (height 3/4 of it).")] = 96,
-    seed: Annotated[int, typer.Option(help="Random seed.")] = 1,
-    as_json: Annotated[bool, typer.Option("--json", help="Print JSON rows instead of a table.")] = False,
+    spp: CellSppOption = 64,
+    reference_spp: CellReferenceSppOption = 1024,
+    width: CellWidthOption = 96,
+    seed: SeedOption = 1,
+    as_json: JsonOption = False,
     output: Annotated[Path, typer.Option("--output", "-o", help="Folder for the reports.")] = Path(
         "pbrt-envmap-vs-cosine"
     ),
-    dask: Annotated[bool, typer.Option("--dask", help="Run the cells as tasks on a Dask LocalCluster.")] = False,
-    scheduler: Annotated[str | None, typer.Option(help="Run the cells on this Dask scheduler.")] = None,
-    workers: Annotated[int, typer.Option(help="Worker processes of the --dask LocalCluster.")] = 2,
+    dask: CellDaskOption = False,
+    scheduler: CellSchedulerOption = None,
+    workers: WorkersOption = 2,
 ) -> None:
     """Cosine-weighted vs environment importance sampling of a diffuse scene under spiky and soft maps (pbrt)."""
     from .experiments.seeds import pbrt_envmap_vs_cosine, reduction_factors
 
-    if spp < 1 or reference_spp < 1 or width < 4:
-        raise LightprobeError("--spp and --reference-spp must be >= 1 and --width >= 4")
+    _check_sizes(spp, reference_spp, width)
     rows = pbrt_envmap_vs_cosine(
         _maps_or_procedural(maps),
         output,
@@ -625,7 +643,7 @@ def experiment_pbrt_envmap_vs_cosine(
         width=width,
         seed=seed,
         progress=_echo_err,
-        dask=scheduler or ("local" if dask else None),
+        dask=_dask_backend(dask, scheduler),
         workers=workers,
     )
     factors = ", ".join(f"{m} {f:.3g}x" for m, f in reduction_factors(rows).items())
@@ -654,8 +672,8 @@ def experiment_lecture_area_sampling(
     spp: Annotated[int, typer.Option(help="Camera samples per pixel.")] = 4,
     reference_spp: Annotated[int, typer.Option(help="Samples per pixel of the MIS reference.")] = 1024,
     width: Annotated[int, typer.Option(help="Image width (height 3/4 of it).")] = 320,
-    seed: Annotated[int, typer.Option(help="Random seed.")] = 1,
-    as_json: Annotated[bool, typer.Option("--json", help="Print JSON rows instead of a table.")] = False,
+    seed: SeedOption = 1,
+    as_json: JsonOption = False,
     output: Annotated[Path, typer.Option("--output", "-o", help="Folder for the images.")] = Path(
         "lecture-area-sampling"
     ),
@@ -663,8 +681,7 @@ def experiment_lecture_area_sampling(
     """Hemisphere vs area vs solid-angle sampling of a rectangular light, 1 and 16 shadow rays (the lecture)."""
     from .experiments.lecture import area_sampling
 
-    if spp < 1 or reference_spp < 1 or width < 4:
-        raise LightprobeError("--spp and --reference-spp must be >= 1 and --width >= 4")
+    _check_sizes(spp, reference_spp, width)
     options = {"spp": spp, "reference_spp": reference_spp, "seed": seed, "resolution": (width, max(1, width * 3 // 4))}
     _lecture_experiment("lecture-area-sampling", area_sampling, as_json, output, options)
 
@@ -676,8 +693,8 @@ def experiment_lecture_many_lights(
     spp: Annotated[int, typer.Option(help="Camera samples per pixel.")] = 1,
     reference_spp: Annotated[int, typer.Option(help="Samples per pixel of the MIS reference.")] = 256,
     width: Annotated[int, typer.Option(help="Image width (height 2/3 of it).")] = 320,
-    seed: Annotated[int, typer.Option(help="Random seed.")] = 1,
-    as_json: Annotated[bool, typer.Option("--json", help="Print JSON rows instead of a table.")] = False,
+    seed: SeedOption = 1,
+    as_json: JsonOption = False,
     output: Annotated[Path, typer.Option("--output", "-o", help="Folder for the images.")] = Path(
         "lecture-many-lights"
     ),
