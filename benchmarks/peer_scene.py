@@ -133,7 +133,7 @@ def run_one(args) -> dict:
         "bsdf_samples": args.bsdf_samples,
         "env_samples": args.env_samples,
         "env_candidates": args.env_candidates,
-        "env_pdf": [args.pdf or "exact", args.pdf_weights or "bilinear", scene.environment.pdf_resolution],
+        "env_pdf": [scene.environment.pdf_mode, scene.environment.pdf_weights, scene.environment.pdf_resolution],
         "seconds": round(stats["seconds"], 4),
         "samples_per_s": round(stats["samples_per_s"]),
         "rays_per_s": round(stats["rays_per_s"]),
@@ -182,9 +182,11 @@ def main(argv=None) -> int:
     parser.add_argument("--reference", help="EXR to compute relMSE against")
     parser.add_argument("--out", help="write the render here")
     parser.add_argument("--profile", action="store_true", help="add seconds per kernel (warm-up excluded)")
-    parser.add_argument("--pdf", choices=["exact", "pbrt"], help="the environment PDF [exact]")
-    parser.add_argument("--pdf-weights", choices=["bilinear", "texel", "blur"], help="[bilinear]")
-    parser.add_argument("--pdf-resolution", type=int, help="PDF grid / map resolution [2 up to 2K maps]")
+    parser.add_argument("--pdf", choices=["exact", "pbrt", "bilinear"], help="the environment PDF [bilinear]")
+    parser.add_argument("--pdf-weights", choices=["bilinear", "texel", "blur"], help="exact/pbrt PDFs [bilinear]")
+    parser.add_argument(
+        "--pdf-resolution", type=int, help="exact/pbrt PDFs: PDF grid / map resolution [2 up to 2K maps]"
+    )
     parser.add_argument("--mesh", help="a mesh file to put in the blob's place (e.g. the 871k-triangle dragon)")
     args = parser.parse_args(argv)
 

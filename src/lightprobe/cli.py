@@ -762,7 +762,7 @@ def envmap_convert(
 def envmap_pdf(
     file: Annotated[Path, typer.Argument(help="Environment map.")],
     output: Annotated[Path, typer.Option("--output", "-o", help="PNG to write.")] = Path("envmap_pdf.png"),
-    pdf: Annotated[str, typer.Option(help="exact or pbrt.")] = "exact",
+    pdf: Annotated[str | None, typer.Option(help="bilinear, exact or pbrt [bilinear for bilinear lookups].")] = None,
     compensated: Annotated[bool, typer.Option(help="Show the MIS-compensated PDF.")] = False,
     mapping: Annotated[str, typer.Option(help="latlong or angular.")] = "latlong",
 ) -> None:

@@ -70,12 +70,12 @@ def test_distributions_match_a_direct_construction(weights, f, pdf):
 
 
 def test_constant_map_compensation_samples_like_the_plain_distribution():
-    env = EnvironmentMap.from_array(np.ones((8, 16, 3), np.float32))
+    env = EnvironmentMap.from_array(np.ones((8, 16, 3), np.float32), pdf="exact")
     for name in ("conditional_cdf", "marginal_cdf"):
         plain, compensated = getattr(env.distribution, name), getattr(env.compensated_distribution, name)
         np.testing.assert_allclose(compensated, plain, rtol=1e-9, atol=1e-12)
 
 
 def test_default_pdf_resolution_refines_small_maps_only():
-    assert EnvironmentMap.from_array(np.ones((8, 16, 3), np.float32)).pdf_resolution == 2
-    assert EnvironmentMap.from_array(np.ones((1025, 2050, 3), np.float32)).pdf_resolution == 1
+    assert EnvironmentMap.from_array(np.ones((8, 16, 3), np.float32), pdf="exact").pdf_resolution == 2
+    assert EnvironmentMap.from_array(np.ones((1025, 2050, 3), np.float32), pdf="pbrt").pdf_resolution == 1

@@ -73,9 +73,10 @@ def test_a_mesh_casts_the_closed_form_shadow(strategy):
     assert abs(mean - expected) < 4 * standard_error + 2e-4, (mean, standard_error)
 
 
-def small_scene(resolution=(32, 24)):
+def small_scene(resolution=(32, 24), **env_options):
     """A sky with a wide sun (so even uniform sampling converges), a mesh, spheres and the ground."""
-    env = EnvironmentMap.from_array(sky_with_sun(256, 128, sun_diameter_deg=12.0, sun_radiance=(40.0, 36.0, 30.0)))
+    sky = sky_with_sun(256, 128, sun_diameter_deg=12.0, sun_radiance=(40.0, 36.0, 30.0))
+    env = EnvironmentMap.from_array(sky, **env_options)
     scene = Scene(Camera([0, 1.6, 4.5], [0, 0.5, 0], fov=40, resolution=resolution), env)
     scene.add(Rectangle.ground(size=30), Lambert(0.5))
     scene.add(blob_mesh(2), RoughPlastic([0.6, 0.2, 0.1], 0.3), transform={"scale": 0.5, "translate": [0, 0.6, 0]})

@@ -385,8 +385,13 @@ def check_envmap_sampling(
 
     ``cells = (rows, columns)`` either groups whole grid cells or splits each evenly (the default splits small
     grids into at least 32 x 64 cells, which tests the placement of samples *inside* a cell, and groups large
-    grids into at most 128 x 256).  Aligned cells make the quadrature of a piecewise-constant pdf exact.
+    grids into at most 128 x 256).  Aligned cells make the quadrature of a piecewise-constant pdf exact.  A
+    ``pdf='bilinear'`` map is tested on its own pieces instead (``cells`` does not apply).
     """
+    if getattr(env, "pdf_mode", None) == "bilinear":
+        if cells is not None:
+            raise ValueError("cells applies to piecewise-constant PDFs; a bilinear one is tested on its pieces")
+        return _check_bilinear_envmap(env, n, seed, compensated, kwargs)
     width, height = env.pdf_grid  # the cells of the piecewise-constant pdf (finer than the image)
     if cells is None:
         rows = height * max(1, 32 // height) if height < 32 else min(height, 128)
@@ -407,5 +412,32 @@ def check_envmap_sampling(
         theta_edges=theta,
         phi_edges=phi,
         subdivisions=max(1, height // rows),
+        **kwargs,
+    )
+
+
+def _split_edges(edges: np.ndarray, parts: int) -> np.ndarray:
+    """Each interval of ``edges`` split into ``parts`` equal ones."""
+    t = np.arange(parts) / parts
+    inner = edges[:-1, None] + (edges[1:] - edges[:-1])[:, None] * t[None, :]
+    return np.append(inner.reshape(-1), edges[-1])
+
+
+def _check_bilinear_envmap(env, n, seed, compensated, kwargs) -> ChiSquareResult:
+    """The bilinear density's cells: its pieces (``env.pdf_pieces()``, where pdf x sin(theta) is bilinear, so
+    2-point Gauss rules are exact), each split evenly until there are at least 32 x 64 cells."""
+    theta, phi = env.pdf_pieces()
+    theta = _split_edges(theta, max(1, -(-32 // (theta.size - 1))))
+    phi = _split_edges(phi, max(1, -(-64 // (phi.size - 1))))
+    u = np.random.default_rng(seed).random((n, 2))
+    dirs, _ = env.sample(u, compensated=compensated)
+    kwargs.setdefault("order", 2)
+    kwargs.setdefault("max_depth", 0)
+    return spherical_test(
+        dirs,
+        lambda v: env.pdf(v, compensated=compensated),
+        frame=ENV_TO_LATLONG_ANGLES @ env.to_world.T,
+        theta_edges=theta,
+        phi_edges=phi,
         **kwargs,
     )

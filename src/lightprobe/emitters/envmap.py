@@ -14,12 +14,16 @@ lookup : {"bilinear", "nearest"}
     Radiance reconstruction.  ``bilinear`` follows Mitsuba 3 exactly (columns at u = (i + 0.5)/W, rows at
     v = j/(H - 1)); ``nearest`` returns the texel that contains the direction, the piecewise-constant function that
     the sampling PDF is exactly proportional to.
-pdf : {"exact", "pbrt"}
-    ``exact`` (Krivanek, default): texel probability = luminance x the texel's solid angle
-    dphi (cos theta0 - cos theta1), and the direction is uniform *on the sphere* inside the texel (phi uniform,
-    cos theta uniform), so p(w) = luminance(texel) / integral of luminance: exactly proportional, no pixel-centre
-    or half-texel bias.  ``pbrt``: texel probability = luminance x sin(theta at the row centre), (u, v) uniform
-    inside the texel, and p(w) = p(u, v) W H / (2 pi^2 sin theta) with the direction's own theta.
+pdf : {"bilinear", "exact", "pbrt"}
+    ``bilinear`` (default with bilinear lookups, unless ``pdf_weights`` or ``pdf_resolution`` is given): the
+    density is the lookup's own bilinear luminance, weighted by sin(theta) at the nodes, as Mitsuba 3 samples its
+    maps (:mod:`lightprobe.emitters.envmap_bilinear`); L / p is then nearly constant even across a bilinearly spread
+    sun (peer scene: 1.18x lower error than ``exact`` at equal samples).  ``pdf_weights`` and ``pdf_resolution``
+    do not apply to it.  ``exact`` (Krivanek, default otherwise): texel probability = luminance x the texel's solid
+    angle dphi (cos theta0 - cos theta1), and the direction is uniform *on the sphere* inside the texel (phi
+    uniform, cos theta uniform), so p(w) = luminance(texel) / integral of luminance: exactly proportional, no
+    pixel-centre or half-texel bias.  ``pbrt``: texel probability = luminance x sin(theta at the row centre),
+    (u, v) uniform inside the texel, and p(w) = p(u, v) W H / (2 pi^2 sin theta) with the direction's own theta.
 pdf_weights : {"bilinear", "texel", "blur"}
     The luminance the PDF is built from, per texel.  ``texel``: the texel's own luminance (the function the
     ``exact`` PDF is exactly proportional to with ``nearest`` lookups).  ``bilinear``: the mean over the texel of
@@ -54,16 +58,17 @@ from ..errors import ImageError, ParameterError, warn_once
 from ..sampling.distributions import invert_2d, pdf_2d, sample_2d
 from ..sampling.kernels import TWO_PI
 from . import mappings
-from .envmap_pdf import build_distributions, luminance_f32
+from .envmap_bilinear import bilinear_invert, bilinear_pdf, bilinear_sample, build_bilinear
+from .envmap_pdf import build_distributions, fresh_table, luminance_f32
 from .mappings import bilinear_latlong, direction_to_latlong, nearest_latlong
 
 __all__ = ["EnvKernel", "EnvironmentMap"]
 
 LOOKUPS = {"nearest": 0, "bilinear": 1}
-PDF_MODES = {"exact": 0, "pbrt": 1}
+PDF_MODES = {"exact": 0, "pbrt": 1, "bilinear": 2}
 _REFINE_UP_TO = 2048 * 1024  # texels: maps up to 2K get a PDF grid 2x finer in each dimension
 PDF_WEIGHTS = ("bilinear", "texel", "blur")
-EXACT, PBRT = 0, 1
+EXACT, PBRT, BILINEAR_PDF = 0, 1, 2
 NEAREST, BILINEAR = 0, 1
 
 
@@ -80,6 +85,11 @@ class EnvKernel(NamedTuple):
     conditional_cdf: np.ndarray  # (rows, columns + 1)
     comp_marginal_cdf: np.ndarray
     comp_conditional_cdf: np.ndarray
+    # pdf="bilinear" (emitters/envmap_bilinear.py): the two densities' running sums sit in the *_cdf fields above
+    # (marginal (NY,), rows (NY, W + 1)); node weights come from this luminance
+    luminance: np.ndarray  # (H, W) float32, unscaled
+    node_sines: np.ndarray  # (NY,)
+    comp_offset: float  # luminance subtracted by the compensated density
 
 
 # --- kernels ------------------------------------------------------------------------------------------------------
@@ -115,6 +125,18 @@ def _cdfs(k, compensated):
 
 
 @jit_inline
+def _offset(k, compensated):
+    return k.comp_offset if compensated else 0.0
+
+
+@jit_inline
+def _bilinear_x(k, u):
+    """The bilinear density's coordinate u' = u - 0.5 / W (wrapped) of lat-long u."""
+    x = u - 0.5 / k.luminance.shape[1]
+    return x + 1.0 if x < 0.0 else x
+
+
+@jit_inline
 def _cell_pdf(k, joint_density, row, sin_theta):
     """Solid-angle density from the unit-square density of a PDF cell (eqs. in the module docstring)."""
     h = k.marginal_cdf.shape[0] - 1
@@ -130,6 +152,18 @@ def env_sample_full(k, compensated, u0, u1):
     """Sample a world direction: (x, y, z, pdf, u, y_cell, cos_theta), the last three being what
     :func:`env_radiance_at_sample` needs to look the radiance up without converting the direction back."""
     mc, cc = _cdfs(k, compensated)
+    if k.mode == BILINEAR_PDF:
+        x, y, p = bilinear_sample(k.luminance, k.node_sines, _offset(k, compensated), cc, mc, u0, u1)
+        u = x + 0.5 / k.luminance.shape[1]  # node i sits at the lookup's column centre u = (i + 0.5) / W
+        if u >= 1.0:
+            u -= 1.0
+        cos_theta = math.cos(math.pi * y)
+        sin_theta = math.sqrt(max(0.0, (1.0 - cos_theta) * (1.0 + cos_theta)))  # as _pdf_at computes it
+        phi = TWO_PI * u
+        ex, ey, ez = math.sin(phi) * sin_theta, cos_theta, -math.cos(phi) * sin_theta
+        wx, wy, wz = _mat_vec(k.to_world, ex, ey, ez)
+        pdf = p / (2.0 * math.pi * math.pi * sin_theta) if sin_theta > 0.0 else 0.0
+        return wx, wy, wz, pdf, u, y, cos_theta
     x, y, p, _, row = sample_2d(mc, cc, u0, u1)
     h = mc.shape[0] - 1
     if k.mode == EXACT:
@@ -162,6 +196,12 @@ def env_radiance_at_sample(k, u, y, cos_theta):
 @jit_inline
 def _pdf_at(k, compensated, u, v, ey):
     mc, cc = _cdfs(k, compensated)
+    if k.mode == BILINEAR_PDF:
+        sin_theta = math.sqrt(max(0.0, (1.0 - ey) * (1.0 + ey)))
+        if sin_theta <= 0.0:
+            return 0.0
+        p = bilinear_pdf(k.luminance, k.node_sines, _offset(k, compensated), mc, _bilinear_x(k, u), v)
+        return p / (2.0 * math.pi * math.pi * sin_theta)
     h = mc.shape[0] - 1
     row = min(int(v * h), h - 1)
     p = pdf_2d(mc, cc, u, (row + 0.5) / h)
@@ -200,7 +240,7 @@ def env_pdf_at(k, compensated, u, v, cos_theta):
 @jit_inline
 def env_sample_coords(k, y, cos_theta):
     """Lat-long v of a sample from :func:`env_sample_full` (y and cos theta as it returned them)."""
-    return y if k.mode == PBRT else math.acos(min(1.0, max(-1.0, cos_theta))) / math.pi
+    return y if k.mode != EXACT else math.acos(min(1.0, max(-1.0, cos_theta))) / math.pi
 
 
 @jit_inline
@@ -217,6 +257,8 @@ def env_to_square(k, compensated, x, y, z):
     ex, ey, ez = _mat_vec(k.to_env, x, y, z)
     u, v = direction_to_latlong(ex, ey, ez)
     mc, cc = _cdfs(k, compensated)
+    if k.mode == BILINEAR_PDF:
+        return bilinear_invert(k.luminance, k.node_sines, _offset(k, compensated), cc, mc, _bilinear_x(k, u), v)
     h = mc.shape[0] - 1
     if k.mode == EXACT:
         row = min(int(v * h), h - 1)
@@ -346,7 +388,7 @@ class EnvironmentMap:
         scale: float = 1.0,
         rotation=None,
         lookup: str = "bilinear",
-        pdf: str = "exact",
+        pdf: str | None = None,
         pdf_weights: str | None = None,
         pdf_resolution: int | None = None,
         source: str = "<array>",
@@ -354,6 +396,9 @@ class EnvironmentMap:
     ):
         if lookup not in LOOKUPS:
             raise ParameterError(f"lookup must be one of {sorted(LOOKUPS)}, got {lookup!r}")
+        if pdf is None:  # the density that follows the lookup, unless a piecewise-constant PDF's option is given
+            piecewise = lookup == "nearest" or pdf_weights is not None or pdf_resolution is not None
+            pdf = "exact" if piecewise else "bilinear"
         if pdf not in PDF_MODES:
             raise ParameterError(f"pdf must be one of {sorted(PDF_MODES)}, got {pdf!r}")
         scale = float(scale)
@@ -365,11 +410,6 @@ class EnvironmentMap:
         self.scale = scale
         self.lookup = lookup
         self.pdf_mode = pdf
-        if pdf_weights is None:
-            pdf_weights = "bilinear" if lookup == "bilinear" else "texel"
-        if pdf_weights not in PDF_WEIGHTS:
-            raise ParameterError(f"pdf_weights must be one of {list(PDF_WEIGHTS)}, got {pdf_weights!r}")
-        self.pdf_weights = pdf_weights
         self.radiance = image  # unscaled, as read
         self.to_world = _rotation_matrix(rotation)
 
@@ -381,6 +421,49 @@ class EnvironmentMap:
         self.texel_solid_angle = _row_solid_angles(h, w)
         self.mean_luminance = float(lum.sum(axis=1, dtype=np.float64) @ self.texel_solid_angle) / (4.0 * math.pi)
 
+        if pdf == "bilinear":
+            if pdf_weights is not None or pdf_resolution is not None:
+                raise ParameterError(
+                    "pdf_weights and pdf_resolution shape the piecewise-constant PDFs (pdf='exact' or 'pbrt'); "
+                    "pdf='bilinear' is the map's own bilinear luminance"
+                )
+            self.pdf_weights = None
+            self.pdf_resolution = 1
+            self.cos_edges = _cos_edges(h)
+            sines, self.distribution, self.compensated_distribution = build_bilinear(
+                lum, self.mean_luminance, fresh_table
+            )
+            tables = (
+                self.distribution.marginal,
+                self.distribution.row_sums,
+                self.compensated_distribution.marginal,
+                self.compensated_distribution.row_sums,
+            )
+            comp_offset = self.compensated_distribution.offset
+        else:
+            self._build_piecewise_constant(lum, pdf_weights, pdf_resolution)
+            tables = (*self.distribution.kernel_arrays(), *self.compensated_distribution.kernel_arrays())
+            sines, comp_offset = np.zeros(2), 0.0
+        self._kernel = EnvKernel(
+            image if scale == 1.0 else image * np.float32(scale),  # no copy of a large map when unscaled
+            np.ascontiguousarray(self.to_world.T),
+            np.ascontiguousarray(self.to_world),
+            LOOKUPS[lookup],
+            PDF_MODES[pdf],
+            self.cos_edges,
+            *tables,
+            lum,
+            sines,
+            float(comp_offset),
+        )
+
+    def _build_piecewise_constant(self, lum, pdf_weights, pdf_resolution):
+        h, w = lum.shape
+        if pdf_weights is None:
+            pdf_weights = "bilinear" if self.lookup == "bilinear" else "texel"
+        if pdf_weights not in PDF_WEIGHTS:
+            raise ParameterError(f"pdf_weights must be one of {list(PDF_WEIGHTS)}, got {pdf_weights!r}")
+        self.pdf_weights = pdf_weights
         if pdf_resolution is None:  # finer cells follow a bilinear sun more closely; large maps need no refining
             pdf_resolution = 2 if h * w <= _REFINE_UP_TO else 1
         f = pdf_resolution
@@ -392,16 +475,6 @@ class EnvironmentMap:
         self.cos_edges = _cos_edges(h * f)
         self.distribution, self.compensated_distribution = build_distributions(
             lum, f, pdf_weights, self._row_factor(h * f), cell_solid_angle
-        )
-        self._kernel = EnvKernel(
-            image if scale == 1.0 else image * np.float32(scale),  # no copy of a large map when unscaled
-            np.ascontiguousarray(self.to_world.T),
-            np.ascontiguousarray(self.to_world),
-            LOOKUPS[lookup],
-            PDF_MODES[pdf],
-            self.cos_edges,
-            *self.distribution.kernel_arrays(),
-            *self.compensated_distribution.kernel_arrays(),
         )
 
     def _row_factor(self, rows: int) -> np.ndarray:
@@ -498,7 +571,16 @@ class EnvironmentMap:
 
     def pdf_image(self, *, compensated: bool = False) -> np.ndarray:
         """Sampling density per steradian on the PDF grid (``pdf_resolution`` x the image in each dimension;
-        at the row centre for ``pdf='pbrt'``)."""
+        at the row centre for ``pdf='pbrt'``; at the texel centres for ``pdf='bilinear'``)."""
+        if self.pdf_mode == "bilinear":
+            h, w = self.luminance.shape
+            v = (np.arange(h) + 0.5) / h
+            u = (np.arange(w) + 0.5) / w
+            theta, phi = np.pi * v[:, None], 2 * np.pi * u[None, :]
+            local = np.stack(
+                np.broadcast_arrays(np.sin(phi) * np.sin(theta), np.cos(theta), -np.cos(phi) * np.sin(theta)), -1
+            )
+            return self.pdf(local.reshape(-1, 3) @ self.to_world.T, compensated=compensated).reshape(h, w)
         dist = self.compensated_distribution if compensated else self.distribution
         joint = dist.marginal_density[:, None] * dist.conditional_density
         h = joint.shape[0]
@@ -508,8 +590,24 @@ class EnvironmentMap:
 
     @property
     def pdf_grid(self) -> tuple[int, int]:
-        """(columns, rows) of the piecewise-constant sampling PDF."""
+        """(columns, rows) of the PDF's pieces: cells of the piecewise-constant PDFs, intervals between the nodes
+        of the bilinear one (see :meth:`pdf_pieces`)."""
+        if self.pdf_mode == "bilinear":
+            return self.luminance.shape[1], self.distribution.row_sums.shape[0] - 1
         return self.distribution.shape[1], self.distribution.shape[0]
+
+    def pdf_pieces(self) -> tuple[np.ndarray, np.ndarray]:
+        """(theta edges, phi edges) in radians, environment frame, of the pieces on which pdf x sin(theta) is a
+        polynomial of degree <= 1 in each angle (constant for ``exact``/``pbrt`` cells up to the Jacobian,
+        bilinear between ``bilinear``'s nodes, whose columns sit at the texel centres): quadrature on these
+        pieces is exact."""
+        columns, rows = self.pdf_grid
+        theta = np.linspace(0.0, np.pi, rows + 1)
+        if self.pdf_mode == "bilinear":
+            phi = 2 * np.pi * np.concatenate([[0.0], (np.arange(columns) + 0.5) / columns, [1.0]])
+        else:
+            phi = np.linspace(0.0, 2 * np.pi, columns + 1)
+        return theta, phi
 
     def to_array(self, *, mapping: str = "latlong", size: int | None = None) -> np.ndarray:
         """The radiance image (scale applied, rotation not) as lat-long, or resampled to an angular map."""

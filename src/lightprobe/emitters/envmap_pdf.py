@@ -27,7 +27,7 @@ from ..color import LUMINANCE_WEIGHTS
 from ..sampling.distributions import PiecewiseConstant2D
 from .mappings import bilinear_latlong_weights
 
-__all__ = ["WEIGHT_MODES", "build_distributions", "luminance_f32"]
+__all__ = ["WEIGHT_MODES", "build_distributions", "fresh_table", "luminance_f32"]
 
 #: how a PDF cell's weight is computed from the luminance (see the ``pdf_weights`` option of EnvironmentMap)
 WEIGHT_MODES = {"bilinear": 0, "texel": 1, "blur": 2}
@@ -43,7 +43,7 @@ def _luminance(image, weights, out):
 
 def luminance_f32(image: np.ndarray) -> np.ndarray:
     """Luminance (H, W) float32 of a float32 RGB image, without float64 temporaries."""
-    out = _fresh(image.shape[:2], np.float32)
+    out = fresh_table(image.shape[:2], np.float32)
     _luminance(image, LUMINANCE_WEIGHTS, out)
     return out
 
@@ -149,7 +149,7 @@ def _conditional_cdfs(weights, row_factor, mean, cdf, comp_cdf, integral, comp_i
             comp_cdf[r, c + 1] = run_c / sc if sc > 0.0 else (c + 1) / n
 
 
-def _fresh(shape: tuple[int, int], dtype) -> np.ndarray:
+def fresh_table(shape: tuple[int, int], dtype) -> np.ndarray:
     """An uninitialised array in its own anonymous memory map.  NumPy asks the kernel for transparent huge pages
     on large arrays; with the common ``defrag = madvise`` setting the first touch of each then waits for memory
     compaction (measured on the 2-core VM: 0.8 s to first-touch a 268 MB table, 0.13 s mapped like this)."""
@@ -173,12 +173,12 @@ def build_distributions(
     k = max(1, 4 // f)
     vi, vw = _hat_taps(rows, h, k, "v")
     ui, uw = _hat_taps(cols, w, k, "u")
-    weights = _fresh((rows, cols), np.float32)
+    weights = fresh_table((rows, cols), np.float32)
     row_sums = np.empty(rows)
     _cell_weights(lum, f, WEIGHT_MODES[mode], vi, vw, ui, uw, _SUPPORT_BLUR, cell_solid_angle, weights, row_sums)
     mean = float(row_sums.sum()) / (4.0 * math.pi)
-    cdf = _fresh((rows, cols + 1), np.float64)
-    comp_cdf = _fresh((rows, cols + 1), np.float64)
+    cdf = fresh_table((rows, cols + 1), np.float64)
+    comp_cdf = fresh_table((rows, cols + 1), np.float64)
     integral = np.empty(rows)
     comp_integral = np.empty(rows)
     _conditional_cdfs(

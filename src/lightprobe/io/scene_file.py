@@ -16,8 +16,8 @@ Example (every key shown; optional ones have their default)::
     scale = 1.0
     rotation = 0.0                      # degrees about +Y
     lookup = "bilinear"                 # or "nearest"
-    pdf = "exact"                       # or "pbrt"
-    pdf_weights = "bilinear"            # or "texel", "blur" (default: bilinear for bilinear lookups)
+    pdf = "bilinear"                    # or "exact", "pbrt" (default: bilinear for bilinear lookups, else exact)
+    pdf_weights = "bilinear"            # exact/pbrt only: or "texel", "blur" (default: bilinear for bilinear lookups)
     # sky = { sun_elevation = 35, sun_azimuth = 45, sun_diameter = 0.5, sun_radiance = [4e4, 3.8e4, 3.4e4],
     #         width = 1024, height = 512 }     # the procedural sky with a sun
     # constant = [1.0, 1.0, 1.0]              # a uniform white furnace
@@ -222,8 +222,9 @@ def _environment(t: _Table, base: Path) -> EnvironmentMap:
         "scale": t.number("scale", 1.0),
         "rotation": t.number("rotation", 0.0),
         "lookup": t.string("lookup", "bilinear"),
-        "pdf": t.string("pdf", "exact"),
     }
+    if "pdf" in t.data:
+        options["pdf"] = t.string("pdf")
     if "pdf_weights" in t.data:
         options["pdf_weights"] = t.string("pdf_weights")
     mapping = t.string("mapping", "latlong")
