@@ -84,7 +84,7 @@ def render_command(
         bool | None,
         typer.Option(
             "--mis-compensation/--no-mis-compensation",
-            help="Sample the MIS-compensated env PDF [on for mis, env map alone].",
+            help="Sample the MIS-compensated env PDF on every material / on none [mis, env map alone: diffuse ones].",
         ),
     ] = None,
     light_sampler: Annotated[

@@ -88,7 +88,9 @@ def test_compensation_removes_the_mean_and_keeps_the_sun():
 
 
 def test_defaults_follow_the_lookup_and_the_piecewise_options():
-    assert EnvironmentMap.from_array(np.ones((4, 8, 3), np.float32)).pdf_mode == "bilinear"
+    env = EnvironmentMap.from_array(np.ones((4, 8, 3), np.float32))
+    assert env.pdf_mode == "bilinear"
+    assert "pdf='bilinear'" in repr(env) and "pdf_resolution" not in repr(env)  # the grid options do not apply
     assert EnvironmentMap.from_array(np.ones((4, 8, 3), np.float32), lookup="nearest").pdf_mode == "exact"
     for option in ({"pdf_resolution": 2}, {"pdf_weights": "blur"}):  # asking for a piecewise-constant PDF's option
         assert EnvironmentMap.from_array(np.ones((4, 8, 3), np.float32), **option).pdf_mode == "exact"

@@ -159,6 +159,6 @@ def test_environment_only_options_are_refused_with_area_lights(option, message):
 def test_compensation_is_on_by_default_for_environment_maps_alone_and_off_with_area_lights():
     from .test_wavefront import small_scene
 
-    assert render(small_scene((4, 4)), RenderSettings(spp=1)).stats["mis_compensation"] is True
+    assert render(small_scene((4, 4)), RenderSettings(spp=1)).stats["mis_compensation"] == "diffuse"
     assert render(small_scene((4, 4)), RenderSettings(spp=1, strategy="env")).stats["mis_compensation"] is False
     assert render(mixed_scene((4, 4), n_panels=3), RenderSettings(spp=1)).stats["mis_compensation"] is False

@@ -85,6 +85,27 @@ def small_scene(resolution=(32, 24), **env_options):
     return scene
 
 
+def test_automatic_compensation_is_per_material():
+    """mis_compensation=None compensates Lambertian materials only (decisions.md 29): a view of a Lambertian ground
+    renders as with compensation everywhere, a view filled by a GGX sphere as without (bit for bit), and each
+    differs from the other choice.  (Unbiasedness: the 4096-spp reference below uses the default, and every
+    strategy's z-test compares against it.)"""
+    sky = EnvironmentMap.from_array(sky_with_sun(256, 128, sun_diameter_deg=12.0, sun_radiance=(40.0, 36.0, 30.0)))
+    ground = Scene(Camera([0, 2.0, 0], [0, 0, -0.5], fov=30, resolution=(6, 4)), sky)
+    ground.add(Rectangle.ground(size=30), Lambert(0.5))
+    sphere = Scene(Camera([0, 0.5, 3], [0, 0.5, 0], fov=10, resolution=(6, 4)), sky)
+    sphere.add(Sphere([0, 0.5, 0], 0.5), GGXConductor(0.3, material="Au"))
+    images = {
+        (name, option): render(scene, RenderSettings(spp=16, seed=3, mis_compensation=option)).image
+        for name, scene in (("ground", ground), ("sphere", sphere))
+        for option in (None, True, False)
+    }
+    np.testing.assert_array_equal(images["ground", None], images["ground", True])
+    assert not np.array_equal(images["ground", None], images["ground", False])
+    np.testing.assert_array_equal(images["sphere", None], images["sphere", False])
+    assert not np.array_equal(images["sphere", None], images["sphere", True])
+
+
 @pytest.fixture(scope="module")
 def reference():
     return render(small_scene(), RenderSettings(spp=4096, strategy="mis", seed=12345))

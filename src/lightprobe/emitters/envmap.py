@@ -644,9 +644,14 @@ class EnvironmentMap:
 
     def __repr__(self) -> str:
         w, h = self.resolution
+        grid = (
+            ""
+            if self.pdf_mode == "bilinear"
+            else f", pdf_weights={self.pdf_weights!r}, pdf_resolution={self.pdf_resolution}"
+        )
         return (
             f"EnvironmentMap({self.source!r}, {w}x{h}, scale={self.scale:g}, lookup={self.lookup!r}, "
-            f"pdf={self.pdf_mode!r}, pdf_weights={self.pdf_weights!r}, pdf_resolution={self.pdf_resolution})"
+            f"pdf={self.pdf_mode!r}{grid})"
         )
 
 

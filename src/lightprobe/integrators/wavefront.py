@@ -37,6 +37,7 @@ import numpy as np
 
 from .._numba import jit_parallel, prange
 from ..bsdfs.dispatch import bsdf_eval, bsdf_pdf
+from ..bsdfs.lambert import LAMBERT
 from ..bsdfs.phong import PHONG
 from ..emitters.area import STRATEGIES as LIGHT_STRATEGIES
 from ..emitters.envmap import env_coords, env_eval, env_lookup, env_pdf_at, env_sample_coords, env_sample_full
@@ -69,6 +70,7 @@ from .techniques import (
 __all__ = ["STRATEGIES", "Accumulator", "RenderResult", "RenderSettings", "kernels_cached", "render", "result_from"]
 
 HEURISTICS = {"balance": 1.0, "power": 2.0}
+DIFFUSE = "diffuse"  # mis_compensation's automatic choice: the compensated PDF on Lambertian materials only
 
 
 @dataclass(frozen=True)
@@ -84,7 +86,7 @@ class RenderSettings:
     first_sample: int = 0  # sample indices first_sample ... first_sample + spp - 1 (split and resumed renders)
     sampler: str = "sobol"
     env_candidates: int = 1  # > 1: resampled environment samples (RIS, Talbot et al. 2005) from this many candidates
-    mis_compensation: bool | None = None  # None: on for MIS in scenes lit by an environment map alone
+    mis_compensation: bool | None = None  # None: on diffuse materials for MIS in scenes lit by an environment map alone
     light_sampler: str = "power"
     lights_per_sample: int = 1
     light_strategy: str = "solid-angle"
@@ -285,13 +287,13 @@ def _shade_setup(
 
 
 @jit_parallel
-def _env_sample_stage(env, compensated, m, frame, state, env_u, wdir, tpdf, uv):
+def _env_sample_stage(env, compensate, m, material, frame, state, env_u, wdir, tpdf, uv):
     """Environment samples: directions, densities and lat-long coordinates; those below the surface are dropped."""
     for r in prange(state.shape[0]):
         if state[r] != SLOT_ENV:
             continue
-        wx, wy, wz, pdf, u, y, cos_theta = env_sample_full(env, compensated, env_u[r, 0], env_u[r, 1])
         k = r // m
+        wx, wy, wz, pdf, u, y, cos_theta = env_sample_full(env, compensate[material[k]], env_u[r, 0], env_u[r, 1])
         if frame[k, 6] * wx + frame[k, 7] * wy + frame[k, 8] * wz <= 0.0 or pdf <= 0.0:
             state[r] = SLOT_NONE
             continue
@@ -305,7 +307,7 @@ def _env_sample_stage(env, compensated, m, frame, state, env_u, wdir, tpdf, uv):
 def _env_resample_stage(
     s,
     env,
-    compensated,
+    compensate,
     m,
     env_candidates,
     sampler,
@@ -349,7 +351,7 @@ def _env_resample_stage(
             else:
                 v = 64 + j * env_candidates + i
                 (u0, u1), uc = uniform_2d(rs, 2 + 3 * v), uniform(rs, 4 + 3 * v)
-            wx, wy, wz, pdf, u, y, cos_theta = env_sample_full(env, compensated, u0, u1)
+            wx, wy, wz, pdf, u, y, cos_theta = env_sample_full(env, compensate[material[k]], u0, u1)
             if pdf <= 0.0:
                 continue
             wi = to_local(ts, tt, ns, wx, wy, wz)
@@ -377,7 +379,7 @@ def _env_resample_stage(
 
 
 @jit_parallel
-def _env_lookup_stage(env, compensated, mis, state, wdir, uv, radiance, epdf):
+def _env_lookup_stage(env, compensate, m, material, mis, state, wdir, uv, radiance, epdf):
     """Radiance for every live slot, and the environment's density for BSDF samples under MIS."""
     for r in prange(state.shape[0]):
         st = state[r]
@@ -389,7 +391,7 @@ def _env_lookup_stage(env, compensated, mis, state, wdir, uv, radiance, epdf):
         u, v, cos_theta = env_coords(env, wdir[r, 0], wdir[r, 1], wdir[r, 2])
         radiance[r, 0], radiance[r, 1], radiance[r, 2] = env_lookup(env, u, v)
         if mis and st == SLOT_BSDF:
-            epdf[r] = env_pdf_at(env, compensated, u, v, cos_theta)
+            epdf[r] = env_pdf_at(env, compensate[material[r // m]], u, v, cos_theta)
 
 
 @jit_parallel
@@ -606,6 +608,15 @@ def _pass_buffers(n: int, m: int) -> dict[str, np.ndarray]:
 PROFILE: dict | None = None
 
 
+def _compensated_materials(kinds: np.ndarray, compensated) -> np.ndarray:
+    """Per material, whether its environment samples (and the MIS weights of its BSDF samples) use the compensated
+    PDF: every material for True, none for False, Lambertian ones for ``DIFFUSE``.  Both techniques at a shading
+    point see the same density, so each point's MIS weights still sum to one (Veach 1997, 9.2)."""
+    if compensated == DIFFUSE:
+        return np.ascontiguousarray(kinds == LAMBERT)
+    return np.full(kinds.shape[0], bool(compensated))
+
+
 def _launch(kernel, values: dict) -> None:
     """Call a kernel with its arguments taken by parameter name from ``values``."""
     code = kernel.py_func.__code__
@@ -660,8 +671,8 @@ def render(
     if area_path and settings.mis_compensation:
         raise ParameterError("mis_compensation applies to scenes lit by an environment map alone")
     compensated = settings.mis_compensation
-    if compensated is None:  # measured to win on the peer scene (decisions.md 21)
-        compensated = settings.strategy == "mis" and not area_path
+    if compensated is None:  # on diffuse materials, where it wins (decisions.md 21 and 29)
+        compensated = DIFFUSE if settings.strategy == "mis" and not area_path else False
     env = (scene.environment or _placeholder_environment()).kernel
     stats = {
         "width": width,
@@ -728,7 +739,7 @@ def render(
         "n_env": settings.n_env,
         "m": m,
         "beta": HEURISTICS[settings.heuristic],
-        "compensated": compensated,
+        "compensate": _compensated_materials(arrays.material_kind, compensated),
         "mis": strategy == MIS,
         **light_constants,
     }
