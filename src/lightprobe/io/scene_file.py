@@ -17,7 +17,7 @@ Example (every key shown; optional ones have their default)::
     rotation = 0.0                      # degrees about +Y
     lookup = "bilinear"                 # or "nearest"
     pdf = "bilinear"                    # or "exact", "pbrt" (default: bilinear for bilinear lookups, else exact)
-    pdf_weights = "bilinear"            # exact/pbrt only: or "texel", "blur" (default: bilinear for bilinear lookups)
+    # pdf_weights = "bilinear"          # with pdf = "exact" or "pbrt" only: or "texel", "blur"
     # sky = { sun_elevation = 35, sun_azimuth = 45, sun_diameter = 0.5, sun_radiance = [4e4, 3.8e4, 3.4e4],
     #         width = 1024, height = 512 }     # the procedural sky with a sun
     # constant = [1.0, 1.0, 1.0]              # a uniform white furnace
