@@ -138,7 +138,8 @@ def _bilinear_x(k, u):
 
 @jit_inline
 def _cell_pdf(k, joint_density, row, sin_theta):
-    """Solid-angle density from the unit-square density of a PDF cell (eqs. in the module docstring)."""
+    """Solid-angle density from a unit-square density (eqs. in the module docstring): per cell for ``exact``,
+    with the lat-long Jacobian 1 / (2 pi^2 sin theta) for ``pbrt`` and ``bilinear``."""
     h = k.marginal_cdf.shape[0] - 1
     if k.mode == EXACT:
         return joint_density / (TWO_PI * h * (k.cos_edges[row] - k.cos_edges[row + 1]))
@@ -154,25 +155,21 @@ def env_sample_full(k, compensated, u0, u1):
     mc, cc = _cdfs(k, compensated)
     if k.mode == BILINEAR_PDF:
         x, y, p = bilinear_sample(k.luminance, k.node_sines, _offset(k, compensated), cc, mc, u0, u1)
-        u = x + 0.5 / k.luminance.shape[1]  # node i sits at the lookup's column centre u = (i + 0.5) / W
-        if u >= 1.0:
-            u -= 1.0
+        x += 0.5 / k.luminance.shape[1]  # node i sits at the lookup's column centre u = (i + 0.5) / W
+        if x >= 1.0:
+            x -= 1.0
+        row = 0  # unused: the density is per (u, v), converted like pbrt's
         cos_theta = math.cos(math.pi * y)
-        sin_theta = math.sqrt(max(0.0, (1.0 - cos_theta) * (1.0 + cos_theta)))  # as _pdf_at computes it
-        phi = TWO_PI * u
-        ex, ey, ez = math.sin(phi) * sin_theta, cos_theta, -math.cos(phi) * sin_theta
-        wx, wy, wz = _mat_vec(k.to_world, ex, ey, ez)
-        pdf = p / (2.0 * math.pi * math.pi * sin_theta) if sin_theta > 0.0 else 0.0
-        return wx, wy, wz, pdf, u, y, cos_theta
-    x, y, p, _, row = sample_2d(mc, cc, u0, u1)
-    h = mc.shape[0] - 1
-    if k.mode == EXACT:
-        # uniform in cos(theta) between the row's edges: uniform in solid angle inside the cell
-        t = min(max(y * h - row, 0.0), 1.0)
-        c0 = k.cos_edges[row]
-        cos_theta = c0 - t * (c0 - k.cos_edges[row + 1])
     else:
-        cos_theta = math.cos(math.pi * y)
+        x, y, p, _, row = sample_2d(mc, cc, u0, u1)
+        h = mc.shape[0] - 1
+        if k.mode == EXACT:
+            # uniform in cos(theta) between the row's edges: uniform in solid angle inside the cell
+            t = min(max(y * h - row, 0.0), 1.0)
+            c0 = k.cos_edges[row]
+            cos_theta = c0 - t * (c0 - k.cos_edges[row + 1])
+        else:
+            cos_theta = math.cos(math.pi * y)
     sin_theta = math.sqrt(max(0.0, (1.0 - cos_theta) * (1.0 + cos_theta)))
     phi = TWO_PI * x
     ex, ey, ez = math.sin(phi) * sin_theta, cos_theta, -math.cos(phi) * sin_theta
@@ -201,7 +198,7 @@ def _pdf_at(k, compensated, u, v, ey):
         if sin_theta <= 0.0:
             return 0.0
         p = bilinear_pdf(k.luminance, k.node_sines, _offset(k, compensated), mc, _bilinear_x(k, u), v)
-        return p / (2.0 * math.pi * math.pi * sin_theta)
+        return _cell_pdf(k, p, 0, sin_theta)
     h = mc.shape[0] - 1
     row = min(int(v * h), h - 1)
     p = pdf_2d(mc, cc, u, (row + 0.5) / h)

@@ -130,6 +130,15 @@ def _invert_linear(a, b, m):
 
 
 @jit_inline
+def _column_pair(lum, sines, offset, k, t, i):
+    """Weights of node columns i and i + 1 at the fraction t between node rows k and k + 1."""
+    s = 1.0 - t
+    c0 = s * node_weight(lum, sines, offset, k, i) + t * node_weight(lum, sines, offset, k + 1, i)
+    c1 = s * node_weight(lum, sines, offset, k, i + 1) + t * node_weight(lum, sines, offset, k + 1, i + 1)
+    return c0, c1
+
+
+@jit_inline
 def bilinear_sample(lum, sines, offset, row_sums, marginal, u0, u1):
     """(x, y, density over the unit square) of the sample that (u0, u1) maps to."""
     ny, n1 = row_sums.shape
@@ -150,8 +159,7 @@ def bilinear_sample(lum, sines, offset, row_sums, marginal, u0, u1):
             lo = mid
         else:
             hi = mid
-    c0 = s * node_weight(lum, sines, offset, k, lo) + t * node_weight(lum, sines, offset, k + 1, lo)
-    c1 = s * node_weight(lum, sines, offset, k, lo + 1) + t * node_weight(lum, sines, offset, k + 1, lo + 1)
+    c0, c1 = _column_pair(lum, sines, offset, k, t, lo)
     tx = _invert_linear(c0, c1, target_x - (s * row_sums[k, lo] + t * row_sums[k + 1, lo]))
     x = (lo + tx) / w
     if x >= 1.0:
@@ -177,8 +185,7 @@ def bilinear_pdf(lum, sines, offset, marginal, x, y):
         return 0.0
     k, t = _cell(ny - 1, y)
     i, tx = _cell(w, x)
-    c0 = (1.0 - t) * node_weight(lum, sines, offset, k, i) + t * node_weight(lum, sines, offset, k + 1, i)
-    c1 = (1.0 - t) * node_weight(lum, sines, offset, k, i + 1) + t * node_weight(lum, sines, offset, k + 1, i + 1)
+    c0, c1 = _column_pair(lum, sines, offset, k, t, i)
     return ((1.0 - tx) * c0 + tx * c1) * (w * (ny - 1)) / marginal[ny - 1]
 
 
@@ -193,8 +200,7 @@ def bilinear_invert(lum, sines, offset, row_sums, marginal, x, y):
     u1 = (marginal[k] + a * t + 0.5 * (b - a) * t * t) / marginal[ny - 1]
     i, tx = _cell(w, x)
     s = 1.0 - t
-    c0 = s * node_weight(lum, sines, offset, k, i) + t * node_weight(lum, sines, offset, k + 1, i)
-    c1 = s * node_weight(lum, sines, offset, k, i + 1) + t * node_weight(lum, sines, offset, k + 1, i + 1)
+    c0, c1 = _column_pair(lum, sines, offset, k, t, i)
     row_total = s * a + t * b
     base = s * row_sums[k, i] + t * row_sums[k + 1, i]
     u0 = (base + c0 * tx + 0.5 * (c1 - c0) * tx * tx) / row_total if row_total > 0.0 else x
