@@ -391,15 +391,17 @@ def check_envmap_sampling(
     if getattr(env, "pdf_mode", None) == "bilinear":
         if cells is not None:
             raise ValueError("cells applies to piecewise-constant PDFs; a bilinear one is tested on its pieces")
-        return _check_bilinear_envmap(env, n, seed, compensated, kwargs)
-    width, height = env.pdf_grid  # the cells of the piecewise-constant pdf (finer than the image)
-    if cells is None:
-        rows = height * max(1, 32 // height) if height < 32 else min(height, 128)
-        cols = width * max(1, 64 // width) if width < 64 else min(width, 256)
-        cells = (rows, cols)
-    rows, cols = cells
-    theta = texel_edges(height, rows, np.pi)
-    phi = texel_edges(width, cols, 2.0 * np.pi)
+        theta, phi, subdivisions = _bilinear_cells(env)
+    else:
+        width, height = env.pdf_grid  # the cells of the piecewise-constant pdf (finer than the image)
+        if cells is None:
+            rows = height * max(1, 32 // height) if height < 32 else min(height, 128)
+            cols = width * max(1, 64 // width) if width < 64 else min(width, 256)
+            cells = (rows, cols)
+        rows, cols = cells
+        theta = texel_edges(height, rows, np.pi)
+        phi = texel_edges(width, cols, 2.0 * np.pi)
+        subdivisions = max(1, height // rows)
     u = np.random.default_rng(seed).random((n, 2))
     dirs, _ = env.sample(u, compensated=compensated)
     frame = ENV_TO_LATLONG_ANGLES @ env.to_world.T
@@ -411,7 +413,7 @@ def check_envmap_sampling(
         frame=frame,
         theta_edges=theta,
         phi_edges=phi,
-        subdivisions=max(1, height // rows),
+        subdivisions=subdivisions,
         **kwargs,
     )
 
@@ -423,21 +425,10 @@ def _split_edges(edges: np.ndarray, parts: int) -> np.ndarray:
     return np.append(inner.reshape(-1), edges[-1])
 
 
-def _check_bilinear_envmap(env, n, seed, compensated, kwargs) -> ChiSquareResult:
+def _bilinear_cells(env) -> tuple[np.ndarray, np.ndarray, int]:
     """The bilinear density's cells: its pieces (``env.pdf_pieces()``, where pdf x sin(theta) is bilinear, so
-    2-point Gauss rules are exact), each split evenly until there are at least 32 x 64 cells."""
+    2-point Gauss rules are exact), each split evenly until there are at least 32 x 64 cells; no subdivision."""
     theta, phi = env.pdf_pieces()
     theta = _split_edges(theta, max(1, -(-32 // (theta.size - 1))))
     phi = _split_edges(phi, max(1, -(-64 // (phi.size - 1))))
-    u = np.random.default_rng(seed).random((n, 2))
-    dirs, _ = env.sample(u, compensated=compensated)
-    kwargs.setdefault("order", 2)
-    kwargs.setdefault("max_depth", 0)
-    return spherical_test(
-        dirs,
-        lambda v: env.pdf(v, compensated=compensated),
-        frame=ENV_TO_LATLONG_ANGLES @ env.to_world.T,
-        theta_edges=theta,
-        phi_edges=phi,
-        **kwargs,
-    )
+    return theta, phi, 1
