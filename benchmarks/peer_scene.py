@@ -6,9 +6,9 @@
     python benchmarks/peer_scene.py --spp 64 --reference ref.exr --out mine.exr
 
 Each line has: seconds (render loop, after scene setup and kernel warm-up), samples_per_s (camera samples,
-res^2 * spp / seconds, Mitsuba's definition), rays_per_s (camera + shadow rays), embree_rays_per_s (rays through our
-Embree path / time in it), bare_embree_rays_per_s (the same recorded batches re-traced by a bare embreex loop on
-all cores), ray_tracing_share (time in Embree / render time), peak_mb (max resident memory of the process), cores,
+res^2 * spp / seconds, Mitsuba's definition), rays_per_s (camera + shadow rays), embree_rays (the rays of those that
+reached a mesh's bounds; the kernels trace them through Embree themselves, so their time is part of the kernels' in
+the profile), peak_mb (max resident memory of the process), cores,
 and relmse = mean over pixels and channels of (x - ref)^2 / (ref^2 + 0.01) when --reference is given (the peer
 kit's metric).  For comparison: Mitsuba 3's llvm variant renders this scene at about 10 M samples/s on this
 machine's 2 cores (../shared/peers/README.md).
@@ -17,49 +17,17 @@ machine's 2 cores (../shared/peers/README.md).
 from __future__ import annotations
 
 import argparse
-import itertools
 import json
 import os
 import resource
 import subprocess
 import sys
-import time
-from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
 
 def relmse(image: np.ndarray, reference: np.ndarray) -> float:
     return float(np.mean((image - reference) ** 2 / (reference**2 + 0.01)))
-
-
-def bare_embree_rate(tracer, batches) -> float:
-    """Re-trace recorded Embree batches with nothing around the embreex calls (split over the same threads)."""
-    scene = tracer._scene
-    threads = tracer.threads
-    pool = ThreadPoolExecutor(threads)
-    prepared = []
-    for kind, o, d, tfar in batches:
-        edges = np.linspace(0, len(o), threads + 1).astype(int)
-        parts = [
-            (o[a:b], d[a:b], None if tfar is None else np.ascontiguousarray(tfar[a:b]))
-            for a, b in itertools.pairwise(edges)
-        ]
-        prepared.append((kind, parts))
-    total = sum(len(o) for _, o, _, _ in batches)
-
-    def run(kind, part):
-        o, d, tfar = part
-        if kind == "occluded":
-            return scene.run(o, d, dists=tfar, query="OCCLUDED")
-        return scene.run(o, d, dists=tfar, output=1)
-
-    start = time.perf_counter()
-    for kind, parts in prepared:
-        list(pool.map(lambda p, k=kind: run(k, p), parts))
-    seconds = time.perf_counter() - start
-    pool.shutdown()
-    return total / seconds if seconds > 0 else float("nan")
 
 
 def _replace_blob(path: str) -> None:
@@ -113,12 +81,7 @@ def run_one(args) -> dict:
     result = render(scene, settings, tracer=tracer)
     profile, wavefront.PROFILE = wavefront.PROFILE, None
     stats = result.stats
-    peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # before the recording below
-    # record one pass worth of Embree batches and re-trace them bare
-    tracer.record = []
-    render(scene, RenderSettings(spp=min(2, args.spp), strategy=args.strategy, seed=args.seed + 1), tracer=tracer)
-    bare = bare_embree_rate(tracer, tracer.record)
-    tracer.record = None
+    peak_mb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     line = {
         "renderer": "lightprobe",
         "scene": "peer",
@@ -140,9 +103,6 @@ def run_one(args) -> dict:
         "camera_rays": stats["camera_rays"],
         "shadow_rays": stats["shadow_rays"],
         "embree_rays": stats["embree_rays"],
-        "embree_rays_per_s": round(stats["embree_rays"] / max(stats["embree_seconds"], 1e-12)),
-        "bare_embree_rays_per_s": round(bare),
-        "ray_tracing_share": round(stats["embree_seconds"] / max(stats["seconds"], 1e-12), 4),
         "setup_seconds": round(stats["setup_seconds"], 3),
         "peak_mb": round(peak_mb, 1),
         "cores": os.cpu_count(),
@@ -150,10 +110,7 @@ def run_one(args) -> dict:
     }
     if profile is not None:
         stages = {name: round(t, 3) for name, t in sorted(profile.items(), key=lambda kv: -kv[1])}
-        stages["embree"] = round(stats["embree_seconds"], 3)
-        stages["other (Python between kernels)"] = round(
-            stats["seconds"] - sum(profile.values()) - stats["embree_seconds"], 3
-        )
+        stages["other (Python between kernels)"] = round(stats["seconds"] - sum(profile.values()), 3)
         line["profile_seconds"] = stages
     if args.reference:
         ref = read_image(args.reference)[:, :, :3]

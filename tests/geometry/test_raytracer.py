@@ -111,10 +111,18 @@ def test_occlusion_agrees_with_closest_hit(scene):
 
 
 def test_threads_give_identical_hits(scene):
+    import numba
+
     arrays = scene.compile()
     o, d = random_rays(100_000, seed=3)
-    one = RayTracer(arrays, threads=1).intersect(o, d)
-    two = RayTracer(arrays, threads=2).intersect(o, d)
+    before = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        one = RayTracer(arrays).intersect(o, d)
+        numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))
+        two = RayTracer(arrays).intersect(o, d)
+    finally:
+        numba.set_num_threads(before)
     for a, b in zip(one, two, strict=True):
         np.testing.assert_array_equal(a, b)
 

@@ -1,29 +1,24 @@
-"""Ray queries: analytic shapes in Numba, triangle meshes in Embree 4 (``embreex``), batches split over threads.
+"""Ray queries: analytic shapes in Numba, triangle meshes in Embree 4 (its C API, :mod:`.embree`).
 
-One ``embreex`` call runs on one thread but releases the GIL, so a batch is cut into ``threads`` chunks run from
-a thread pool (measured on this machine: 1.95x with 2 threads).  Pitfalls handled here: embreex takes float32
-C-contiguous arrays only and has no per-ray tnear (callers offset origins, see
-:func:`lightprobe.geometry.intersect.ray_offset`); ``OCCLUDED`` returns -1 for unblocked rays; the BVH is built on
-the first query, which :class:`RayTracer` triggers at construction so that timings exclude it.
+Embree has no per-ray tnear here (callers offset origins, see :func:`lightprobe.geometry.intersect.ray_offset`).
+The render kernels call Embree themselves, one ray at a time; the batch methods below serve everything else
+(area-light paths, masks, tests) with the same calls in a parallel loop.
 
 Closest-hit queries take a per-ray ``tfar`` (the nearest analytic hit), so Embree only reports closer triangles.
 """
 
 from __future__ import annotations
 
-import itertools
 import time
-from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
 from .._numba import jit_parallel, prange
+from .embree import FAR, EmbreeScene, intersect_batch, new_scratch, occluded_batch
 from .intersect import MESH, MISS, closest_analytic, may_hit_mesh, occluded_analytic
 from .scene import SceneArrays
 
 __all__ = ["RayTracer"]
-
-MIN_CHUNK = 16_384  # below this, splitting a batch over threads costs more than it gains
 
 
 @jit_parallel
@@ -60,66 +55,43 @@ class RayTracer:
     arrays : SceneArrays
         From :meth:`lightprobe.geometry.scene.Scene.compile`.
     threads : int
-        Python threads that share each Embree batch (Embree releases the GIL).
+        Kept for callers; Embree batches run in Numba's threads (``numba.set_num_threads``).
     """
 
     def __init__(self, arrays: SceneArrays, *, threads: int = 2):
         self.arrays = arrays
         self.threads = max(1, int(threads))
-        self._pool = ThreadPoolExecutor(self.threads) if self.threads > 1 else None
         self.embree_rays = 0
         self.embree_seconds = 0.0
         #: set to a list to keep a copy of every Embree batch: ("occluded" | "intersect", origins, dirs, tfar)
         self.record: list | None = None
-        self._scene = None
+        #: the meshes' Embree scene (None without meshes); kernels take ``mesh_scene`` and ``scratch``
+        self.embree: EmbreeScene | None = None
+        self.scratch = new_scratch()
         if arrays.mesh_faces.shape[0]:
-            from embreex import rtcore_scene
-            from embreex.mesh_construction import TriangleMesh
+            self.embree = EmbreeScene(arrays.mesh_vertices, arrays.mesh_faces, arrays.mesh_face_start)
 
-            self._scene = rtcore_scene.EmbreeScene(robust=True)
-            vertices = arrays.mesh_vertices.astype(np.float32)
-            for g in range(arrays.mesh_face_start.shape[0] - 1):
-                faces = arrays.mesh_faces[arrays.mesh_face_start[g] : arrays.mesh_face_start[g + 1]]
-                # each mesh is its own Embree geometry, so geomID is the mesh index
-                TriangleMesh(self._scene, np.ascontiguousarray(vertices[faces]))
-            # build the BVH now rather than inside the first timed query
-            self._scene.run(np.zeros((1, 3), np.float32), np.ones((1, 3), np.float32), query="OCCLUDED")
+    @property
+    def mesh_scene(self) -> int:
+        """The ``RTCScene`` handle for kernels, 0 when there are no meshes."""
+        return 0 if self.embree is None else self.embree.handle
 
     def close(self) -> None:
-        if self._pool is not None:
-            self._pool.shutdown(wait=False)
-            self._pool = None
-
-    def __del__(self):
-        self.close()
+        if self.embree is not None:
+            self.embree.close()
+            self.embree = None
 
     # --- Embree batches -----------------------------------------------------------------------------------------
-    def _split(self, n: int) -> list[slice]:
-        if self._pool is None or n < 2 * MIN_CHUNK:
-            return [slice(0, n)]
-        edges = np.linspace(0, n, self.threads + 1).astype(int)
-        return [slice(int(a), int(b)) for a, b in itertools.pairwise(edges)]
-
-    def _run(self, fn, n: int):
-        parts = self._split(n)
-        if len(parts) == 1:
-            return [fn(parts[0])]
-        return list(self._pool.map(fn, parts))
-
     def embree_occluded(self, origins: np.ndarray, dirs: np.ndarray, tfar: np.ndarray | None = None) -> np.ndarray:
-        """Boolean (N,): does a mesh block the segment (0, tfar)?  Inputs float32 (N, 3)."""
+        """Boolean (N,): does a mesh block the segment (0, tfar)?  Inputs (N, 3), rounded to float32."""
         n = origins.shape[0]
-        if self._scene is None or n == 0:
+        if self.embree is None or n == 0:
             return np.zeros(n, dtype=bool)
         if self.record is not None:
             self.record.append(("occluded", origins.copy(), dirs.copy(), None if tfar is None else tfar.copy()))
         start = time.perf_counter()
-
-        def work(sl):
-            dist = None if tfar is None else np.ascontiguousarray(tfar[sl], dtype=np.float32)
-            return self._scene.run(origins[sl], dirs[sl], dists=dist, query="OCCLUDED") != -1
-
-        result = np.concatenate(self._run(work, n))
+        far = np.full(n, FAR, np.float32) if tfar is None else np.asarray(tfar, np.float32)
+        result = occluded_batch(self.mesh_scene, self.scratch, origins, dirs, far)
         self.embree_rays += n
         self.embree_seconds += time.perf_counter() - start
         return result
@@ -130,14 +102,7 @@ class RayTracer:
         if self.record is not None:
             self.record.append(("intersect", origins.copy(), dirs.copy(), tfar.copy()))
         start = time.perf_counter()
-
-        def work(sl):
-            dist = np.ascontiguousarray(tfar[sl], dtype=np.float32)
-            r = self._scene.run(origins[sl], dirs[sl], dists=dist, output=1)
-            return r["tfar"], r["geomID"], r["primID"], r["u"], r["v"]
-
-        parts = self._run(work, n)
-        result = tuple(np.concatenate([p[k] for p in parts]) for k in range(5))
+        result = intersect_batch(self.mesh_scene, self.scratch, origins, dirs, np.asarray(tfar, np.float32))
         self.embree_rays += n
         self.embree_seconds += time.perf_counter() - start
         return result
@@ -167,7 +132,7 @@ class RayTracer:
         ``origins`` is (N, 3), or one (3,) origin shared by every ray (a pinhole camera).
         """
         sel = np.nonzero(needs)[0]
-        if sel.size == 0 or self._scene is None:
+        if sel.size == 0 or self.embree is None:
             return
         tfar = np.where(np.isfinite(t[sel]), t[sel], 3e38).astype(np.float32)
         o = np.asarray(origins)
@@ -196,7 +161,7 @@ class RayTracer:
         )
         blocked, needs = _occluded_analytic_batch(self.arrays, o, d, tm)
         sel = np.nonzero(needs)[0]
-        if sel.size and self._scene is not None:
+        if sel.size and self.embree is not None:
             tfar = np.where(np.isfinite(tm[sel]), tm[sel], 3e38).astype(np.float32)
             blocked[sel] = self.embree_occluded(o[sel].astype(np.float32), d[sel].astype(np.float32), tfar)
         return blocked

@@ -340,6 +340,8 @@ def slot_buffers(nm: int) -> dict[str, np.ndarray]:
         "hit_b1": np.empty(nm),
         "hit_b2": np.empty(nm),
         "hit_mesh": np.empty(nm, np.bool_),  # a mesh may be nearer than the analytic hit
+        "shadow_o": np.empty((nm, 3), np.float32),  # shadow rays left for Embree
+        "shadow_d": np.empty((nm, 3), np.float32),
         "shadow_t": np.empty(nm, np.float32),  # the segment length of a shadow ray left for Embree
     }
 

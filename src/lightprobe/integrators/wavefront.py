@@ -33,6 +33,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
+import numba
 import numpy as np
 
 from .._numba import jit_parallel, prange
@@ -44,8 +45,10 @@ from ..emitters.envmap import env_coords, env_eval, env_lookup, env_pdf_at, env_
 from ..emitters.selection import SELECTORS, build_selector
 from ..errors import ParameterError
 from ..geometry.camera import camera_ray
+from ..geometry.embree import FAR as MESH_FAR
+from ..geometry.embree import closest_mesh_hit, mesh_occluded
 from ..geometry.frame import to_local, to_world
-from ..geometry.intersect import MISS, closest_analytic, may_hit_mesh, occluded_analytic, ray_offset
+from ..geometry.intersect import MESH, MISS, closest_analytic, may_hit_mesh, occluded_analytic, ray_offset
 from ..geometry.raytracer import RayTracer
 from ..geometry.scene import Scene
 from ..sampling.mis import mis_weight
@@ -188,8 +191,26 @@ class RenderResult:
 # --- kernels ------------------------------------------------------------------------------------------------------
 @jit_parallel
 def _camera_pass(
-    s, cam, sampler, seed, pixel_start, spp_pass, sample_start, dirs, t, kind, index, needs_mesh, prim, b1, b2
+    s,
+    cam,
+    sampler,
+    seed,
+    pixel_start,
+    spp_pass,
+    sample_start,
+    mesh_scene,
+    scratch,
+    ray_counts,
+    dirs,
+    t,
+    kind,
+    index,
+    prim,
+    b1,
+    b2,
 ):
+    """Camera rays and their nearest hits: analytic shapes, then meshes through Embree where a ray may reach a
+    mesh's bounds before its analytic hit."""
     ox, oy, oz = cam[0], cam[1], cam[2]
     for k in prange(dirs.shape[0]):
         pixel = pixel_start + k // spp_pass
@@ -198,10 +219,17 @@ def _camera_pass(
         dx, dy, dz = camera_ray(cam, pixel, u0, u1)
         dirs[k, 0], dirs[k, 1], dirs[k, 2] = dx, dy, dz
         t[k], kind[k], index[k] = closest_analytic(s, ox, oy, oz, dx, dy, dz, np.inf)
-        needs_mesh[k] = may_hit_mesh(s, ox, oy, oz, dx, dy, dz, t[k])
-        prim[k] = 0  # mesh hits are filled in by the ray tracer
+        prim[k] = 0
         b1[k] = 0.0
         b2[k] = 0.0
+        # meshes in the same loop: camera rays are coherent, and here they cost 0.27 s of the peer scene's 64-spp
+        # render against 0.42 s in a loop of their own (the opposite of shadow rays, decisions.md 30)
+        if mesh_scene != 0 and may_hit_mesh(s, ox, oy, oz, dx, dy, dz, t[k]):
+            ray_counts[numba.get_thread_id(), 0] += 1
+            far = t[k] if t[k] < np.inf else MESH_FAR
+            mt, mesh, face, mb1, mb2 = closest_mesh_hit(mesh_scene, scratch, ox, oy, oz, dx, dy, dz, far)
+            if mesh >= 0:
+                t[k], kind[k], index[k], prim[k], b1[k], b2[k] = mt, MESH, mesh, face, mb1, mb2
 
 
 # Shading runs as four kernels rather than one: the environment lookups are cache misses (the map and its CDFs
@@ -416,10 +444,9 @@ def _shade_finish(
     epdf,
     contrib,
     flags,
-    shadow_o,
-    shadow_d,
 ):
-    """Contributions (BSDF value, cosine, MIS weight) and shadow rays, tested against analytic shapes here."""
+    """Contributions (BSDF value, cosine, MIS weight) and shadow rays, tested against analytic shapes here; those
+    that may reach a mesh are flagged TEST_MESH for :func:`_mesh_shadow_stage`."""
     m = n_bsdf + n_env
     inv_m = 1.0 / m
     for k in prange(point.shape[0]):
@@ -467,12 +494,25 @@ def _shade_finish(
                 flags[r] = BLOCKED
                 continue
             contrib[r, 0], contrib[r, 1], contrib[r, 2] = cr, cg, cb
-            if may_hit_mesh(s, qx, qy, qz, wx, wy, wz, np.inf):
-                flags[r] = TEST_MESH
-                shadow_o[r, 0], shadow_o[r, 1], shadow_o[r, 2] = qx, qy, qz
-                shadow_d[r, 0], shadow_d[r, 1], shadow_d[r, 2] = wx, wy, wz
-            else:
-                flags[r] = VISIBLE
+            flags[r] = TEST_MESH if may_hit_mesh(s, qx, qy, qz, wx, wy, wz, np.inf) else VISIBLE
+
+
+# Shadow rays that may reach a mesh are traced in a loop of their own, not inside _shade_finish: on the peer scene at
+# 64 spp, 3.9 M such rays added about 1.1 s to that loop body and take 0.9 s here, where the shading work does not
+# evict Embree's BVH between rays (decisions.md 30).
+@jit_parallel
+def _mesh_shadow_stage(m, mesh_scene, scratch, ray_counts, point, gnormal, wdir, flags):
+    """Shadow rays flagged TEST_MESH, through Embree: each becomes VISIBLE or BLOCKED."""
+    for r in prange(flags.shape[0]):
+        if flags[r] != TEST_MESH:
+            continue
+        k = r // m
+        wx, wy, wz = wdir[r, 0], wdir[r, 1], wdir[r, 2]
+        qx, qy, qz = ray_offset(
+            point[k, 0], point[k, 1], point[k, 2], gnormal[k, 0], gnormal[k, 1], gnormal[k, 2], wx, wy, wz
+        )
+        ray_counts[numba.get_thread_id(), 1] += 1
+        flags[r] = BLOCKED if mesh_occluded(mesh_scene, scratch, qx, qy, qz, wx, wy, wz, MESH_FAR) else VISIBLE
 
 
 @jit_parallel
@@ -577,7 +617,6 @@ def _pass_buffers(n: int, m: int) -> dict[str, np.ndarray]:
         "t": np.empty(n),  # hit distance (inf: miss)
         "kind": np.empty(n, np.int64),  # MISS / MESH / SPHERE / RECT
         "index": np.empty(n, np.int64),  # which mesh, sphere or rectangle
-        "needs_mesh": np.empty(n, np.bool_),  # the ray may reach a mesh before t
         "prim": np.empty(n, np.int64),  # mesh face
         "b1": np.empty(n),  # barycentrics of a mesh hit
         "b2": np.empty(n),
@@ -599,8 +638,6 @@ def _pass_buffers(n: int, m: int) -> dict[str, np.ndarray]:
         "epdf": np.empty(nm),  # environment density of BSDF samples (MIS)
         "contrib": np.empty((nm, 3)),  # unoccluded contribution
         "flags": np.empty(nm, np.int8),  # NONE / VISIBLE / TEST_MESH / BLOCKED
-        "shadow_o": np.empty((nm, 3), np.float32),  # shadow rays left for Embree
-        "shadow_d": np.empty((nm, 3), np.float32),
     }
 
 
@@ -645,8 +682,6 @@ def render(
     settings = settings or RenderSettings()
     settings.validate()
     _check_material_strategy(scene, settings)
-    import numba
-
     if settings.threads is not None:
         numba.set_num_threads(min(settings.threads, numba.config.NUMBA_NUM_THREADS))
     threads = numba.get_num_threads()
@@ -705,6 +740,8 @@ def render(
     strategy = STRATEGIES[settings.strategy]
     sample_stage = _env_resample_stage if settings.env_candidates > 1 else _env_sample_stage
     stages = (_shade_setup, sample_stage, _env_lookup_stage, _shade_finish)
+    if tracer.mesh_scene:
+        stages += (_mesh_shadow_stage,)
     light_constants = {}
     if area_path:
         from .area_lights import STAGES, slot_buffers
@@ -727,7 +764,11 @@ def render(
             "n_light": settings.light_samples,
             "n_per_light": settings.n_env,
         }
+    ray_counts = np.zeros((numba.config.NUMBA_NUM_THREADS, 8), np.int64)  # per thread (a row = a cache line)
     constants = {
+        "mesh_scene": tracer.mesh_scene,
+        "scratch": tracer.scratch,
+        "ray_counts": ray_counts,
         "s": arrays,
         "env": env,
         "cam": cam,
@@ -750,9 +791,6 @@ def render(
         b = {k: v[: n * m] if v.shape[0] == largest_pass * m else v[:n] for k, v in buffers.items()}
         values = {**constants, **b, "pixel_start": pixel_start, "spp_pass": spp_now, "sample_start": sample_start}
         _launch(_camera_pass, values)
-        tracer.add_mesh_hits(
-            cam[:3], b["dirs"], b["needs_mesh"], b["t"], b["kind"], b["index"], b["prim"], b["b1"], b["b2"]
-        )
         if area_path:
             _launch(stages[0], values)
             # BSDF directions: the nearest mesh hit, where a mesh may be nearer than the analytic one
@@ -773,17 +811,18 @@ def render(
                 _launch(kernel, values)
         flags = b["flags"]
         shadow_rays = int(np.count_nonzero(flags))
-        test = np.nonzero(flags == TEST_MESH)[0]
-        if test.size:
-            tfar = b["shadow_t"][test] if area_path else None
-            blocked = tracer.embree_occluded(b["shadow_o"][test], b["shadow_d"][test], tfar)
-            flags[test] = np.where(blocked, BLOCKED, VISIBLE).astype(np.int8)
+        if area_path:  # its shadow rays carry a segment length: traced as one batch
+            test = np.nonzero(flags == TEST_MESH)[0]
+            if test.size:
+                blocked = tracer.embree_occluded(b["shadow_o"][test], b["shadow_d"][test], b["shadow_t"][test])
+                flags[test] = np.where(blocked, BLOCKED, VISIBLE).astype(np.int8)
         values.update(flags=flags, acc_mean=acc.mean, acc_m2=acc.m2, acc_count=acc.count, acc_nonfinite=acc.nonfinite)
         _launch(_accumulate, values)
         return shadow_rays
 
     embree_before = tracer.embree_rays
     embree_seconds_before = tracer.embree_seconds
+    counted_before = 0
     start = time.perf_counter()
     with _InterruptAtPassEnd() as interrupt:
         try:
@@ -793,6 +832,7 @@ def render(
                 PROFILE.clear()  # the warm-up (and any compiling) is not the render
             embree_before = tracer.embree_rays
             embree_seconds_before = tracer.embree_seconds
+            counted_before = ray_counts.sum()
             stats["setup_seconds"] = time.perf_counter() - t_setup
             start = time.perf_counter()
             for sample_start, spp_now in _sample_rounds(settings.first_sample, settings.spp, spp_pass):
@@ -817,7 +857,7 @@ def render(
         except KeyboardInterrupt:
             stats["interrupted"] = True
     stats["seconds"] = time.perf_counter() - start
-    stats["embree_rays"] = tracer.embree_rays - embree_before
+    stats["embree_rays"] = tracer.embree_rays - embree_before + int(ray_counts.sum() - counted_before)
     stats["embree_seconds"] = tracer.embree_seconds - embree_seconds_before
     if own_tracer:
         tracer.close()

@@ -1,0 +1,204 @@
+"""Embree 4 through its C API, called from inside the Numba kernels (one ray per call).
+
+The library is the ``libembree4`` that ``embreex``'s wheel ships.  It is opened twice: with ``ctypes``, to build
+scenes from Python, and into LLVM's symbol table (``llvmlite.binding.load_library_permanently``), so that kernels
+call ``rtcOccluded1`` and ``rtcIntersect1`` as external functions *by name*.  A ctypes function pointer baked into
+a kernel would make Numba refuse to cache it; a symbol name is resolved when the cached code is loaded.  Calling
+Embree inside the kernels drops the gather, float32 copy, thread pool and scatter that batches through ``embreex``
+needed (decisions.md 30 has the measurements).
+
+Ray structs live in ``scratch``, one 128-byte row per Numba thread (``numba.get_thread_id()``): Embree wants them
+16-byte aligned (NumPy's allocations are), and rows a cache line apart keep the two threads from sharing lines.
+Layout of ``RTCRayHit`` in this build (instance arrays enabled: 96 bytes), in 32-bit words: origin 0-2, tnear 3,
+direction 4-6, time 7, tfar 8, mask 9, id 10, flags 11, geometric normal 12-14, u 15, v 16, primID 17, geomID 18,
+instID 19, instPrimID 20.  ``rtcOccluded1`` reads the first 12 words (``RTCRay``) and reports a blocked ray by
+setting tfar to -inf; ``rtcIntersect1`` leaves primID/geomID untouched on a miss, so they are set to -1 first.
+Inputs are rounded to float32 as Embree stores them; the scene is built robust (watertight), as ``embreex`` did.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import glob
+import os
+
+import numba
+import numpy as np
+from numba import types
+
+from .._numba import jit_inline, jit_parallel, prange
+from ..errors import LightprobeError
+
+__all__ = ["EmbreeScene", "closest_mesh_hit", "intersect_batch", "mesh_occluded", "new_scratch", "occluded_batch"]
+
+INVALID_ID = 0xFFFFFFFF  # RTC_INVALID_GEOMETRY_ID
+_RTC_SCENE_FLAG_ROBUST = 1 << 2
+_RTC_GEOMETRY_TYPE_TRIANGLE = 0
+_RTC_BUFFER_TYPE_INDEX, _RTC_BUFFER_TYPE_VERTEX = 0, 1
+_RTC_FORMAT_UINT3, _RTC_FORMAT_FLOAT3 = 0x5003, 0x9003
+SCRATCH_WORDS = 32  # one row of ``scratch``: a 96-byte RTCRayHit padded to two cache lines' worth of 64 bytes
+FAR = np.float32(3e38)  # tfar of a ray with no nearer analytic hit (finite: Embree wants tfar >= tnear, not inf)
+
+
+def _library_path() -> str:
+    try:
+        import embreex
+    except ImportError as exc:  # pragma: no cover - embreex is a dependency
+        raise LightprobeError("lightprobe needs embreex (pip install embreex): it ships the Embree 4 library") from exc
+    libs = os.path.join(os.path.dirname(os.path.dirname(embreex.__file__)), "embreex.libs")
+    found = sorted(glob.glob(os.path.join(libs, "libembree4*")))
+    if not found:  # pragma: no cover - a wheel without the bundled library
+        raise LightprobeError(f"no libembree4 in {libs}: reinstall embreex")
+    return found[0]
+
+
+def _load():
+    import llvmlite.binding as llvm
+
+    path = _library_path()
+    lib = ctypes.CDLL(path)
+    llvm.load_library_permanently(path)
+    vp, uint, size = ctypes.c_void_p, ctypes.c_uint, ctypes.c_size_t
+    signatures = {
+        "rtcNewDevice": (vp, [ctypes.c_char_p]),
+        "rtcReleaseDevice": (None, [vp]),
+        "rtcGetDeviceError": (ctypes.c_int, [vp]),
+        "rtcNewScene": (vp, [vp]),
+        "rtcSetSceneFlags": (None, [vp, ctypes.c_int]),
+        "rtcCommitScene": (None, [vp]),
+        "rtcReleaseScene": (None, [vp]),
+        "rtcNewGeometry": (vp, [vp, ctypes.c_int]),
+        "rtcSetSharedGeometryBuffer": (None, [vp, ctypes.c_int, uint, ctypes.c_int, vp, size, size, size]),
+        "rtcCommitGeometry": (None, [vp]),
+        "rtcAttachGeometry": (uint, [vp, vp]),
+        "rtcReleaseGeometry": (None, [vp]),
+    }
+    for name, (restype, argtypes) in signatures.items():
+        fn = getattr(lib, name)
+        fn.restype, fn.argtypes = restype, argtypes
+    return lib
+
+
+_lib = _load()
+
+# void rtcOccluded1(RTCScene, RTCRay*, RTCOccludedArguments*) and rtcIntersect1(RTCScene, RTCRayHit*,
+# RTCIntersectArguments*); pointers pass as 64-bit integers (the same registers under the x86-64 and AArch64 ABIs),
+# null arguments select Embree's defaults
+_rtc_occluded1 = types.ExternalFunction("rtcOccluded1", types.void(types.intp, types.intp, types.intp))
+_rtc_intersect1 = types.ExternalFunction("rtcIntersect1", types.void(types.intp, types.intp, types.intp))
+
+
+class EmbreeScene:
+    """Triangle meshes in one Embree scene; mesh g is geometry g (so geomID is the mesh index).
+
+    ``handle`` is the ``RTCScene`` pointer as an integer, for the kernels.  The vertex and index arrays are shared
+    with Embree (not copied), so the scene keeps them alive until :meth:`close`.
+    """
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray, face_start: np.ndarray):
+        self._device = _lib.rtcNewDevice(None)
+        if not self._device:
+            raise LightprobeError("Embree could not create a device")
+        self._scene = _lib.rtcNewScene(self._device)
+        _lib.rtcSetSceneFlags(self._scene, _RTC_SCENE_FLAG_ROBUST)
+        # Embree may read 16 bytes at the last vertex (its documented padding rule), hence the spare row
+        self._vertices = np.zeros((vertices.shape[0] + 1, 3), np.float32)
+        self._vertices[:-1] = vertices
+        self._indices = []
+        for g in range(face_start.shape[0] - 1):
+            idx = np.ascontiguousarray(faces[face_start[g] : face_start[g + 1]], dtype=np.uint32)
+            geom = _lib.rtcNewGeometry(self._device, _RTC_GEOMETRY_TYPE_TRIANGLE)
+            _lib.rtcSetSharedGeometryBuffer(
+                geom, _RTC_BUFFER_TYPE_VERTEX, 0, _RTC_FORMAT_FLOAT3, self._vertices.ctypes.data, 0, 12,
+                vertices.shape[0],
+            )  # fmt: skip
+            _lib.rtcSetSharedGeometryBuffer(
+                geom, _RTC_BUFFER_TYPE_INDEX, 0, _RTC_FORMAT_UINT3, idx.ctypes.data, 0, 12, idx.shape[0]
+            )
+            _lib.rtcCommitGeometry(geom)
+            _lib.rtcAttachGeometry(self._scene, geom)
+            _lib.rtcReleaseGeometry(geom)
+            self._indices.append(idx)
+        _lib.rtcCommitScene(self._scene)  # builds the BVH now, outside any timed query
+        error = _lib.rtcGetDeviceError(self._device)
+        if error:
+            self.close()
+            raise LightprobeError(f"Embree could not build the mesh scene (RTCError {error})")
+        self.handle = int(self._scene)
+
+    def close(self) -> None:
+        if self._scene:
+            _lib.rtcReleaseScene(self._scene)
+            self._scene = None
+        if self._device:
+            _lib.rtcReleaseDevice(self._device)
+            self._device = None
+        self.handle = 0
+
+    def __del__(self):
+        self.close()
+
+
+def new_scratch() -> np.ndarray:
+    """Ray structs for the kernels: one row per Numba thread."""
+    return np.zeros((numba.config.NUMBA_NUM_THREADS, SCRATCH_WORDS), np.uint32)
+
+
+@jit_inline
+def _put_ray(words, floats, ox, oy, oz, dx, dy, dz, tfar):
+    floats[0], floats[1], floats[2], floats[3] = np.float32(ox), np.float32(oy), np.float32(oz), np.float32(0.0)
+    floats[4], floats[5], floats[6], floats[7] = np.float32(dx), np.float32(dy), np.float32(dz), np.float32(0.0)
+    floats[8] = np.float32(tfar)
+    words[9] = INVALID_ID  # mask: every geometry
+    words[10] = 0
+    words[11] = 0
+
+
+@jit_inline
+def mesh_occluded(scene, scratch, ox, oy, oz, dx, dy, dz, tfar):
+    """Does a mesh triangle block the ray on (0, tfar)?  (tfar float32: pass ``FAR`` for an unbounded ray.)"""
+    words = scratch[numba.get_thread_id()]
+    floats = words.view(np.float32)
+    _put_ray(words, floats, ox, oy, oz, dx, dy, dz, tfar)
+    _rtc_occluded1(scene, words.ctypes.data, 0)
+    return floats[8] == -np.inf
+
+
+@jit_inline
+def closest_mesh_hit(scene, scratch, ox, oy, oz, dx, dy, dz, tfar):
+    """The nearest triangle hit closer than tfar: (t, mesh, face, b1, b2); mesh -1 when there is none."""
+    words = scratch[numba.get_thread_id()]
+    floats = words.view(np.float32)
+    _put_ray(words, floats, ox, oy, oz, dx, dy, dz, tfar)
+    words[17] = INVALID_ID
+    words[18] = INVALID_ID
+    _rtc_intersect1(scene, words.ctypes.data, 0)
+    if words[18] == INVALID_ID:
+        return np.float32(tfar), -1, -1, np.float32(0.0), np.float32(0.0)
+    return floats[8], np.int64(words[18]), np.int64(words[17]), floats[15], floats[16]
+
+
+@jit_parallel
+def occluded_batch(scene, scratch, origins, dirs, tfar):
+    n = dirs.shape[0]
+    blocked = np.empty(n, np.bool_)
+    for i in prange(n):
+        blocked[i] = mesh_occluded(
+            scene, scratch, origins[i, 0], origins[i, 1], origins[i, 2], dirs[i, 0], dirs[i, 1], dirs[i, 2], tfar[i]
+        )
+    return blocked
+
+
+@jit_parallel
+def intersect_batch(scene, scratch, origins, dirs, tfar):
+    n = dirs.shape[0]
+    t = np.empty(n, np.float32)
+    geom = np.empty(n, np.int64)
+    prim = np.empty(n, np.int64)
+    u = np.empty(n, np.float32)
+    v = np.empty(n, np.float32)
+    for i in prange(n):
+        t[i], geom[i], prim[i], u[i], v[i] = closest_mesh_hit(
+            scene, scratch, origins[i, 0], origins[i, 1], origins[i, 2], dirs[i, 0], dirs[i, 1], dirs[i, 2], tfar[i]
+        )
+    return t, geom, prim, u, v
