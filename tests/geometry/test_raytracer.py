@@ -154,3 +154,16 @@ def test_camera_orientation_and_fov():
     np.testing.assert_allclose(d[0], np.array([-2, 1, -1]) / np.sqrt(6), atol=1e-12)
     np.testing.assert_allclose(d[1], np.array([2, 1, -1]) / np.sqrt(6), atol=1e-12)
     np.testing.assert_allclose(d[2], np.array([-2, -1, -1]) / np.sqrt(6), atol=1e-12)
+
+
+def test_a_closed_tracer_refuses_rather_than_missing_the_meshes(scene):
+    from lightprobe.errors import LightprobeError
+    from lightprobe.integrators.wavefront import RenderSettings, render
+
+    tracer = RayTracer(scene.compile())
+    tracer.close()
+    o, d = random_rays(10, seed=4)
+    with pytest.raises(LightprobeError, match="closed"):
+        tracer.intersect(o, d)
+    with pytest.raises(LightprobeError, match="closed"):
+        render(scene, RenderSettings(spp=1), tracer=tracer)

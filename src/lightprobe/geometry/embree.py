@@ -36,8 +36,8 @@ _RTC_SCENE_FLAG_ROBUST = 1 << 2
 _RTC_GEOMETRY_TYPE_TRIANGLE = 0
 _RTC_BUFFER_TYPE_INDEX, _RTC_BUFFER_TYPE_VERTEX = 0, 1
 _RTC_FORMAT_UINT3, _RTC_FORMAT_FLOAT3 = 0x5003, 0x9003
-SCRATCH_WORDS = 32  # one row of ``scratch``: a 96-byte RTCRayHit padded to two cache lines' worth of 64 bytes
-FAR = np.float32(3e38)  # tfar of a ray with no nearer analytic hit (finite: Embree wants tfar >= tnear, not inf)
+SCRATCH_WORDS = 32  # one row of ``scratch``: a 96-byte RTCRayHit padded to 128 bytes (two cache lines)
+FAR = np.float32(3e38)  # tfar of a ray with no nearer analytic hit (as before, so hits are bit-identical)
 
 
 def _library_path() -> str:

@@ -14,6 +14,7 @@ import time
 import numpy as np
 
 from .._numba import jit_parallel, prange
+from ..errors import LightprobeError
 from .embree import FAR, EmbreeScene, intersect_batch, new_scratch, occluded_batch
 from .intersect import MESH, MISS, closest_analytic, may_hit_mesh, occluded_analytic
 from .scene import SceneArrays
@@ -71,9 +72,14 @@ class RayTracer:
         if arrays.mesh_faces.shape[0]:
             self.embree = EmbreeScene(arrays.mesh_vertices, arrays.mesh_faces, arrays.mesh_face_start)
 
+    def _require_open(self) -> None:
+        if self.embree is None and self.arrays.mesh_faces.shape[0]:  # else every mesh would silently vanish
+            raise LightprobeError("this RayTracer was closed; make a new one for the scene")
+
     @property
     def mesh_scene(self) -> int:
         """The ``RTCScene`` handle for kernels, 0 when there are no meshes."""
+        self._require_open()
         return 0 if self.embree is None else self.embree.handle
 
     def close(self) -> None:
@@ -86,6 +92,7 @@ class RayTracer:
         """Boolean (N,): does a mesh block the segment (0, tfar)?  Inputs (N, 3), rounded to float32."""
         n = origins.shape[0]
         if self.embree is None or n == 0:
+            self._require_open()
             return np.zeros(n, dtype=bool)
         if self.record is not None:
             self.record.append(("occluded", origins.copy(), dirs.copy(), None if tfar is None else tfar.copy()))
@@ -99,6 +106,10 @@ class RayTracer:
     def embree_intersect(self, origins: np.ndarray, dirs: np.ndarray, tfar: np.ndarray):
         """Closest mesh hit closer than tfar: (t, mesh index, face, b1, b2), mesh index -1 for none."""
         n = origins.shape[0]
+        if self.embree is None or n == 0:
+            self._require_open()
+            return (np.asarray(tfar, np.float32).copy(), np.full(n, -1), np.full(n, -1), np.zeros(n, np.float32),
+                    np.zeros(n, np.float32))  # fmt: skip
         if self.record is not None:
             self.record.append(("intersect", origins.copy(), dirs.copy(), tfar.copy()))
         start = time.perf_counter()
@@ -132,7 +143,7 @@ class RayTracer:
         ``origins`` is (N, 3), or one (3,) origin shared by every ray (a pinhole camera).
         """
         sel = np.nonzero(needs)[0]
-        if sel.size == 0 or self.embree is None:
+        if sel.size == 0 or not self.mesh_scene:
             return
         tfar = np.where(np.isfinite(t[sel]), t[sel], 3e38).astype(np.float32)
         o = np.asarray(origins)
@@ -161,7 +172,7 @@ class RayTracer:
         )
         blocked, needs = _occluded_analytic_batch(self.arrays, o, d, tm)
         sel = np.nonzero(needs)[0]
-        if sel.size and self.embree is not None:
+        if sel.size and self.mesh_scene:
             tfar = np.where(np.isfinite(tm[sel]), tm[sel], 3e38).astype(np.float32)
             blocked[sel] = self.embree_occluded(o[sel].astype(np.float32), d[sel].astype(np.float32), tfar)
         return blocked
