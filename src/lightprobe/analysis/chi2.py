@@ -182,11 +182,16 @@ def _cell_integrals(pdf: PdfFunc, t0, t1, p0, p1, frame: np.ndarray, order: int,
         dp = (p1[a:b] - p0[a:b])[:, None]
         th = t0[a:b, None] + dt * s[None, :]  # (m, q)
         ph = p0[a:b, None] + dp * s[None, :]
-        tw = dt * w[None, :] * np.sin(th)
+        st, ct, sp, cp = np.sin(th), np.cos(th), np.sin(ph), np.cos(ph)
+        tw = dt * w[None, :] * st
         pw = dp * w[None, :]
-        th_b = np.repeat(th, order, axis=1)  # (m, q*q): theta major
-        ph_b = np.tile(ph, (1, order))
-        dirs = _directions(th_b.reshape(-1), ph_b.reshape(-1), frame)
+        # the q x q nodes of each part, theta major: trigonometry on the q thetas and q phis only (the products are
+        # the same numbers as _directions gives on the expanded grid)
+        local = np.empty((b - a, order, order, 3))
+        local[..., 0] = st[:, :, None] * cp[:, None, :]
+        local[..., 1] = st[:, :, None] * sp[:, None, :]
+        local[..., 2] = ct[:, :, None]
+        dirs = local.reshape(-1, 3) @ frame
         vals = np.asarray(pdf(dirs), dtype=np.float64).reshape(b - a, order, order)
         out[a:b] = np.einsum("mij,mi,mj->m", vals, tw, pw)
     return out
@@ -266,7 +271,7 @@ def spherical_expected(
 
 
 def equal_mass_theta_edges(
-    pdf: PdfFunc, n_rings: int, *, frame=None, n_uniform: int = 64, n_fine: int = 4096, n_phi: int = 256
+    pdf: PdfFunc, n_rings: int, *, frame=None, n_uniform: int = 64, n_fine: int = 4096, n_phi: int = 64
 ) -> np.ndarray:
     """Theta edges of ``n_rings`` rings of (nearly) equal probability about the frame's axis.
 
