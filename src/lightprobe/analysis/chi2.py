@@ -148,12 +148,6 @@ def _angles(dirs: np.ndarray, frame: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return theta, phi
 
 
-def _directions(theta: np.ndarray, phi: np.ndarray, frame: np.ndarray) -> np.ndarray:
-    st = np.sin(theta)
-    local = np.stack([st * np.cos(phi), st * np.sin(phi), np.cos(theta)], axis=-1)
-    return local @ frame
-
-
 def spherical_counts(dirs, theta_edges, phi_edges, *, frame=None) -> np.ndarray:
     """Histogram of unit directions over (theta, phi) cells, shape (len(theta_edges)-1, len(phi_edges)-1)."""
     m = _frame(frame)
@@ -185,8 +179,8 @@ def _cell_integrals(pdf: PdfFunc, t0, t1, p0, p1, frame: np.ndarray, order: int,
         st, ct, sp, cp = np.sin(th), np.cos(th), np.sin(ph), np.cos(ph)
         tw = dt * w[None, :] * st
         pw = dp * w[None, :]
-        # the q x q nodes of each part, theta major: trigonometry on the q thetas and q phis only (the products are
-        # the same numbers as _directions gives on the expanded grid)
+        # the q x q nodes of each part, theta major, as unit vectors (sin t cos p, sin t sin p, cos t) in the
+        # frame: the sines and cosines are taken of the q thetas and the q phis, then multiplied out
         local = np.empty((b - a, order, order, 3))
         local[..., 0] = st[:, :, None] * cp[:, None, :]
         local[..., 1] = st[:, :, None] * sp[:, None, :]
