@@ -19,9 +19,10 @@ import shutil
 import tempfile
 from pathlib import Path
 
-# Numba's default OpenMP layer busy-waits between parallel regions, which slows down the Embree calls that
-# run between our kernels (measured in ../shared/notes/raytracing-measurements.md).  The workqueue layer has no
-# such spinning; it is also always available (TBB/OpenMP may not be).
+# Numba's default OpenMP layer busy-waits between parallel regions, which slows down Embree work that runs
+# between our kernels, such as building a mesh scene (measured in ../shared/notes/raytracing-measurements.md).
+# The workqueue layer has no such spinning; it is also always available (TBB/OpenMP may not be), and it gives
+# numba.get_thread_id(), which the kernels' Embree calls use to pick their scratch row.
 os.environ.setdefault("NUMBA_THREADING_LAYER", "workqueue")
 
 
