@@ -21,8 +21,8 @@ from pathlib import Path
 
 # Numba's default OpenMP layer busy-waits between parallel regions, which slows down Embree work that runs
 # between our kernels, such as building a mesh scene (measured in ../shared/notes/raytracing-measurements.md).
-# The workqueue layer has no such spinning; it is also always available (TBB/OpenMP may not be), and it gives
-# numba.get_thread_id(), which the kernels' Embree calls use to pick their scratch row.
+# The workqueue layer has no such spinning; it is also always available (TBB/OpenMP may not be).  (The kernels'
+# Embree calls pick a scratch row by numba.get_thread_id(), which every layer provides.)
 os.environ.setdefault("NUMBA_THREADING_LAYER", "workqueue")
 
 
