@@ -96,6 +96,8 @@ class EmbreeScene:
     """
 
     def __init__(self, vertices: np.ndarray, faces: np.ndarray, face_start: np.ndarray):
+        self._scene = self._device = None  # so that close() (and __del__) work however far this gets
+        self.handle = 0
         self._device = _lib.rtcNewDevice(None)
         if not self._device:
             raise LightprobeError("Embree could not create a device")
