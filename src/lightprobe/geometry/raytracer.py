@@ -9,8 +9,6 @@ Closest-hit queries take a per-ray ``tfar`` (the nearest analytic hit), so Embre
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 
 from .._numba import jit_parallel, prange
@@ -62,10 +60,7 @@ class RayTracer:
     def __init__(self, arrays: SceneArrays, *, threads: int = 2):
         self.arrays = arrays
         self.threads = max(1, int(threads))
-        self.embree_rays = 0
-        self.embree_seconds = 0.0
-        #: set to a list to keep a copy of every Embree batch: ("occluded" | "intersect", origins, dirs, tfar)
-        self.record: list | None = None
+        self.embree_rays = 0  # rays traced by the batch methods (the render kernels count their own)
         #: the meshes' Embree scene (None without meshes); kernels take ``mesh_scene`` and ``scratch``
         self.embree: EmbreeScene | None = None
         self.scratch = new_scratch()
@@ -94,13 +89,9 @@ class RayTracer:
         if self.embree is None or n == 0:
             self._require_open()
             return np.zeros(n, dtype=bool)
-        if self.record is not None:
-            self.record.append(("occluded", origins.copy(), dirs.copy(), None if tfar is None else tfar.copy()))
-        start = time.perf_counter()
         far = np.full(n, FAR, np.float32) if tfar is None else np.asarray(tfar, np.float32)
         result = occluded_batch(self.mesh_scene, self.scratch, origins, dirs, far)
         self.embree_rays += n
-        self.embree_seconds += time.perf_counter() - start
         return result
 
     def embree_intersect(self, origins: np.ndarray, dirs: np.ndarray, tfar: np.ndarray):
@@ -110,12 +101,8 @@ class RayTracer:
             self._require_open()
             return (np.asarray(tfar, np.float32).copy(), np.full(n, -1), np.full(n, -1), np.zeros(n, np.float32),
                     np.zeros(n, np.float32))  # fmt: skip
-        if self.record is not None:
-            self.record.append(("intersect", origins.copy(), dirs.copy(), tfar.copy()))
-        start = time.perf_counter()
         result = intersect_batch(self.mesh_scene, self.scratch, origins, dirs, np.asarray(tfar, np.float32))
         self.embree_rays += n
-        self.embree_seconds += time.perf_counter() - start
         return result
 
     # --- full queries (NumPy in, NumPy out) ------------------------------------------------------------------------
@@ -145,7 +132,7 @@ class RayTracer:
         sel = np.nonzero(needs)[0]
         if sel.size == 0 or not self.mesh_scene:
             return
-        tfar = np.where(np.isfinite(t[sel]), t[sel], 3e38).astype(np.float32)
+        tfar = np.where(np.isfinite(t[sel]), t[sel], FAR).astype(np.float32)
         o = np.asarray(origins)
         if o.ndim == 1:
             o32 = np.ascontiguousarray(np.broadcast_to(o.astype(np.float32), (sel.size, 3)))
@@ -173,6 +160,6 @@ class RayTracer:
         blocked, needs = _occluded_analytic_batch(self.arrays, o, d, tm)
         sel = np.nonzero(needs)[0]
         if sel.size and self.mesh_scene:
-            tfar = np.where(np.isfinite(tm[sel]), tm[sel], 3e38).astype(np.float32)
+            tfar = np.where(np.isfinite(tm[sel]), tm[sel], FAR).astype(np.float32)
             blocked[sel] = self.embree_occluded(o[sel].astype(np.float32), d[sel].astype(np.float32), tfar)
         return blocked

@@ -821,7 +821,6 @@ def render(
         return shadow_rays
 
     embree_before = tracer.embree_rays
-    embree_seconds_before = tracer.embree_seconds
     counted_before = 0
     start = time.perf_counter()
     with _InterruptAtPassEnd() as interrupt:
@@ -831,7 +830,6 @@ def render(
             if PROFILE is not None:
                 PROFILE.clear()  # the warm-up (and any compiling) is not the render
             embree_before = tracer.embree_rays
-            embree_seconds_before = tracer.embree_seconds
             counted_before = ray_counts.sum()
             stats["setup_seconds"] = time.perf_counter() - t_setup
             start = time.perf_counter()
@@ -858,7 +856,6 @@ def render(
             stats["interrupted"] = True
     stats["seconds"] = time.perf_counter() - start
     stats["embree_rays"] = tracer.embree_rays - embree_before + int(ray_counts.sum() - counted_before)
-    stats["embree_seconds"] = tracer.embree_seconds - embree_seconds_before
     if own_tracer:
         tracer.close()
     return _finish(acc, stats, width, height)
