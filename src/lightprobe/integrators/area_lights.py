@@ -7,11 +7,15 @@ Scenes lit by an environment map alone keep the measured four-stage environment 
    hemisphere directions get their nearest analytic hit (and a flag if a mesh may be nearer); each light slot
    picks a light with the selector (one pick per group of ``n_per_light`` slots, from that group's own random
    dimension, so a pick never shifts the dimensions of other samples) and samples it with the light strategy.
-2. Embree closest hits for the BSDF directions that may reach a mesh.
+2. ``_lights_mesh_hits``: Embree closest hits for the BSDF directions that may reach a mesh.
 3. ``_lights_finish``: a BSDF or hemisphere direction counts the radiance of what it hits: an emitter's (MIS
    weight from p_l x pdf_li of *that* emitter), the environment's if it escapes, nothing if it hits an ordinary
    surface (so it needs no shadow ray).  A light sample casts a shadow ray over the *segment* to the sampled
-   point (tested against analytic shapes here, left for Embree with its ``tfar`` otherwise).
+   point (tested against analytic shapes here, flagged TEST_MESH with its segment's ``tfar`` otherwise).
+4. ``_lights_mesh_shadows``: Embree occlusion for the shadow rays flagged TEST_MESH.
+
+Stages 2 and 4 exist only for scenes with meshes.  They call Embree from inside the kernel, in loops of their own,
+as the environment path does (decisions.md 30).
 
 The estimator of a light slot is the lecture's 1/(KN) sum f L cos / (p_l p(x')), combined with BSDF samples by the
 balance or power heuristic on sample-count-weighted densities (n_bsdf p_bsdf against K N p_l p_li).
@@ -21,6 +25,7 @@ from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 
 from .._numba import jit, jit_parallel, prange
@@ -28,6 +33,8 @@ from ..bsdfs.dispatch import bsdf_eval, bsdf_pdf
 from ..emitters.area import light_intersect, light_pdf, light_radiance, light_sample
 from ..emitters.envmap import env_eval, env_eval_pdf, env_sample
 from ..emitters.selection import select_light, selector_pmf
+from ..geometry.embree import FAR as MESH_FAR
+from ..geometry.embree import closest_mesh_hit, mesh_occluded
 from ..geometry.frame import to_local, to_world
 from ..geometry.intersect import (
     MESH,
@@ -57,7 +64,7 @@ from .techniques import (
     store_shading_frame,
 )
 
-__all__ = ["slot_buffers"]
+__all__ = ["slot_buffers", "stages"]
 
 SLOT_LIGHT = SLOT_ENV  # a light sample: the environment's or an area light's
 
@@ -289,7 +296,7 @@ def _lights_finish(
                     flags[r] = TEST_MESH
                     shadow_o[r, 0], shadow_o[r, 1], shadow_o[r, 2] = qx, qy, qz
                     shadow_d[r, 0], shadow_d[r, 1], shadow_d[r, 2] = wx, wy, wz
-                    shadow_t[r] = tmax if tmax < 3e38 else 3e38
+                    shadow_t[r] = tmax if tmax < MESH_FAR else MESH_FAR
                 else:
                     flags[r] = VISIBLE
                 continue
@@ -328,6 +335,51 @@ def _lights_finish(
             flags[r] = VISIBLE  # the closest hit already decided visibility
 
 
+@jit_parallel
+def _lights_mesh_hits(
+    mesh_scene, scratch, ray_counts, todo, wdir, ray_o, hit_t, hit_kind, hit_index, hit_prim, hit_b1, hit_b2
+):
+    """The slots in ``todo`` (BSDF and hemisphere directions flagged in ``hit_mesh``): the nearest mesh hit, where
+    it is nearer than the analytic one."""
+    for q in prange(todo.shape[0]):
+        r = todo[q]
+        ray_counts[numba.get_thread_id(), 2] += 1
+        far = hit_t[r] if hit_t[r] < np.inf else MESH_FAR
+        mt, mesh, face, mb1, mb2 = closest_mesh_hit(
+            mesh_scene, scratch, ray_o[r, 0], ray_o[r, 1], ray_o[r, 2], wdir[r, 0], wdir[r, 1], wdir[r, 2], far
+        )
+        if mesh >= 0:
+            hit_t[r], hit_kind[r], hit_index[r], hit_prim[r], hit_b1[r], hit_b2[r] = mt, MESH, mesh, face, mb1, mb2
+
+
+@jit_parallel
+def _lights_mesh_shadows(mesh_scene, scratch, ray_counts, todo, shadow_o, shadow_d, shadow_t, flags):
+    """The slots in ``todo`` (shadow rays flagged TEST_MESH), over their segments (0, shadow_t), through Embree:
+    each becomes VISIBLE or BLOCKED."""
+    for q in prange(todo.shape[0]):
+        r = todo[q]
+        ray_counts[numba.get_thread_id(), 1] += 1
+        blocked = mesh_occluded(
+            mesh_scene,
+            scratch,
+            shadow_o[r, 0],
+            shadow_o[r, 1],
+            shadow_o[r, 2],
+            shadow_d[r, 0],
+            shadow_d[r, 1],
+            shadow_d[r, 2],
+            shadow_t[r],
+        )
+        flags[r] = BLOCKED if blocked else VISIBLE
+
+
+#: the slots each Embree stage traces, gathered from the pass buffers before it runs (see wavefront.WORKLISTS)
+WORKLISTS = {
+    _lights_mesh_hits: lambda b: np.flatnonzero(b["hit_mesh"]),
+    _lights_mesh_shadows: lambda b: np.flatnonzero(b["flags"] == TEST_MESH),
+}
+
+
 def slot_buffers(nm: int) -> dict[str, np.ndarray]:
     """The extra per-slot arrays of this path, keyed by kernel parameter name."""
     return {
@@ -340,10 +392,15 @@ def slot_buffers(nm: int) -> dict[str, np.ndarray]:
         "hit_b1": np.empty(nm),
         "hit_b2": np.empty(nm),
         "hit_mesh": np.empty(nm, np.bool_),  # a mesh may be nearer than the analytic hit
-        "shadow_o": np.empty((nm, 3), np.float32),  # shadow rays left for Embree
+        # shadow rays left for Embree, in float32 as Embree stores them
+        "shadow_o": np.empty((nm, 3), np.float32),
         "shadow_d": np.empty((nm, 3), np.float32),
-        "shadow_t": np.empty(nm, np.float32),  # the segment length of a shadow ray left for Embree
+        "shadow_t": np.empty(nm, np.float32),  # the segment's length
     }
 
 
-STAGES = (_lights_setup, _lights_finish)
+def stages(with_meshes: bool) -> tuple:
+    """The kernels of one pass, in order (the Embree stages only for scenes with meshes)."""
+    if with_meshes:
+        return _lights_setup, _lights_mesh_hits, _lights_finish, _lights_mesh_shadows
+    return _lights_setup, _lights_finish

@@ -4,14 +4,15 @@ The image is rendered in *passes*: a pass is a few samples per pixel over a band
 it fits the ``pass_samples`` budget), so memory is bounded by the pass, not by the sample count.  A pass runs as a
 wavefront of kernels:
 
-1. camera rays (box filter with jitter) and their nearest sphere/rectangle hit, and which rays may reach a mesh;
-2. Embree closest hits for those rays only;
-3. shading: for each hit, ``n_bsdf + K n_env`` directions from the chosen strategy, their unoccluded
+1. camera rays (box filter with jitter) and their nearest hit: spheres and rectangles, then meshes through Embree
+   (called from the kernel) for the rays that may reach one;
+2. shading: for each hit, ``n_bsdf + K n_env`` directions from the chosen strategy, their unoccluded
    contributions, and shadow rays (tested against spheres and rectangles on the spot).  Scenes lit by an
    environment map alone shade in the four stages below (their measured fast path); scenes with area lights in
    the stages of :mod:`lightprobe.integrators.area_lights`;
-4. Embree occlusion for the shadow rays that may reach a mesh (with the segment's end for area lights);
-5. accumulation: each pixel's samples are added *in sample order* to a running mean and variance (Welford).
+3. Embree occlusion for the shadow rays that may reach a mesh (with the segment's end for area lights), in a
+   kernel over the list of those rays;
+4. accumulation: each pixel's samples are added *in sample order* to a running mean and variance (Welford).
 
 Every random number is a hash of (seed, pixel, sample index, dimension) and each pixel is accumulated in sample
 order, so the image is bit-identical for any pass size and any thread count.  Camera rays that miss show the
@@ -501,11 +502,10 @@ def _shade_finish(
 # 64 spp, 3.9 M such rays added about 1.1 s to that loop body and take 0.9 s here, where the shading work does not
 # evict Embree's BVH between rays (decisions.md 30).
 @jit_parallel
-def _mesh_shadow_stage(m, mesh_scene, scratch, ray_counts, point, gnormal, wdir, flags):
-    """Shadow rays flagged TEST_MESH, through Embree: each becomes VISIBLE or BLOCKED."""
-    for r in prange(flags.shape[0]):
-        if flags[r] != TEST_MESH:
-            continue
+def _mesh_shadow_stage(m, mesh_scene, scratch, ray_counts, todo, point, gnormal, wdir, flags):
+    """The slots in ``todo`` (shadow rays flagged TEST_MESH), through Embree: each becomes VISIBLE or BLOCKED."""
+    for q in prange(todo.shape[0]):
+        r = todo[q]
         k = r // m
         wx, wy, wz = wdir[r, 0], wdir[r, 1], wdir[r, 2]
         qx, qy, qz = ray_offset(
@@ -513,6 +513,12 @@ def _mesh_shadow_stage(m, mesh_scene, scratch, ray_counts, point, gnormal, wdir,
         )
         ray_counts[numba.get_thread_id(), 1] += 1
         flags[r] = BLOCKED if mesh_occluded(mesh_scene, scratch, qx, qy, qz, wx, wy, wz, MESH_FAR) else VISIBLE
+
+
+# The Embree stages loop over a list of the slots they trace, gathered in NumPy before they run: those slots cluster
+# where the meshes are on screen, and prange hands each thread one contiguous share of the index range, so a loop
+# over every slot gave one thread most of the rays (many-light demo: 97 % of them in the second half).
+WORKLISTS = {_mesh_shadow_stage: lambda b: np.flatnonzero(b["flags"] == TEST_MESH)}
 
 
 @jit_parallel
@@ -742,9 +748,12 @@ def render(
     stages = (_shade_setup, sample_stage, _env_lookup_stage, _shade_finish)
     if tracer.mesh_scene:
         stages += (_mesh_shadow_stage,)
+    worklists = WORKLISTS
     light_constants = {}
     if area_path:
-        from .area_lights import STAGES, slot_buffers
+        from .area_lights import WORKLISTS as AREA_WORKLISTS
+        from .area_lights import slot_buffers
+        from .area_lights import stages as area_stages
 
         lights = scene.light_table()
         has_env = scene.environment is not None
@@ -755,7 +764,8 @@ def render(
         for name in ("env_u", "uv", "epdf"):  # the environment stages' own arrays: this path has no use for them
             del buffers[name]
         buffers.update(slot_buffers(largest_pass * m))
-        stages = STAGES
+        stages = area_stages(bool(tracer.mesh_scene))
+        worklists = AREA_WORKLISTS
         light_constants = {
             "lights": lights,
             "sel": selector,
@@ -791,32 +801,13 @@ def render(
         b = {k: v[: n * m] if v.shape[0] == largest_pass * m else v[:n] for k, v in buffers.items()}
         values = {**constants, **b, "pixel_start": pixel_start, "spp_pass": spp_now, "sample_start": sample_start}
         _launch(_camera_pass, values)
-        if area_path:
-            _launch(stages[0], values)
-            # BSDF directions: the nearest mesh hit, where a mesh may be nearer than the analytic one
-            tracer.add_mesh_hits(
-                b["ray_o"],
-                b["wdir"],
-                b["hit_mesh"],
-                b["hit_t"],
-                b["hit_kind"],
-                b["hit_index"],
-                b["hit_prim"],
-                b["hit_b1"],
-                b["hit_b2"],
-            )
-            _launch(stages[1], values)
-        else:
-            for kernel in stages:
-                _launch(kernel, values)
+        for kernel in stages:
+            if kernel in worklists:
+                values["todo"] = worklists[kernel](b)
+            _launch(kernel, values)
         flags = b["flags"]
         shadow_rays = int(np.count_nonzero(flags))
-        if area_path:  # its shadow rays carry a segment length: traced as one batch
-            test = np.nonzero(flags == TEST_MESH)[0]
-            if test.size:
-                blocked = tracer.embree_occluded(b["shadow_o"][test], b["shadow_d"][test], b["shadow_t"][test])
-                flags[test] = np.where(blocked, BLOCKED, VISIBLE).astype(np.int8)
-        values.update(flags=flags, acc_mean=acc.mean, acc_m2=acc.m2, acc_count=acc.count, acc_nonfinite=acc.nonfinite)
+        values.update(acc_mean=acc.mean, acc_m2=acc.m2, acc_count=acc.count, acc_nonfinite=acc.nonfinite)
         _launch(_accumulate, values)
         return shadow_rays
 
@@ -865,7 +856,9 @@ def kernels_cached() -> bool:
     """Whether the render kernels are in the on-disk cache (else the first render compiles them, ~20-45 s)."""
     from .._numba import is_cached
 
-    return is_cached(_camera_pass, _shade_setup, _env_sample_stage, _env_lookup_stage, _shade_finish, _accumulate)
+    return is_cached(
+        _camera_pass, _shade_setup, _env_sample_stage, _env_lookup_stage, _shade_finish, _mesh_shadow_stage, _accumulate
+    )
 
 
 class _Stop(Exception):
