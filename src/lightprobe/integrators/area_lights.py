@@ -100,7 +100,7 @@ def _lights_setup(
     cam,
     sampler,
     seed,
-    pixel_start,
+    pixels,
     spp_pass,
     sample_start,
     dirs,
@@ -164,7 +164,7 @@ def _lights_setup(
             continue
         ts, tt, ns, wo = load_shading_frame(frame, wo_local, k)
         mk, mp = s.material_kind[material[k]], s.material_params[material[k]]
-        rs = sample_state(sampler, seed, pixel_start + k // spp_pass, sample_start + k % spp_pass)
+        rs = sample_state(sampler, seed, pixels[k // spp_pass], sample_start + k % spp_pass)
         for j in range(m):
             r = base + j
             u0, u1 = uniform_2d(rs, 2 + 3 * j)

@@ -54,6 +54,7 @@ from ..geometry.raytracer import RayTracer
 from ..geometry.scene import Scene
 from ..sampling.mis import mis_weight
 from ..sampling.rng import SAMPLERS, sample_state, uniform, uniform_2d
+from .schedule import pass_pixels
 from .techniques import (
     BLOCKED,
     BRDF,
@@ -196,7 +197,7 @@ def _camera_pass(
     cam,
     sampler,
     seed,
-    pixel_start,
+    pixels,
     spp_pass,
     sample_start,
     mesh_scene,
@@ -214,7 +215,7 @@ def _camera_pass(
     mesh's bounds before its analytic hit."""
     ox, oy, oz = cam[0], cam[1], cam[2]
     for k in prange(dirs.shape[0]):
-        pixel = pixel_start + k // spp_pass
+        pixel = pixels[k // spp_pass]
         rs = sample_state(sampler, seed, pixel, sample_start + k % spp_pass)
         u0, u1 = uniform_2d(rs, 0)
         dx, dy, dz = camera_ray(cam, pixel, u0, u1)
@@ -246,7 +247,7 @@ def _shade_setup(
     cam,
     sampler,
     seed,
-    pixel_start,
+    pixels,
     spp_pass,
     sample_start,
     dirs,
@@ -291,7 +292,7 @@ def _shade_setup(
             continue
         ts, tt, ns, wo = load_shading_frame(frame, wo_local, k)
         mk, mp = s.material_kind[material[k]], s.material_params[material[k]]
-        rs = sample_state(sampler, seed, pixel_start + k // spp_pass, sample_start + k % spp_pass)
+        rs = sample_state(sampler, seed, pixels[k // spp_pass], sample_start + k % spp_pass)
         for j in range(m):
             r = base + j
             u0, u1 = uniform_2d(rs, 2 + 3 * j)
@@ -341,7 +342,7 @@ def _env_resample_stage(
     env_candidates,
     sampler,
     seed,
-    pixel_start,
+    pixels,
     spp_pass,
     sample_start,
     frame,
@@ -368,7 +369,7 @@ def _env_resample_stage(
             continue
         k = r // m
         j = r % m
-        rs = sample_state(sampler, seed, pixel_start + k // spp_pass, sample_start + k % spp_pass)
+        rs = sample_state(sampler, seed, pixels[k // spp_pass], sample_start + k % spp_pass)
         ts, tt, ns, wo = load_shading_frame(frame, wo_local, k)
         mk, mp = s.material_kind[material[k]], s.material_params[material[k]]
         wsum = 0.0
@@ -522,11 +523,11 @@ WORKLISTS = {_mesh_shadow_stage: lambda b: np.flatnonzero(b["flags"] == TEST_MES
 
 
 @jit_parallel
-def _accumulate(direct, contrib, flags, m, spp_pass, pixel_start, acc_mean, acc_m2, acc_count, acc_nonfinite):
+def _accumulate(direct, contrib, flags, m, spp_pass, pixels, acc_mean, acc_m2, acc_count, acc_nonfinite):
     mean, m2, count, nonfinite = acc_mean, acc_m2, acc_count, acc_nonfinite
     n_pixels = direct.shape[0] // spp_pass
     for q in prange(n_pixels):
-        p = pixel_start + q
+        p = pixels[q]
         for j in range(spp_pass):
             k = q * spp_pass + j
             vr, vg, vb = direct[k, 0], direct[k, 1], direct[k, 2]
@@ -799,7 +800,8 @@ def render(
         """One pass over ``count`` pixels x ``spp_now`` samples; returns the number of shadow rays traced."""
         n = count * spp_now
         b = {k: v[: n * m] if v.shape[0] == largest_pass * m else v[:n] for k, v in buffers.items()}
-        values = {**constants, **b, "pixel_start": pixel_start, "spp_pass": spp_now, "sample_start": sample_start}
+        values = {**constants, **b, "spp_pass": spp_now, "sample_start": sample_start}
+        values["pixels"] = pass_pixels(pixel_start, count)
         _launch(_camera_pass, values)
         for kernel in stages:
             if kernel in worklists:
