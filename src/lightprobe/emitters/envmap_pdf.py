@@ -18,10 +18,10 @@ Extra memory: the float32 luminance and cell weights plus the two float64 CDF ta
 from __future__ import annotations
 
 import math
-import mmap
 
 import numpy as np
 
+from .._memory import fresh_array as fresh_table
 from .._numba import jit, jit_parallel, prange
 from ..color import LUMINANCE_WEIGHTS
 from ..sampling.distributions import PiecewiseConstant2D
@@ -147,16 +147,6 @@ def _conditional_cdfs(weights, row_factor, mean, cdf, comp_cdf, integral, comp_i
             run_c += max(v - mean, 0.0) * row_factor[r]
             cdf[r, c + 1] = run / s if s > 0.0 else (c + 1) / n
             comp_cdf[r, c + 1] = run_c / sc if sc > 0.0 else (c + 1) / n
-
-
-def fresh_table(shape: tuple[int, int], dtype) -> np.ndarray:
-    """An uninitialised array in its own anonymous memory map.  NumPy asks the kernel for transparent huge pages
-    on large arrays; with the common ``defrag = madvise`` setting the first touch of each then waits for memory
-    compaction (measured on the 2-core VM: 0.8 s to first-touch a 268 MB table, 0.13 s mapped like this)."""
-    nbytes = int(np.prod(shape)) * np.dtype(dtype).itemsize
-    if nbytes < 1 << 26:
-        return np.empty(shape, dtype)
-    return np.frombuffer(mmap.mmap(-1, nbytes), dtype=dtype).reshape(shape)
 
 
 def build_distributions(

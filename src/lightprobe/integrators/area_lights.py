@@ -28,6 +28,7 @@ import math
 import numba
 import numpy as np
 
+from .._memory import fresh_array
 from .._numba import jit, jit_parallel, prange
 from ..bsdfs.dispatch import bsdf_eval, bsdf_pdf
 from ..emitters.area import light_intersect, light_pdf, light_radiance, light_sample
@@ -383,19 +384,19 @@ WORKLISTS = {
 def slot_buffers(nm: int) -> dict[str, np.ndarray]:
     """The extra per-slot arrays of this path, keyed by kernel parameter name."""
     return {
-        "seg": np.empty(nm),  # distance to the sampled point on an area light (inf: the environment)
-        "ray_o": np.empty((nm, 3)),  # origin of a BSDF direction's ray (offset from the surface)
-        "hit_t": np.empty(nm),  # its nearest hit
-        "hit_kind": np.empty(nm, np.int64),
-        "hit_index": np.empty(nm, np.int64),
-        "hit_prim": np.empty(nm, np.int64),
-        "hit_b1": np.empty(nm),
-        "hit_b2": np.empty(nm),
-        "hit_mesh": np.empty(nm, np.bool_),  # a mesh may be nearer than the analytic hit
+        "seg": fresh_array(nm),  # distance to the sampled point on an area light (inf: the environment)
+        "ray_o": fresh_array((nm, 3)),  # origin of a BSDF direction's ray (offset from the surface)
+        "hit_t": fresh_array(nm),  # its nearest hit
+        "hit_kind": fresh_array(nm, np.int64),
+        "hit_index": fresh_array(nm, np.int64),
+        "hit_prim": fresh_array(nm, np.int64),
+        "hit_b1": fresh_array(nm),
+        "hit_b2": fresh_array(nm),
+        "hit_mesh": fresh_array(nm, np.bool_),  # a mesh may be nearer than the analytic hit
         # shadow rays left for Embree, in float32 as Embree stores them
-        "shadow_o": np.empty((nm, 3), np.float32),
-        "shadow_d": np.empty((nm, 3), np.float32),
-        "shadow_t": np.empty(nm, np.float32),  # the segment's length
+        "shadow_o": fresh_array((nm, 3), np.float32),
+        "shadow_d": fresh_array((nm, 3), np.float32),
+        "shadow_t": fresh_array(nm, np.float32),  # the segment's length
     }
 
 

@@ -37,6 +37,7 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
+from .._memory import fresh_array
 from .._numba import jit_parallel, prange
 from ..bsdfs.dispatch import bsdf_eval, bsdf_pdf
 from ..bsdfs.lambert import LAMBERT
@@ -616,35 +617,36 @@ def _check_material_strategy(scene: Scene, settings: RenderSettings) -> None:
 
 
 def _pass_buffers(n: int, m: int) -> dict[str, np.ndarray]:
-    """Arrays of one pass: ``n`` camera samples, ``m`` shading slots each, keyed by kernel parameter name."""
+    """Arrays of one pass: ``n`` camera samples, ``m`` shading slots each, keyed by kernel parameter name.  (Mapped
+    without huge pages: their first touch, in the first passes, took twice a pass's time with NumPy's.)"""
     nm = n * m
     return {
         # camera samples
-        "dirs": np.empty((n, 3)),  # camera ray directions
-        "t": np.empty(n),  # hit distance (inf: miss)
-        "kind": np.empty(n, np.int64),  # MISS / MESH / SPHERE / RECT
-        "index": np.empty(n, np.int64),  # which mesh, sphere or rectangle
-        "prim": np.empty(n, np.int64),  # mesh face
-        "b1": np.empty(n),  # barycentrics of a mesh hit
-        "b2": np.empty(n),
-        "direct": np.empty((n, 3)),  # radiance seen directly (the environment, for misses)
-        "point": np.empty((n, 3)),  # hit point
-        "gnormal": np.empty((n, 3)),  # geometric normal
-        "frame": np.empty((n, 9)),  # shading frame s, t, n
-        "wo_local": np.empty((n, 3)),  # direction to the viewer, local
-        "material": np.empty(n, np.int64),  # -1: nothing to shade
+        "dirs": fresh_array((n, 3)),  # camera ray directions
+        "t": fresh_array(n),  # hit distance (inf: miss)
+        "kind": fresh_array(n, np.int64),  # MISS / MESH / SPHERE / RECT
+        "index": fresh_array(n, np.int64),  # which mesh, sphere or rectangle
+        "prim": fresh_array(n, np.int64),  # mesh face
+        "b1": fresh_array(n),  # barycentrics of a mesh hit
+        "b2": fresh_array(n),
+        "direct": fresh_array((n, 3)),  # radiance seen directly (the environment, for misses)
+        "point": fresh_array((n, 3)),  # hit point
+        "gnormal": fresh_array((n, 3)),  # geometric normal
+        "frame": fresh_array((n, 9)),  # shading frame s, t, n
+        "wo_local": fresh_array((n, 3)),  # direction to the viewer, local
+        "material": fresh_array(n, np.int64),  # -1: nothing to shade
         # shading slots, r = k m + j
-        "state": np.empty(nm, np.int8),  # SLOT_*: which technique made the direction
-        "wdir": np.empty((nm, 3)),  # direction, world
-        "wloc": np.empty((nm, 3)),  # direction, local
-        "tpdf": np.empty(nm),  # density of the technique that made it
-        "bweight": np.empty((nm, 3)),  # BSDF sample weight
-        "env_u": np.empty((nm, 2)),  # random numbers of environment samples
-        "uv": np.empty((nm, 2)),  # lat-long coordinates of environment samples
-        "radiance": np.empty((nm, 3)),  # environment radiance along the direction
-        "epdf": np.empty(nm),  # environment density of BSDF samples (MIS)
-        "contrib": np.empty((nm, 3)),  # unoccluded contribution
-        "flags": np.empty(nm, np.int8),  # NONE / VISIBLE / TEST_MESH / BLOCKED
+        "state": fresh_array(nm, np.int8),  # SLOT_*: which technique made the direction
+        "wdir": fresh_array((nm, 3)),  # direction, world
+        "wloc": fresh_array((nm, 3)),  # direction, local
+        "tpdf": fresh_array(nm),  # density of the technique that made it
+        "bweight": fresh_array((nm, 3)),  # BSDF sample weight
+        "env_u": fresh_array((nm, 2)),  # random numbers of environment samples
+        "uv": fresh_array((nm, 2)),  # lat-long coordinates of environment samples
+        "radiance": fresh_array((nm, 3)),  # environment radiance along the direction
+        "epdf": fresh_array(nm),  # environment density of BSDF samples (MIS)
+        "contrib": fresh_array((nm, 3)),  # unoccluded contribution
+        "flags": fresh_array(nm, np.int8),  # NONE / VISIBLE / TEST_MESH / BLOCKED
     }
 
 
