@@ -1,8 +1,9 @@
 """Wavefront direct-illumination renderer: an environment map and area lights, BSDF/light/MIS sampling, shadow rays.
 
 The image is rendered in *passes*: a pass is a few samples per pixel over a band of pixels (the whole image when
-it fits the ``pass_samples`` budget), so memory is bounded by the pass, not by the sample count.  A pass runs as a
-wavefront of kernels:
+it fits the ``pass_samples`` budget), so memory is bounded by the pass, not by the sample count.  Its buffers list
+the band's pixels in spread-out blocks (:mod:`lightprobe.integrators.schedule`), so that the threads' shares of
+every kernel hold the same mix of sky and objects.  A pass runs as a wavefront of kernels:
 
 1. camera rays (box filter with jitter) and their nearest hit: spheres and rectangles, then meshes through Embree
    (called from the kernel) for the rays that may reach one;
@@ -519,7 +520,8 @@ def _mesh_shadow_stage(m, mesh_scene, scratch, ray_counts, todo, point, gnormal,
 
 # The Embree stages loop over a list of the slots they trace, gathered in NumPy before they run: those slots cluster
 # where the meshes are on screen, and prange hands each thread one contiguous share of the index range, so a loop
-# over every slot gave one thread most of the rays (many-light demo: 97 % of them in the second half).
+# over every slot gave one thread most of the rays (many-light demo in image order: 97 % of them in the second
+# half).  The spread pixel order of schedule.py evens that out too; the list makes the shares exactly equal.
 WORKLISTS = {_mesh_shadow_stage: lambda b: np.flatnonzero(b["flags"] == TEST_MESH)}
 
 
