@@ -4,7 +4,7 @@ Numba's ``prange`` gives each thread one contiguous share of a loop's range, and
 the pass's buffers, whose entries follow the pass's pixels.  Work is not spread evenly over the image: the sky at
 the top of the frame costs a camera ray and nothing else, the ground and the objects below it cost every shading
 stage (peer scene: 40 % of a pass's live shading slots in its first half, 60 % in its second).  In image order,
-the thread with the lower half idled while the other finished.  So a pass lists its pixels in blocks of ``BLOCK``
+the thread given the top of the frame idled while the other finished.  So a pass lists its pixels in blocks of ``BLOCK``
 consecutive pixels, taken in the order (b x stride) mod blocks, the stride coprime to the number of blocks and
 near blocks / golden ratio: every pixel appears once, and any run of consecutive blocks -- each thread's share --
 is spread over the whole band (a Kronecker sequence).  A pixel's samples keep their random numbers (they depend on
