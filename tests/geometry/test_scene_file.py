@@ -129,7 +129,7 @@ EXTRA_RENDER_KEYS = (
     'heuristic = "power"\nbsdf_samples = 1\nenv_samples = 1\nseed = 3\nmis_compensation = false\nsampler = "sobol"\n'
     "env_candidates = 2\n"
 )
-SKY = '[environment]\nsky = { sun_elevation = 35, sun_azimuth = 45, sun_diameter = 2.0, width = 64, height = 32 }\n'
+SKY = "[environment]\nsky = { sun_elevation = 35, sun_azimuth = 45, sun_diameter = 2.0, width = 64, height = 32 }\n"
 STRING_KEYS = {
     "type",
     "material",
