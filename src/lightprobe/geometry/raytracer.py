@@ -2,7 +2,7 @@
 
 Embree has no per-ray tnear here (callers offset origins, see :func:`lightprobe.geometry.intersect.ray_offset`).
 The render kernels call Embree themselves, one ray at a time; the batch methods below serve everything else
-(area-light paths, masks, tests) with the same calls in a parallel loop.
+(the object-id pass, NumPy callers, tests) with the same calls in a parallel loop.
 
 Closest-hit queries take a per-ray ``tfar`` (the nearest analytic hit), so Embree only reports closer triangles.
 """

@@ -817,7 +817,6 @@ def render(
         _launch(_accumulate, values)
         return shadow_rays
 
-    embree_before = tracer.embree_rays
     counted_before = 0
     start = time.perf_counter()
     with _InterruptAtPassEnd() as interrupt:
@@ -826,7 +825,6 @@ def render(
             run_pass(Accumulator(n_pixels), 0, 1, 1, 0)
             if PROFILE is not None:
                 PROFILE.clear()  # the warm-up (and any compiling) is not the render
-            embree_before = tracer.embree_rays
             counted_before = ray_counts.sum()
             stats["setup_seconds"] = time.perf_counter() - t_setup
             start = time.perf_counter()
@@ -852,7 +850,7 @@ def render(
         except KeyboardInterrupt:
             stats["interrupted"] = True
     stats["seconds"] = time.perf_counter() - start
-    stats["embree_rays"] = tracer.embree_rays - embree_before + int(ray_counts.sum() - counted_before)
+    stats["embree_rays"] = int(ray_counts.sum() - counted_before)  # every Embree call of a render is in a kernel
     if own_tracer:
         tracer.close()
     return _finish(acc, stats, width, height)
