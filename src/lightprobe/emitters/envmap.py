@@ -53,13 +53,14 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .._memory import fresh_array
 from .._numba import jit, jit_inline, jit_parallel, prange
 from ..errors import ImageError, ParameterError, warn_once
 from ..sampling.distributions import invert_2d, pdf_2d, sample_2d
 from ..sampling.kernels import TWO_PI
 from . import mappings
 from .envmap_bilinear import bilinear_invert, bilinear_pdf, bilinear_sample, build_bilinear
-from .envmap_pdf import build_distributions, fresh_table, luminance_f32
+from .envmap_pdf import build_distributions, luminance_f32
 from .mappings import bilinear_latlong, direction_to_latlong, nearest_latlong
 
 __all__ = ["EnvKernel", "EnvironmentMap"]
@@ -428,7 +429,7 @@ class EnvironmentMap:
             self.pdf_resolution = 1
             self.cos_edges = _cos_edges(h)
             sines, self.distribution, self.compensated_distribution = build_bilinear(
-                lum, self.mean_luminance, fresh_table
+                lum, self.mean_luminance, fresh_array
             )
             tables = (
                 self.distribution.marginal,

@@ -21,13 +21,13 @@ import math
 
 import numpy as np
 
-from .._memory import fresh_array as fresh_table
+from .._memory import fresh_array
 from .._numba import jit, jit_parallel, prange
 from ..color import LUMINANCE_WEIGHTS
 from ..sampling.distributions import PiecewiseConstant2D
 from .mappings import bilinear_latlong_weights
 
-__all__ = ["WEIGHT_MODES", "build_distributions", "fresh_table", "luminance_f32"]
+__all__ = ["WEIGHT_MODES", "build_distributions", "luminance_f32"]
 
 #: how a PDF cell's weight is computed from the luminance (see the ``pdf_weights`` option of EnvironmentMap)
 WEIGHT_MODES = {"bilinear": 0, "texel": 1, "blur": 2}
@@ -43,7 +43,7 @@ def _luminance(image, weights, out):
 
 def luminance_f32(image: np.ndarray) -> np.ndarray:
     """Luminance (H, W) float32 of a float32 RGB image, without float64 temporaries."""
-    out = fresh_table(image.shape[:2], np.float32)
+    out = fresh_array(image.shape[:2], np.float32)
     _luminance(image, LUMINANCE_WEIGHTS, out)
     return out
 
@@ -163,12 +163,12 @@ def build_distributions(
     k = max(1, 4 // f)
     vi, vw = _hat_taps(rows, h, k, "v")
     ui, uw = _hat_taps(cols, w, k, "u")
-    weights = fresh_table((rows, cols), np.float32)
+    weights = fresh_array((rows, cols), np.float32)
     row_sums = np.empty(rows)
     _cell_weights(lum, f, WEIGHT_MODES[mode], vi, vw, ui, uw, _SUPPORT_BLUR, cell_solid_angle, weights, row_sums)
     mean = float(row_sums.sum()) / (4.0 * math.pi)
-    cdf = fresh_table((rows, cols + 1), np.float64)
-    comp_cdf = fresh_table((rows, cols + 1), np.float64)
+    cdf = fresh_array((rows, cols + 1), np.float64)
+    comp_cdf = fresh_array((rows, cols + 1), np.float64)
     integral = np.empty(rows)
     comp_integral = np.empty(rows)
     _conditional_cdfs(
