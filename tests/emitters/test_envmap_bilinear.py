@@ -9,7 +9,13 @@ import pytest
 
 from lightprobe.color import LUMINANCE_WEIGHTS
 from lightprobe.emitters.envmap import EnvironmentMap
-from lightprobe.emitters.envmap_bilinear import node_sines
+from lightprobe.emitters.envmap_bilinear import (
+    SMALL_ANGLE_COLUMNS,
+    SMALL_ANGLE_ROWS,
+    angle_tables,
+    node_sines,
+    sample_angles,
+)
 from lightprobe.emitters.procedural import sky_with_sun
 from lightprobe.errors import ParameterError
 
@@ -27,6 +33,25 @@ def test_node_sines_are_hat_means_of_sin_theta():
         assert s[j] == pytest.approx(np.trapezoid(hat * np.sin(np.pi * v), v) / np.trapezoid(hat, v), rel=1e-6)
     assert node_sines(2) == pytest.approx([2 / np.pi, 2 / np.pi])  # a two-row map keeps a density at its poles
     assert node_sines(1).shape == (2,)
+
+
+@pytest.mark.parametrize(("ny", "w"), [(SMALL_ANGLE_ROWS, SMALL_ANGLE_COLUMNS), (512, 1024), (4096, 8192)])
+def test_sample_angles_are_libms_to_rounding(ny, w):
+    """A sample's angles from the node tables and small-angle polynomials (no libm in the kernel) agree with
+    cos(theta), sin(phi), cos(phi) computed directly, to within the rounding of the angle itself (phi up to 2 pi:
+    2e-15), at the smallest tables the renderer uses them for and at 8K; the 0.05-rad bound on the small angle is
+    what the thresholds guarantee."""
+    assert np.pi / (SMALL_ANGLE_ROWS - 1) <= 0.05 and 2 * np.pi / SMALL_ANGLE_COLUMNS <= 0.05
+    rows, columns = angle_tables(ny, w)
+    rng = np.random.default_rng(5)
+    for _ in range(2000):
+        row, column = int(rng.integers(ny - 1)), int(rng.integers(w))
+        t, tx = rng.random(2)
+        t, tx = (1.0, 1.0) if _ == 0 else (t, tx)  # the cells' far corners: the largest small angles
+        cos_theta, sin_phi, cos_phi = sample_angles(rows, columns, row, t, column, tx)
+        theta, phi = np.pi * (row + t) / (ny - 1), 2 * np.pi * (column + 0.5 + tx) / w
+        assert abs(cos_theta - np.cos(theta)) < 2e-15
+        assert abs(sin_phi - np.sin(phi)) < 2e-15 and abs(cos_phi - np.cos(phi)) < 2e-15
 
 
 @pytest.mark.parametrize("rotation", [None, 37.0])

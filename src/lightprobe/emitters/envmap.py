@@ -59,7 +59,16 @@ from ..errors import ImageError, ParameterError, warn_once
 from ..sampling.distributions import invert_2d, pdf_2d, sample_2d
 from ..sampling.kernels import TWO_PI
 from . import mappings
-from .envmap_bilinear import bilinear_invert, bilinear_pdf, bilinear_sample, build_bilinear
+from .envmap_bilinear import (
+    SMALL_ANGLE_COLUMNS,
+    SMALL_ANGLE_ROWS,
+    angle_tables,
+    bilinear_invert,
+    bilinear_pdf,
+    bilinear_sample,
+    build_bilinear,
+    sample_angles,
+)
 from .envmap_pdf import build_distributions, luminance_f32
 from .mappings import bilinear_latlong, direction_to_latlong, nearest_latlong
 
@@ -91,6 +100,8 @@ class EnvKernel(NamedTuple):
     luminance: np.ndarray  # (H, W) float32, unscaled
     node_sines: np.ndarray  # (NY,)
     comp_offset: float  # luminance subtracted by the compensated density
+    row_angles: np.ndarray  # (NY, 2) cos, sin of the node rows' theta (envmap_bilinear.angle_tables)
+    column_angles: np.ndarray  # (W, 2) cos, sin of the columns' phi
 
 
 # --- kernels ------------------------------------------------------------------------------------------------------
@@ -155,11 +166,18 @@ def env_sample_full(k, compensated, u0, u1):
     :func:`env_radiance_at_sample` needs to look the radiance up without converting the direction back."""
     mc, cc = _cdfs(k, compensated)
     if k.mode == BILINEAR_PDF:
-        x, y, p = bilinear_sample(k.luminance, k.node_sines, _offset(k, compensated), cc, mc, u0, u1)
+        x, y, p, column, tx, node_row, t = bilinear_sample(
+            k.luminance, k.node_sines, _offset(k, compensated), cc, mc, u0, u1
+        )
         x += 0.5 / k.luminance.shape[1]  # node i sits at the lookup's column centre u = (i + 0.5) / W
         if x >= 1.0:
             x -= 1.0
         row = 0  # unused: the density is per (u, v), converted like pbrt's
+        if k.row_angles.shape[0] >= SMALL_ANGLE_ROWS and k.column_angles.shape[0] >= SMALL_ANGLE_COLUMNS:
+            cos_theta, sin_phi, cos_phi = sample_angles(k.row_angles, k.column_angles, node_row, t, column, tx)
+            sin_theta = math.sqrt(max(0.0, (1.0 - cos_theta) * (1.0 + cos_theta)))
+            wx, wy, wz = _mat_vec(k.to_world, sin_phi * sin_theta, cos_theta, -cos_phi * sin_theta)
+            return wx, wy, wz, _cell_pdf(k, p, row, sin_theta), x, y, cos_theta
         cos_theta = math.cos(math.pi * y)
     else:
         x, y, p, _, row = sample_2d(mc, cc, u0, u1)
@@ -438,10 +456,12 @@ class EnvironmentMap:
                 self.compensated_distribution.row_sums,
             )
             comp_offset = self.compensated_distribution.offset
+            row_angles, column_angles = angle_tables(sines.shape[0], w)
         else:
             self._build_piecewise_constant(lum, pdf_weights, pdf_resolution)
             tables = (*self.distribution.kernel_arrays(), *self.compensated_distribution.kernel_arrays())
             sines, comp_offset = np.zeros(2), 0.0
+            row_angles, column_angles = np.zeros((2, 2)), np.zeros((1, 2))
         self._kernel = EnvKernel(
             image if scale == 1.0 else image * np.float32(scale),  # no copy of a large map when unscaled
             np.ascontiguousarray(self.to_world.T),
@@ -453,6 +473,8 @@ class EnvironmentMap:
             lum,
             sines,
             float(comp_offset),
+            row_angles,
+            column_angles,
         )
 
     def _build_piecewise_constant(self, lum, pdf_weights, pdf_resolution):
