@@ -65,7 +65,7 @@ def run_one(args) -> dict:
     settings = RenderSettings(
         spp=args.spp,
         strategy=args.strategy,
-        heuristic=args.heuristic,
+        heuristic=args.heuristic,  # None: the renderer's default
         seed=args.seed,
         threads=args.threads,
         sampler=args.sampler,
@@ -90,10 +90,10 @@ def run_one(args) -> dict:
         "mesh": args.mesh or "blob (98k triangles)",
         "triangles": stats["triangles"],
         "strategy": args.strategy,
-        "heuristic": args.heuristic,
+        "heuristic": stats["heuristic"],
         "sampler": args.sampler,
         "mis_compensation": stats["mis_compensation"],
-        "bsdf_samples": args.bsdf_samples,
+        "bsdf_samples": stats["n_bsdf"],
         "env_samples": args.env_samples,
         "env_candidates": args.env_candidates,
         "env_pdf": [scene.environment.pdf_mode, scene.environment.pdf_weights, scene.environment.pdf_resolution],
@@ -127,11 +127,11 @@ def main(argv=None) -> int:
     parser.add_argument("--spp", type=int, help="samples per pixel (default: 16, 64, 256 in separate processes)")
     parser.add_argument("--res", type=int, default=512)
     parser.add_argument("--strategy", default="mis")
-    parser.add_argument("--heuristic", default="power")
+    parser.add_argument("--heuristic", help="balance or power [the renderer's default]")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--sampler", default="sobol", help="sobol or independent")
     parser.add_argument("--mis-compensation", choices=["auto", "on", "off"], default="auto")
-    parser.add_argument("--bsdf-samples", type=int, default=1)
+    parser.add_argument("--bsdf-samples", type=int, help="BSDF samples per camera sample [the renderer's default]")
     parser.add_argument("--env-samples", type=int, default=1)
     parser.add_argument("--env-candidates", type=int, default=1, help="RIS candidates per environment sample")
     parser.add_argument("--threads", type=int)
@@ -165,19 +165,19 @@ def main(argv=None) -> int:
             str(args.res),
             "--strategy",
             args.strategy,
-            "--heuristic",
-            args.heuristic,
             "--seed",
             str(args.seed),
             "--sampler",
             args.sampler,
-            "--bsdf-samples",
-            str(args.bsdf_samples),
             "--env-samples",
             str(args.env_samples),
             "--mis-compensation",
             args.mis_compensation,
         ]
+        if args.heuristic:
+            cmd += ["--heuristic", args.heuristic]
+        if args.bsdf_samples is not None:
+            cmd += ["--bsdf-samples", str(args.bsdf_samples)]
         if args.threads:
             cmd += ["--threads", str(args.threads)]
         if args.reference:

@@ -67,8 +67,14 @@ def render_command(
     strategy: Annotated[
         str | None, typer.Option(help="uniform, cosine, brdf, env (light sampling) or mis [mis].")
     ] = None,
-    heuristic: Annotated[str | None, typer.Option(help="MIS heuristic: balance or power [power].")] = None,
-    bsdf_samples: Annotated[int | None, typer.Option(help="BSDF samples per camera sample [1].")] = None,
+    heuristic: Annotated[
+        str | None,
+        typer.Option(help="MIS heuristic: balance or power [balance if only an environment lights the scene]."),
+    ] = None,
+    bsdf_samples: Annotated[
+        int | None,
+        typer.Option(help="BSDF samples per camera sample [2 for MIS if only an environment lights it, else 1]."),
+    ] = None,
     env_samples: Annotated[
         int | None, typer.Option("--env-samples", "--light-samples", help="Samples per picked light, N [1].")
     ] = None,

@@ -106,6 +106,29 @@ def test_automatic_compensation_is_per_material():
     assert not np.array_equal(images["sphere", None], images["sphere", True])
 
 
+def test_automatic_sample_allocation_and_heuristic():
+    """n_bsdf=None and heuristic=None (decisions.md 33): 2 BSDF samples and the balance heuristic for MIS where an
+    environment map is the only light, 1 and power with area lights; other strategies take 1 BSDF-slot; given
+    values are kept.  The stats report what was used, and an automatic render is the explicit one, bit for bit."""
+    env_scene = small_scene((6, 4))
+    lit = small_scene((6, 4))
+    lit.add(Rectangle([-0.5, 3, -0.5], [1, 0, 0], [0, 0, 1]), None, emission=5.0, name="panel")
+
+    def used(scene, **options):
+        stats = render(scene, RenderSettings(spp=1, **options)).stats
+        return stats["n_bsdf"], stats["heuristic"]
+
+    assert used(env_scene) == (2, "balance")
+    assert used(lit) == (1, "power")
+    assert used(env_scene, strategy="brdf") == (1, "balance")
+    assert used(env_scene, n_bsdf=1, heuristic="power") == (1, "power")
+    assert used(lit, n_bsdf=2, heuristic="balance") == (2, "balance")
+    auto = render(env_scene, RenderSettings(spp=4, seed=5)).image
+    explicit = render(env_scene, RenderSettings(spp=4, seed=5, n_bsdf=2, heuristic="balance")).image
+    np.testing.assert_array_equal(auto, explicit)
+    assert not np.array_equal(auto, render(env_scene, RenderSettings(spp=4, seed=5, n_bsdf=1)).image)
+
+
 @pytest.fixture(scope="module")
 def reference():
     return render(small_scene(), RenderSettings(spp=4096, strategy="mis", seed=12345))

@@ -32,7 +32,7 @@ PRESETS = {
     "cosine": {"strategy": "cosine"},
     "brdf": {"strategy": "brdf"},
     "env": {"strategy": "env"},
-    "mis": {"strategy": "mis", "heuristic": "power"},
+    "mis": {"strategy": "mis"},  # the renderer's defaults
     "mis-power": {"strategy": "mis", "heuristic": "power"},
     "mis-balance": {"strategy": "mis", "heuristic": "balance"},
     "mis-compensated": {"strategy": "mis", "mis_compensation": True},

@@ -77,8 +77,8 @@ Example (every key shown; optional ones have their default)::
     [render]                            # optional defaults for `lightprobe render` (options override them)
     spp = 64
     strategy = "mis"
-    heuristic = "power"
-    bsdf_samples = 1
+    heuristic = "balance"               # default: balance with an environment map alone, else power
+    bsdf_samples = 2                    # default: 2 for MIS with an environment map alone, else 1
     env_samples = 1                     # light samples per chosen light (N)
     seed = 0
     sampler = "sobol"                   # sobol (Owen-scrambled Sobol') | independent
