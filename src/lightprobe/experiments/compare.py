@@ -23,7 +23,7 @@ import numpy as np
 from ..analysis import metrics
 from ..errors import LightprobeError
 from ..geometry.scene import Scene
-from ..integrators.wavefront import RenderSettings, render, result_from
+from ..integrators.wavefront import RenderSettings, render, result_from, settings_for
 
 __all__ = ["PRESETS", "StrategyRun", "compare", "parse_strategy"]
 
@@ -120,6 +120,7 @@ def run_strategy(
     done = 0
     spent = 0.0
     target = 1
+    settings = settings_for(scene, settings)  # the report states the allocation and heuristic actually used
     run = StrategyRun(label, settings, np.zeros((height, width, 3), np.float32), np.zeros((height, width, 3)))
     # short passes in time mode, so that the budget is met within a pass of a few milliseconds
     pass_samples = max(width * height, 1 << 15) if equal == "time" else settings.pass_samples

@@ -74,7 +74,16 @@ from .techniques import (
     store_shading_frame,
 )
 
-__all__ = ["STRATEGIES", "Accumulator", "RenderResult", "RenderSettings", "kernels_cached", "render", "result_from"]
+__all__ = [
+    "STRATEGIES",
+    "Accumulator",
+    "RenderResult",
+    "RenderSettings",
+    "kernels_cached",
+    "render",
+    "result_from",
+    "settings_for",
+]
 
 HEURISTICS = {"balance": 1.0, "power": 2.0}
 DIFFUSE = "diffuse"  # mis_compensation's automatic choice: the compensated PDF on Lambertian materials only
@@ -629,6 +638,15 @@ def _placeholder_environment():
     return EnvironmentMap.from_array(constant(1.0, width=2, height=1), source="none")
 
 
+def _takes_area_path(scene: Scene, settings: RenderSettings) -> bool:
+    return bool(scene.emitters) or scene.environment is None or settings.lights_per_sample > 1
+
+
+def settings_for(scene: Scene, settings: RenderSettings) -> RenderSettings:
+    """``settings`` with the automatic choices made as :func:`render` makes them for ``scene``."""
+    return settings.resolved(environment_only=not _takes_area_path(scene, settings))
+
+
 def _check_material_strategy(scene: Scene, settings: RenderSettings) -> None:
     if settings.strategy == "mis":
         for name, bsdf in scene.materials.items():
@@ -723,7 +741,7 @@ def render(
     n_pixels = width * height
     # scenes lit by an environment map alone keep its measured fast path (decisions.md 12); any emitter, no
     # environment, or several light picks per sample take the general area-light path
-    area_path = bool(scene.emitters) or scene.environment is None or settings.lights_per_sample > 1
+    area_path = _takes_area_path(scene, settings)
     settings = settings.resolved(environment_only=not area_path)
     m = settings.shading_samples
     spp_pass = max(1, min(settings.spp, settings.pass_samples // n_pixels))
