@@ -175,10 +175,9 @@ def env_sample_full(k, compensated, u0, u1):
         row = 0  # unused: the density is per (u, v), converted like pbrt's
         if k.row_angles.shape[0] >= SMALL_ANGLE_ROWS and k.column_angles.shape[0] >= SMALL_ANGLE_COLUMNS:
             cos_theta, sin_phi, cos_phi = sample_angles(k.row_angles, k.column_angles, node_row, t, column, tx)
-            sin_theta = math.sqrt(max(0.0, (1.0 - cos_theta) * (1.0 + cos_theta)))
-            wx, wy, wz = _mat_vec(k.to_world, sin_phi * sin_theta, cos_theta, -cos_phi * sin_theta)
-            return wx, wy, wz, _cell_pdf(k, p, row, sin_theta), x, y, cos_theta
-        cos_theta = math.cos(math.pi * y)
+        else:
+            cos_theta = math.cos(math.pi * y)
+            sin_phi, cos_phi = math.sin(TWO_PI * x), math.cos(TWO_PI * x)
     else:
         x, y, p, _, row = sample_2d(mc, cc, u0, u1)
         h = mc.shape[0] - 1
@@ -189,10 +188,9 @@ def env_sample_full(k, compensated, u0, u1):
             cos_theta = c0 - t * (c0 - k.cos_edges[row + 1])
         else:
             cos_theta = math.cos(math.pi * y)
+        sin_phi, cos_phi = math.sin(TWO_PI * x), math.cos(TWO_PI * x)
     sin_theta = math.sqrt(max(0.0, (1.0 - cos_theta) * (1.0 + cos_theta)))
-    phi = TWO_PI * x
-    ex, ey, ez = math.sin(phi) * sin_theta, cos_theta, -math.cos(phi) * sin_theta
-    wx, wy, wz = _mat_vec(k.to_world, ex, ey, ez)
+    wx, wy, wz = _mat_vec(k.to_world, sin_phi * sin_theta, cos_theta, -cos_phi * sin_theta)
     return wx, wy, wz, _cell_pdf(k, p, row, sin_theta), x, y, cos_theta
 
 

@@ -89,6 +89,9 @@ HEURISTICS = {"balance": 1.0, "power": 2.0}
 DIFFUSE = "diffuse"  # mis_compensation's automatic choice: the compensated PDF on Lambertian materials only
 
 
+_AUTO_BSDF_SAMPLES = 2  # n_bsdf=None under MIS in scenes lit by an environment map alone (decisions.md 33)
+
+
 @dataclass(frozen=True)
 class RenderSettings:
     """How to render.  ``spp`` camera samples per pixel; see the module docstring for the strategies."""
@@ -193,8 +196,6 @@ class RenderSettings:
         heuristic = self.heuristic if self.heuristic is not None else ("balance" if environment_only else "power")
         return replace(self, n_bsdf=n_bsdf, heuristic=heuristic)
 
-
-_AUTO_BSDF_SAMPLES = 2  # n_bsdf=None under MIS in scenes lit by an environment map alone
 
 _KINDS = {"integer": numbers.Integral, "number": numbers.Real, "string": str, "true or false": bool}
 
@@ -742,7 +743,7 @@ def render(
     # scenes lit by an environment map alone keep its measured fast path (decisions.md 12); any emitter, no
     # environment, or several light picks per sample take the general area-light path
     area_path = _takes_area_path(scene, settings)
-    settings = settings.resolved(environment_only=not area_path)
+    settings = settings_for(scene, settings)
     m = settings.shading_samples
     spp_pass = max(1, min(settings.spp, settings.pass_samples // n_pixels))
     band = max(1, min(n_pixels, settings.pass_samples // spp_pass))
