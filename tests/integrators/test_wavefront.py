@@ -127,6 +127,10 @@ def test_automatic_sample_allocation_and_heuristic():
     explicit = render(env_scene, RenderSettings(spp=4, seed=5, n_bsdf=2, heuristic="balance")).image
     np.testing.assert_array_equal(auto, explicit)
     assert not np.array_equal(auto, render(env_scene, RenderSettings(spp=4, seed=5, n_bsdf=1)).image)
+    # the 64-slot limit applies to the counts actually used: 1 + 63 is fine with area lights, 2 + 63 is not
+    assert used(lit, n_env=63) == (1, "power")
+    with pytest.raises(ParameterError, match="got 2 and 63"):
+        render(env_scene, RenderSettings(spp=1, n_env=63))
 
 
 @pytest.fixture(scope="module")

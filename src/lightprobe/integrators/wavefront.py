@@ -143,7 +143,7 @@ class RenderSettings:
             raise ParameterError(f"heuristic must be one of {list(HEURISTICS)}, got {self.heuristic!r}")
         if self.spp < 1:
             raise ParameterError(f"spp must be an integer >= 1, got {self.spp!r}")
-        n_bsdf = _AUTO_BSDF_SAMPLES if self.n_bsdf is None else self.n_bsdf
+        n_bsdf = 1 if self.n_bsdf is None else self.n_bsdf  # automatic: at least 1 (render re-checks the choice)
         if n_bsdf < 0 or self.n_env < 0 or n_bsdf + self.n_env < 1 or n_bsdf + self.n_env > 64:
             raise ParameterError(
                 f"bsdf and env sample counts (n_bsdf, n_env) must be >= 0 with 1 to 64 in all, got {n_bsdf} "
@@ -182,8 +182,9 @@ class RenderSettings:
 
     @property
     def shading_samples(self) -> int:
-        """Shading slots per camera sample (with ``n_bsdf``'s automatic value counted as its largest, 2)."""
-        return (_AUTO_BSDF_SAMPLES if self.n_bsdf is None else self.n_bsdf) + self.light_samples
+        """Shading slots per camera sample (``n_bsdf``'s automatic value counted as its smallest, 1, until
+        :meth:`resolved` makes it concrete)."""
+        return (1 if self.n_bsdf is None else self.n_bsdf) + self.light_samples
 
     def resolved(self, environment_only: bool) -> RenderSettings:
         """These settings with the automatic choices made, for a scene lit by an environment map alone or not.
@@ -744,6 +745,7 @@ def render(
     # environment, or several light picks per sample take the general area-light path
     area_path = _takes_area_path(scene, settings)
     settings = settings_for(scene, settings)
+    settings.validate()  # the automatic choices may take the sample counts past 64
     m = settings.shading_samples
     spp_pass = max(1, min(settings.spp, settings.pass_samples // n_pixels))
     band = max(1, min(n_pixels, settings.pass_samples // spp_pass))
