@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 
 from lightprobe.bsdfs import Lambert
-from lightprobe.integrators.techniques import BRDF, COSINE, SLOT_BSDF, SLOT_HEMI, sample_direction
+from lightprobe.integrators.techniques import BRDF, COSINE, MIS, SLOT_BSDF, SLOT_HEMI, sample_direction, technique_slot
 from lightprobe.sampling.kernels import cosine_hemisphere_to_square
-from lightprobe.sampling.rng import SAMPLERS, sample_state, uniform
+from lightprobe.sampling.rng import SAMPLERS, sample_state, uniform, uniform_2d
 
 WO = (0.3, -0.2, np.sqrt(1.0 - 0.13))
 
@@ -51,3 +51,39 @@ def test_the_net_check_can_fail():
     mixed = _slot_points(BRDF)
     mixed[:, 1] = _slot_points(BRDF, slot=2)[:, 1]  # coordinates of two different pairs
     assert not _is_net(mixed)
+
+
+def _group_points(n_bsdf, n_env, group, camera_samples, pixel=7, sampler="sobol"):
+    """The 2D numbers behind every slot of one technique (``group``: "bsdf" or "env") in camera samples
+    0 .. camera_samples - 1 of one pixel, in sample order, as the renderer's shading setup takes them."""
+    slots = range(n_bsdf) if group == "bsdf" else range(n_bsdf, n_bsdf + n_env)
+    points = []
+    for i in range(camera_samples):
+        rs = sample_state(SAMPLERS[sampler], 3, pixel, i)
+        for j in slots:
+            rj, slot = technique_slot(rs, MIS, n_bsdf, n_env, j)
+            points.append(uniform_2d(rj, 2 + 3 * slot))
+    return np.array(points)
+
+
+def test_slots_of_one_technique_share_one_stratified_set():
+    # MIS with 2 (or 4) BSDF samples per camera sample: a pixel's 128 x 2 (64 x 4) BSDF directions are one
+    # (0, 8, 2)-net, not two (four) smaller nets side by side; likewise 2 environment samples
+    assert _is_net(_group_points(2, 1, "bsdf", 128))
+    assert _is_net(_group_points(4, 1, "bsdf", 64))
+    assert _is_net(_group_points(2, 2, "env", 128))
+    # one slot per group: the slot's own sequence, as before grouping
+    single = _group_points(1, 1, "env", 256)
+    rs = [sample_state(SAMPLERS["sobol"], 3, 7, i) for i in range(256)]
+    assert np.array_equal(single, np.array([uniform_2d(r, 2 + 3 * 1) for r in rs]))
+
+
+def test_slots_side_by_side_are_not_one_net():
+    # negative control: each slot with its own pair (the layout before grouping) gives two 128-nets, which
+    # together fail the 256-point check; the independent sampler keeps exactly that layout
+    rs = [sample_state(SAMPLERS["sobol"], 3, 7, i) for i in range(128)]
+    side_by_side = np.array([uniform_2d(r, 2 + 3 * j) for r in rs for j in range(2)])
+    assert not _is_net(side_by_side)
+    independent = _group_points(2, 1, "bsdf", 4, sampler="independent")
+    rs = [sample_state(SAMPLERS["independent"], 3, 7, i) for i in range(4)]
+    assert np.array_equal(independent, np.array([uniform_2d(r, 2 + 3 * j) for r in rs for j in range(2)]))

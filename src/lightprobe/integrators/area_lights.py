@@ -48,7 +48,7 @@ from ..geometry.intersect import (
     ray_offset,
 )
 from ..sampling.mis import mis_weight
-from ..sampling.rng import sample_state, uniform, uniform_2d
+from ..sampling.rng import SOBOL, group_slot, sample_state, uniform, uniform_2d
 from .techniques import (
     BLOCKED,
     BRDF,
@@ -63,6 +63,7 @@ from .techniques import (
     load_shading_frame,
     sample_direction,
     store_shading_frame,
+    technique_slot,
 )
 
 __all__ = ["slot_buffers", "stages"]
@@ -84,11 +85,18 @@ def emitter_of(s, kind, index, prim):
 
 
 @jit
-def _light_slot(n_bsdf, n_per_light, strategy, j):
-    """The slot whose random dimension picks the light for light slot j (the first of its group)."""
+def _pick_slot(state, n_bsdf, n_per_light, m, strategy, j):
+    """The (sample state, slot) whose 1D number picks the light for light slot j: under ``sobol`` the K picks of a
+    camera sample are one stratified group (``sampling.rng.group_slot``), under ``independent`` the first slot of
+    j's ``n_per_light`` takes it."""
     if strategy == MIS:
-        return n_bsdf + ((j - n_bsdf) // n_per_light) * n_per_light
-    return j
+        first, g, picks = n_bsdf, (j - n_bsdf) // n_per_light, (m - n_bsdf) // n_per_light
+        if state[0] == SOBOL:
+            return group_slot(state, first, picks, g)
+        return state, first + g * n_per_light
+    if state[0] == SOBOL:
+        return group_slot(state, 0, m, j)
+    return state, j
 
 
 @jit_parallel
@@ -168,13 +176,14 @@ def _lights_setup(
         rs = sample_state(sampler, seed, pixels[k // spp_pass], sample_start + k % spp_pass)
         for j in range(m):
             r = base + j
-            u0, u1 = uniform_2d(rs, 2 + 3 * j)
+            rj, slot = technique_slot(rs, strategy, n_bsdf, m - n_bsdf, j)
+            u0, u1 = uniform_2d(rj, 2 + 3 * slot)
             technique = strategy
             if strategy == MIS:
                 technique = BRDF if j < n_bsdf else ENV
             if technique == ENV:
-                picker = _light_slot(n_bsdf, n_per_light, strategy, j)
-                light, pmf = select_light(sel, p[0], p[1], p[2], ng[0], ng[1], ng[2], uniform(rs, 4 + 3 * picker))
+                rp, picker = _pick_slot(rs, n_bsdf, n_per_light, m, strategy, j)
+                light, pmf = select_light(sel, p[0], p[1], p[2], ng[0], ng[1], ng[2], uniform(rp, 4 + 3 * picker))
                 if light < 0 or pmf <= 0.0:
                     continue
                 if light == sel.env_index:
@@ -193,7 +202,7 @@ def _lights_setup(
                 seg[r] = dist
                 state[r] = SLOT_LIGHT
                 continue
-            st, wi, pdf, w = sample_direction(technique, mk, mp, wo, u0, u1, uniform(rs, 4 + 3 * j))
+            st, wi, pdf, w = sample_direction(technique, mk, mp, wo, u0, u1, uniform(rj, 4 + 3 * slot))
             if st == SLOT_NONE:
                 continue
             if st == SLOT_BSDF:

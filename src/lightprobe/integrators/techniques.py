@@ -12,8 +12,9 @@ from ..bsdfs.dispatch import bsdf_sample
 from ..geometry.frame import coordinate_system, to_local
 from ..geometry.intersect import surface
 from ..sampling.kernels import INV_2PI, cosine_hemisphere_pdf, square_to_cosine_hemisphere, square_to_uniform_hemisphere
+from ..sampling.rng import group_slot
 
-__all__ = ["STRATEGIES", "load_shading_frame", "sample_direction", "store_shading_frame"]
+__all__ = ["STRATEGIES", "load_shading_frame", "sample_direction", "store_shading_frame", "technique_slot"]
 
 #: the renderer's strategies (``env`` samples the lights: the environment and any area lights)
 STRATEGIES = {"uniform": 0, "cosine": 1, "brdf": 2, "env": 3, "mis": 4}
@@ -22,6 +23,18 @@ UNIFORM, COSINE, BRDF, ENV, MIS = range(5)
 SLOT_NONE, SLOT_BSDF, SLOT_ENV, SLOT_HEMI = 0, 1, 2, 3
 # flags of a shading sample's shadow ray: no ray, unblocked, to be tested against meshes, blocked
 NONE, VISIBLE, TEST_MESH, BLOCKED = 0, 1, 2, 3
+
+
+@jit_inline
+def technique_slot(state, strategy, n_bsdf, n_env, j):
+    """The (sample state, slot) whose random numbers shading slot j of a camera sample takes: under MIS the
+    ``n_bsdf`` BSDF slots form one group and the ``n_env`` light slots another, a single technique's slots one
+    group (``sampling.rng.group_slot``: a group's directions in a pixel are one stratified set)."""
+    if strategy == MIS:
+        if j < n_bsdf:
+            return group_slot(state, 0, n_bsdf, j)
+        return group_slot(state, n_bsdf, n_env, j - n_bsdf)
+    return group_slot(state, 0, n_bsdf + n_env, j)
 
 
 @jit_inline

@@ -72,6 +72,7 @@ from .techniques import (
     load_shading_frame,
     sample_direction,
     store_shading_frame,
+    technique_slot,
 )
 
 __all__ = [
@@ -326,16 +327,17 @@ def _shade_setup(
         rs = sample_state(sampler, seed, pixels[k // spp_pass], sample_start + k % spp_pass)
         for j in range(m):
             r = base + j
-            u0, u1 = uniform_2d(rs, 2 + 3 * j)
             technique = strategy
             if strategy == MIS:
                 technique = BRDF if j < n_bsdf else ENV
+            rj, slot = technique_slot(rs, strategy, n_bsdf, n_env, j)
+            u0, u1 = uniform_2d(rj, 2 + 3 * slot)
             if technique == ENV:
                 env_u[r, 0] = u0
                 env_u[r, 1] = u1
                 state[r] = SLOT_ENV
                 continue
-            st, wi, pdf, w = sample_direction(technique, mk, mp, wo, u0, u1, uniform(rs, 4 + 3 * j))
+            st, wi, pdf, w = sample_direction(technique, mk, mp, wo, u0, u1, uniform(rj, 4 + 3 * slot))
             if st == SLOT_NONE:
                 continue
             if st == SLOT_BSDF:
@@ -370,6 +372,9 @@ def _env_resample_stage(
     env,
     compensate,
     m,
+    strategy,
+    n_bsdf,
+    n_env,
     env_candidates,
     sampler,
     seed,
@@ -408,7 +413,8 @@ def _env_resample_stage(
         kept = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)  # direction, source pdf, u, v
         for i in range(env_candidates):
             if i == 0:
-                u0, u1, uc = env_u[r, 0], env_u[r, 1], uniform(rs, 4 + 3 * j)
+                rj, slot = technique_slot(rs, strategy, n_bsdf, n_env, j)
+                u0, u1, uc = env_u[r, 0], env_u[r, 1], uniform(rj, 4 + 3 * slot)
             else:
                 v = 64 + j * env_candidates + i
                 (u0, u1), uc = uniform_2d(rs, 2 + 3 * v), uniform(rs, 4 + 3 * v)

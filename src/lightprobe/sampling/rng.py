@@ -24,6 +24,7 @@ from .._numba import jit, jit_parallel, prange
 
 __all__ = [
     "SAMPLERS",
+    "group_slot",
     "owen_scramble",
     "random_uniform",
     "sample_state",
@@ -220,6 +221,20 @@ def uniform_2d(state, dim):
         h, index = _pair_scramble(pkey, sample, pair)
         return _sobol_x(h, index), _sobol_y_scrambled(h, index)
     return random_uniform(key, dim), random_uniform(key, dim + 1)
+
+
+@jit
+def group_slot(state, first, n, j):
+    """Shading sample j of a group of ``n`` slots that share a technique, the group's first slot being ``first``:
+    the (state, slot) whose numbers it takes.  Under ``sobol`` the group shares the first slot's dimensions and
+    sample k's j-th member takes sample index k n + j, so the group's k n directions in a pixel are one stratified
+    Sobol' set (a (0, m, 2)-net at every power-of-two count) rather than n sets interleaved without regard for one
+    another; ``independent`` keeps one slot per member.  Either way a pure function of (seed, pixel, sample index,
+    dimension)."""
+    sampler, key, pkey, sample = state
+    if sampler == SOBOL:
+        return (sampler, key, pkey, sample * n + j), first
+    return state, first + j
 
 
 @jit_parallel
