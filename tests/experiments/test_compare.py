@@ -47,7 +47,7 @@ def test_equal_samples(scene_and_reference):
         assert set(r.metrics) >= {"mse", "relmse", "psnr", "flip", "bias", "efficiency", "relative_efficiency"}
     by = {r.label: r for r in runs}
     # each run states the settings render used: the automatic allocation and heuristic made concrete
-    assert (by["mis-power"].settings.n_bsdf, by["mis-power"].settings.heuristic) == (2, "power")
+    assert (by["mis-power"].settings.n_bsdf, by["mis-power"].settings.heuristic) == (4, "power")
     assert by["brdf"].settings.n_bsdf == 1 and by["env"].settings.heuristic == "balance"
     assert max(r.metrics["relative_efficiency"] for r in runs) == 1.0
     assert by["mis-power"].metrics["mse"] < min(by["brdf"].metrics["mse"], by["env"].metrics["mse"])

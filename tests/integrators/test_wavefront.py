@@ -107,7 +107,7 @@ def test_automatic_compensation_is_per_material():
 
 
 def test_automatic_sample_allocation_and_heuristic():
-    """n_bsdf=None and heuristic=None (decisions.md 33): 2 BSDF samples and the balance heuristic for MIS where an
+    """n_bsdf=None and heuristic=None (decisions.md 33, 34): 4 BSDF samples and the balance heuristic for MIS where an
     environment map is the only light, 1 and power with area lights; other strategies take 1 BSDF-slot; given
     values are kept.  The stats report what was used, and an automatic render is the explicit one, bit for bit."""
     env_scene = small_scene((6, 4))
@@ -118,18 +118,18 @@ def test_automatic_sample_allocation_and_heuristic():
         stats = render(scene, RenderSettings(spp=1, **options)).stats
         return stats["n_bsdf"], stats["heuristic"]
 
-    assert used(env_scene) == (2, "balance")
+    assert used(env_scene) == (4, "balance")
     assert used(lit) == (1, "power")
     assert used(env_scene, strategy="brdf") == (1, "balance")
     assert used(env_scene, n_bsdf=1, heuristic="power") == (1, "power")
     assert used(lit, n_bsdf=2, heuristic="balance") == (2, "balance")
     auto = render(env_scene, RenderSettings(spp=4, seed=5)).image
-    explicit = render(env_scene, RenderSettings(spp=4, seed=5, n_bsdf=2, heuristic="balance")).image
+    explicit = render(env_scene, RenderSettings(spp=4, seed=5, n_bsdf=4, heuristic="balance")).image
     np.testing.assert_array_equal(auto, explicit)
     assert not np.array_equal(auto, render(env_scene, RenderSettings(spp=4, seed=5, n_bsdf=1)).image)
-    # the 64-slot limit applies to the counts actually used: 1 + 63 is fine with area lights, 2 + 63 is not
+    # the 64-slot limit applies to the counts actually used: 1 + 63 is fine with area lights, 4 + 63 is not
     assert used(lit, n_env=63) == (1, "power")
-    with pytest.raises(ParameterError, match="got 2 and 63"):
+    with pytest.raises(ParameterError, match="got 4 and 63"):
         render(env_scene, RenderSettings(spp=1, n_env=63))
 
 
@@ -227,10 +227,12 @@ def test_split_sample_ranges_resume_bit_for_bit_and_merge_exactly(sampler):
 
 
 def test_sobol_has_lower_error_than_independent_at_equal_samples(reference):
+    # the mean over three seeds: the small scene's wide sun on a Phong lobe gives single 16-spp images whose error
+    # varies 3x from seed to seed (sobol 4 + 1: 0.00048-0.00116), which one seed would compare
     err = {}
     for sampler in ("sobol", "independent"):
-        result = render(small_scene(), RenderSettings(spp=16, sampler=sampler, seed=4))
-        err[sampler] = np.mean((result.image - reference.image) ** 2)
+        images = [render(small_scene(), RenderSettings(spp=16, sampler=sampler, seed=seed)).image for seed in (4, 5, 6)]
+        err[sampler] = np.mean([np.mean((image - reference.image) ** 2) for image in images])
     assert err["sobol"] < 0.8 * err["independent"], err
 
 

@@ -90,7 +90,7 @@ HEURISTICS = {"balance": 1.0, "power": 2.0}
 DIFFUSE = "diffuse"  # mis_compensation's automatic choice: the compensated PDF on Lambertian materials only
 
 
-_AUTO_BSDF_SAMPLES = 2  # n_bsdf=None under MIS in scenes lit by an environment map alone (decisions.md 33)
+_AUTO_BSDF_SAMPLES = 4  # n_bsdf=None under MIS in scenes lit by an environment map alone (decisions.md 33, 34)
 
 
 @dataclass(frozen=True)
@@ -189,10 +189,11 @@ class RenderSettings:
 
     def resolved(self, environment_only: bool) -> RenderSettings:
         """These settings with the automatic choices made, for a scene lit by an environment map alone or not.
-        Measured on the peer and demo scenes at 16 and 64 spp (decisions.md 33): under MIS, a second BSDF sample
-        per camera sample and the balance heuristic win 1.2-1.4x in efficiency where the environment is the only
-        light (the compensated environment samples take the sun; the sky, and what hides it, comes from the BSDF
-        samples, which cost no extra camera ray); with 4000 area lights the second BSDF sample loses."""
+        Measured on the peer and demo scenes at 16, 64 and 256 spp (decisions.md 33, 34): under MIS, 4 BSDF samples
+        per camera sample and the balance heuristic win where the environment is the only light (the compensated
+        environment samples take the sun; the sky, and what hides it, comes from the BSDF samples, which cost no
+        extra camera ray, and a camera sample's BSDF samples are one stratified set); with 4000 area lights a
+        second BSDF sample loses."""
         fast = environment_only and self.strategy == "mis"
         n_bsdf = self.n_bsdf if self.n_bsdf is not None else (_AUTO_BSDF_SAMPLES if fast else 1)
         heuristic = self.heuristic if self.heuristic is not None else ("balance" if environment_only else "power")
