@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from lightprobe.bsdfs import Lambert
 from lightprobe.integrators.techniques import BRDF, COSINE, MIS, SLOT_BSDF, SLOT_HEMI, sample_direction, technique_slot
@@ -87,3 +88,70 @@ def test_slots_side_by_side_are_not_one_net():
     independent = _group_points(2, 1, "bsdf", 4, sampler="independent")
     rs = [sample_state(SAMPLERS["independent"], 3, 7, i) for i in range(4)]
     assert np.array_equal(independent, np.array([uniform_2d(r, 2 + 3 * j) for r in rs for j in range(2)]))
+
+
+@pytest.mark.parametrize("path", ["environment", "area lights"])
+def test_the_renderer_takes_each_groups_numbers(path):
+    # One pixel of a Lambertian ground (albedo 1) under an unoccluded sky, strategy "cosine" with 4 slots: each
+    # slot contributes L(wi) (f cos / pdf = 1), so the pixel is the mean of L over the directions made from the
+    # slots' numbers.  Recomputed here from technique_slot's numbers, it must match the render; with any other
+    # layout (each slot its own pair, as before groups) the directions differ and so does the value.  A small
+    # emitter under the ground, which no direction reaches, sends the render down the area-light path.
+    from lightprobe.emitters.envmap import EnvironmentMap, env_eval
+    from lightprobe.emitters.procedural import sky_with_sun
+    from lightprobe.geometry.camera import Camera
+    from lightprobe.geometry.frame import coordinate_system, to_world
+    from lightprobe.geometry.scene import Scene
+    from lightprobe.geometry.shapes import Rectangle
+    from lightprobe.integrators.techniques import STRATEGIES
+    from lightprobe.integrators.wavefront import RenderSettings, render
+    from lightprobe.sampling.kernels import square_to_cosine_hemisphere
+
+    env = EnvironmentMap.from_array(sky_with_sun(64, 32, sun_diameter_deg=20.0, sun_radiance=(8.0, 7.0, 6.0)))
+    scene = Scene(Camera([0, 1.6, 4.5], [0, 0, 0], fov=1.0, resolution=(1, 1)), env)
+    scene.add(Rectangle.ground(size=30), Lambert(1.0))
+    if path == "area lights":
+        scene.add(Rectangle([-0.1, -5, -0.1], [0.2, 0, 0], [0, 0, 0.2]), None, emission=1.0, name="hidden")
+    spp, slots, seed = 16, 4, 9
+    result = render(scene, RenderSettings(spp=spp, strategy="cosine", n_bsdf=slots, n_env=0, seed=seed))
+    assert result.stats["area_lights"] == (1 if path == "area lights" else 0)
+    image = result.image[0, 0]
+
+    def expected(layout):
+        ts, tt = coordinate_system(0.0, 1.0, 0.0)
+        total = np.zeros(3)
+        for i in range(spp):
+            rs = sample_state(SAMPLERS["sobol"], seed, 0, i)
+            for j in range(slots):
+                rj, slot = layout(rs, j)
+                u0, u1 = uniform_2d(rj, 2 + 3 * slot)
+                wi = square_to_cosine_hemisphere(u0, u1)
+                total += env_eval(env.kernel, *to_world(ts, tt, (0.0, 1.0, 0.0), *wi))
+        return total / (spp * slots)
+
+    grouped = expected(lambda rs, j: technique_slot(rs, STRATEGIES["cosine"], slots, 0, j))
+    side_by_side = expected(lambda rs, j: (rs, j))
+    np.testing.assert_allclose(image, grouped, rtol=1e-5)
+    assert not np.allclose(image, side_by_side, rtol=1e-3)
+
+
+def test_a_camera_samples_light_picks_are_stratified():
+    # the area-light path: K = 16 picks per camera sample (MIS, 1 BSDF slot, one sample per light) fall one in each
+    # sixteenth of [0, 1) under sobol; under independent, slot j's own number (the layout before groups)
+    from lightprobe.integrators.area_lights import _pick_slot
+
+    k, n_bsdf = 16, 1
+
+    def picks(sampler, sample):
+        rs = sample_state(SAMPLERS[sampler], 3, 7, sample)
+        out = []
+        for j in range(n_bsdf, n_bsdf + k):
+            rp, picker = _pick_slot(rs, n_bsdf, 1, n_bsdf + k, MIS, j)
+            out.append(uniform(rp, 4 + 3 * picker))
+        return np.array(out)
+
+    for sample in (0, 1, 5):
+        assert np.array_equal(np.sort((picks("sobol", sample) * k).astype(int)), np.arange(k))
+    rs = sample_state(SAMPLERS["independent"], 3, 7, 0)
+    assert np.array_equal(picks("independent", 0), [uniform(rs, 4 + 3 * j) for j in range(n_bsdf, n_bsdf + k)])
+    assert not np.array_equal(np.sort((picks("independent", 0) * k).astype(int)), np.arange(k))
