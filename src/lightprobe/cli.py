@@ -73,7 +73,7 @@ def render_command(
     ] = None,
     bsdf_samples: Annotated[
         int | None,
-        typer.Option(help="BSDF samples per camera sample [4 for MIS if only an environment lights it, else 1]."),
+        typer.Option(help="BSDF samples per camera sample [4 if only an environment map lights the scene, else 1]."),
     ] = None,
     env_samples: Annotated[
         int | None, typer.Option("--env-samples", "--light-samples", help="Samples per picked light, N [1].")

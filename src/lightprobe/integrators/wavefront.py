@@ -193,9 +193,9 @@ class RenderSettings:
         per camera sample and the balance heuristic win where the environment is the only light (the compensated
         environment samples take the sun; the sky, and what hides it, comes from the BSDF samples, which cost no
         extra camera ray, and a camera sample's BSDF samples are one stratified set); with 4000 area lights a
-        second BSDF sample loses."""
-        fast = environment_only and self.strategy == "mis"
-        n_bsdf = self.n_bsdf if self.n_bsdf is not None else (_AUTO_BSDF_SAMPLES if fast else 1)
+        second BSDF sample loses.  The single-technique strategies take the same count, so that every strategy
+        traces n_bsdf + n_env directions per camera sample and equal samples mean equal rays."""
+        n_bsdf = self.n_bsdf if self.n_bsdf is not None else (_AUTO_BSDF_SAMPLES if environment_only else 1)
         heuristic = self.heuristic if self.heuristic is not None else ("balance" if environment_only else "power")
         return replace(self, n_bsdf=n_bsdf, heuristic=heuristic)
 

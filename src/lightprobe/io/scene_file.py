@@ -78,7 +78,7 @@ Example (every key shown; optional ones have their default)::
     spp = 64
     strategy = "mis"
     heuristic = "balance"               # default: balance with an environment map alone, else power
-    bsdf_samples = 4                    # default: 4 for MIS with an environment map alone, else 1
+    bsdf_samples = 4                    # default: 4 with an environment map alone, else 1
     env_samples = 1                     # light samples per chosen light (N)
     seed = 0
     sampler = "sobol"                   # sobol (Owen-scrambled Sobol') | independent
