@@ -94,7 +94,7 @@ def run_one(args) -> dict:
         "sampler": args.sampler,
         "mis_compensation": stats["mis_compensation"],
         "bsdf_samples": stats["n_bsdf"],
-        "env_samples": args.env_samples,
+        "env_samples": stats["n_env"],
         "env_candidates": args.env_candidates,
         "env_pdf": [scene.environment.pdf_mode, scene.environment.pdf_weights, scene.environment.pdf_resolution],
         "seconds": round(stats["seconds"], 4),
@@ -132,7 +132,9 @@ def main(argv=None) -> int:
     parser.add_argument("--sampler", default="sobol", help="sobol or independent")
     parser.add_argument("--mis-compensation", choices=["auto", "on", "off"], default="auto")
     parser.add_argument("--bsdf-samples", type=int, help="BSDF samples per camera sample [the renderer's default]")
-    parser.add_argument("--env-samples", type=int, default=1)
+    parser.add_argument(
+        "--env-samples", type=int, help="environment samples per camera sample [the renderer's default]"
+    )
     parser.add_argument("--env-candidates", type=int, default=1, help="RIS candidates per environment sample")
     parser.add_argument("--threads", type=int)
     parser.add_argument("--pass-samples", type=int, help="camera samples per wavefront pass [the renderer's default]")
@@ -169,8 +171,6 @@ def main(argv=None) -> int:
             str(args.seed),
             "--sampler",
             args.sampler,
-            "--env-samples",
-            str(args.env_samples),
             "--mis-compensation",
             args.mis_compensation,
         ]
@@ -178,6 +178,8 @@ def main(argv=None) -> int:
             cmd += ["--heuristic", args.heuristic]
         if args.bsdf_samples is not None:
             cmd += ["--bsdf-samples", str(args.bsdf_samples)]
+        if args.env_samples is not None:
+            cmd += ["--env-samples", str(args.env_samples)]
         if args.threads:
             cmd += ["--threads", str(args.threads)]
         if args.reference:

@@ -76,7 +76,12 @@ def render_command(
         typer.Option(help="BSDF samples per camera sample [4 if only an environment map lights the scene, else 1]."),
     ] = None,
     env_samples: Annotated[
-        int | None, typer.Option("--env-samples", "--light-samples", help="Samples per picked light, N [1].")
+        int | None,
+        typer.Option(
+            "--env-samples",
+            "--light-samples",
+            help="Samples per picked light, N [4 if only an environment map lights the scene, else 1].",
+        ),
     ] = None,
     seed: Annotated[int | None, typer.Option(help="Random seed [0].")] = None,
     sampler: Annotated[

@@ -135,8 +135,8 @@ def test_every_strategy_and_selector_converges_to_the_reference(mixed_reference,
 # difference, in 12 % of the pixels, from 3b49dfa's image); re-pinned when BSDF samples took their direction from
 # the slot's 2D pair (issue 9: the lobe choice had been drawn from the pair, breaking Sobol' 2D stratification).
 # The map's PDF is pinned to pdf="exact", the default before the bilinear density (issue 9), whose own images are
-# checked by the z-tests of test_wavefront.py; and to 1 BSDF sample with the power heuristic, the defaults before
-# environment-lit scenes took 2 and balance (decisions.md 33).
+# checked by the z-tests of test_wavefront.py; and to 1 BSDF + 1 environment sample with the power heuristic, the
+# defaults before environment-lit scenes took more and balance (decisions.md 33, 34).
 ENV_ONLY_SHA256 = "26f3c84d92d3aec84ca9aa95944f6bcf89fcad52b25b1b65cc6c9c2dbeaf25f6"
 
 
@@ -144,7 +144,7 @@ def test_an_environment_only_scene_is_bit_identical_to_before():
     from .test_wavefront import small_scene
 
     settings = RenderSettings(
-        spp=8, seed=21, sampler="independent", mis_compensation=False, n_bsdf=1, heuristic="power"
+        spp=8, seed=21, sampler="independent", mis_compensation=False, n_bsdf=1, n_env=1, heuristic="power"
     )
     result = render(small_scene((20, 12), pdf="exact"), settings)
     assert hashlib.sha256(result.image.tobytes()).hexdigest() == ENV_ONLY_SHA256

@@ -122,8 +122,10 @@ def run_strategy(
     target = 1
     settings = settings_for(scene, settings)  # the report states the allocation and heuristic actually used
     run = StrategyRun(label, settings, np.zeros((height, width, 3), np.float32), np.zeros((height, width, 3)))
-    # short passes in time mode, so that the budget is met within a pass of a few milliseconds
-    pass_samples = max(width * height, 1 << 15) if equal == "time" else settings.pass_samples
+    # short passes in time mode, so that the budget is met within a pass of a few milliseconds: a pass holds about
+    # 2^17 shading samples (RIS candidates counted), whatever the strategy's samples per camera sample
+    work = settings.n_bsdf + settings.light_samples * settings.env_candidates
+    pass_samples = max(width * height, (1 << 17) // work) if equal == "time" else settings.pass_samples
     while True:
         if equal == "spp":
             if done >= spp:

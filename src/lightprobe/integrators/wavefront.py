@@ -90,7 +90,9 @@ HEURISTICS = {"balance": 1.0, "power": 2.0}
 DIFFUSE = "diffuse"  # mis_compensation's automatic choice: the compensated PDF on Lambertian materials only
 
 
-_AUTO_BSDF_SAMPLES = 4  # n_bsdf=None under MIS in scenes lit by an environment map alone (decisions.md 33, 34)
+# n_bsdf=None and n_env=None in scenes lit by an environment map alone (decisions.md 33, 34); else 1 each
+_AUTO_BSDF_SAMPLES = 4
+_AUTO_ENV_SAMPLES = 4
 
 
 @dataclass(frozen=True)
@@ -100,8 +102,8 @@ class RenderSettings:
     spp: int = 16
     strategy: str = "mis"
     heuristic: str | None = None  # None: balance in scenes lit by an environment map alone, else power
-    n_bsdf: int | None = None  # None: 2 under MIS in scenes lit by an environment map alone, else 1 (decisions 33)
-    n_env: int = 1
+    n_bsdf: int | None = None  # None: 4 in scenes lit by an environment map alone, else 1 (decisions 33, 34)
+    n_env: int | None = None  # None: 4 in scenes lit by an environment map alone, else 1 (decisions 34)
     seed: int = 0
     first_sample: int = 0  # sample indices first_sample ... first_sample + spp - 1 (split and resumed renders)
     sampler: str = "sobol"
@@ -118,7 +120,6 @@ class RenderSettings:
         """Raise :class:`ParameterError` naming the first setting of the wrong type or out of range."""
         for name in (
             "spp",
-            "n_env",
             "seed",
             "first_sample",
             "env_candidates",
@@ -128,8 +129,9 @@ class RenderSettings:
             _require(name, getattr(self, name), "integer")
         for name in ("strategy", "sampler", "light_sampler", "light_strategy"):
             _require(name, getattr(self, name), "string")
-        if self.n_bsdf is not None:
-            _require("n_bsdf", self.n_bsdf, "integer")
+        for name in ("n_bsdf", "n_env"):
+            if getattr(self, name) is not None:
+                _require(name, getattr(self, name), "integer")
         if self.heuristic is not None:
             _require("heuristic", self.heuristic, "string")
         if self.mis_compensation is not None:
@@ -144,11 +146,12 @@ class RenderSettings:
             raise ParameterError(f"heuristic must be one of {list(HEURISTICS)}, got {self.heuristic!r}")
         if self.spp < 1:
             raise ParameterError(f"spp must be an integer >= 1, got {self.spp!r}")
-        n_bsdf = 1 if self.n_bsdf is None else self.n_bsdf  # automatic: at least 1 (render re-checks the choice)
-        if n_bsdf < 0 or self.n_env < 0 or n_bsdf + self.n_env < 1 or n_bsdf + self.n_env > 64:
+        # automatic counts: at least 1 each (render re-checks the counts it resolves them to)
+        n_bsdf = 1 if self.n_bsdf is None else self.n_bsdf
+        n_env = 1 if self.n_env is None else self.n_env
+        if n_bsdf < 0 or n_env < 0 or n_bsdf + n_env < 1 or n_bsdf + n_env > 64:
             raise ParameterError(
-                f"bsdf and env sample counts (n_bsdf, n_env) must be >= 0 with 1 to 64 in all, got {n_bsdf} "
-                f"and {self.n_env}"
+                f"bsdf and env sample counts (n_bsdf, n_env) must be >= 0 with 1 to 64 in all, got {n_bsdf} and {n_env}"
             )
         if not 1 <= self.env_candidates <= 64:
             raise ParameterError(f"env_candidates must be from 1 to 64, got {self.env_candidates!r}")
@@ -178,8 +181,9 @@ class RenderSettings:
 
     @property
     def light_samples(self) -> int:
-        """Light slots per camera sample: K lights, ``n_env`` samples each (the lecture's K N)."""
-        return self.lights_per_sample * self.n_env
+        """Light slots per camera sample: K lights, ``n_env`` samples each (the lecture's K N; an automatic ``n_env``
+        counted as its smallest, 1, until :meth:`resolved` makes it concrete)."""
+        return self.lights_per_sample * (1 if self.n_env is None else self.n_env)
 
     @property
     def shading_samples(self) -> int:
@@ -189,15 +193,17 @@ class RenderSettings:
 
     def resolved(self, environment_only: bool) -> RenderSettings:
         """These settings with the automatic choices made, for a scene lit by an environment map alone or not.
-        Measured on the peer and demo scenes at 16, 64 and 256 spp (decisions.md 33, 34): under MIS, 4 BSDF samples
-        per camera sample and the balance heuristic win where the environment is the only light (the compensated
-        environment samples take the sun; the sky, and what hides it, comes from the BSDF samples, which cost no
-        extra camera ray, and a camera sample's BSDF samples are one stratified set); with 4000 area lights a
-        second BSDF sample loses.  The single-technique strategies take the same count, so that every strategy
-        traces n_bsdf + n_env directions per camera sample and equal samples mean equal rays."""
-        n_bsdf = self.n_bsdf if self.n_bsdf is not None else (_AUTO_BSDF_SAMPLES if environment_only else 1)
+        Measured on the peer and demo scenes and on eight of the seeds' sphere scenes (decisions.md 33, 34): where
+        the environment is the only light, 4 BSDF + 4 environment samples per camera sample with the balance
+        heuristic give the lowest error per second, or within 1.7x of it, everywhere (a camera sample's samples of
+        one technique are one stratified set; they cost no extra camera ray); with 4000 area lights a second BSDF
+        sample loses, so 1 + 1 and power.  The single-technique strategies take the same counts, so that every
+        strategy traces n_bsdf + n_env directions per camera sample and equal samples mean equal rays."""
+        auto = environment_only
+        n_bsdf = self.n_bsdf if self.n_bsdf is not None else (_AUTO_BSDF_SAMPLES if auto else 1)
+        n_env = self.n_env if self.n_env is not None else (_AUTO_ENV_SAMPLES if auto else 1)
         heuristic = self.heuristic if self.heuristic is not None else ("balance" if environment_only else "power")
-        return replace(self, n_bsdf=n_bsdf, heuristic=heuristic)
+        return replace(self, n_bsdf=n_bsdf, n_env=n_env, heuristic=heuristic)
 
 
 _KINDS = {"integer": numbers.Integral, "number": numbers.Real, "string": str, "true or false": bool}

@@ -79,7 +79,7 @@ Example (every key shown; optional ones have their default)::
     strategy = "mis"
     heuristic = "balance"               # default: balance with an environment map alone, else power
     bsdf_samples = 4                    # default: 4 with an environment map alone, else 1
-    env_samples = 1                     # light samples per chosen light (N)
+    env_samples = 4                     # per chosen light (N); default: 4 with an environment map alone, else 1
     seed = 0
     sampler = "sobol"                   # sobol (Owen-scrambled Sobol') | independent
     env_candidates = 1                  # > 1: resampled environment samples (RIS) from this many candidates
