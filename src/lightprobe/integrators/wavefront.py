@@ -199,9 +199,8 @@ class RenderSettings:
         one technique are one stratified set; they cost no extra camera ray); with 4000 area lights a second BSDF
         sample loses, so 1 + 1 and power.  The single-technique strategies take the same counts, so that every
         strategy traces n_bsdf + n_env directions per camera sample and equal samples mean equal rays."""
-        auto = environment_only
-        n_bsdf = self.n_bsdf if self.n_bsdf is not None else (_AUTO_BSDF_SAMPLES if auto else 1)
-        n_env = self.n_env if self.n_env is not None else (_AUTO_ENV_SAMPLES if auto else 1)
+        n_bsdf = self.n_bsdf if self.n_bsdf is not None else (_AUTO_BSDF_SAMPLES if environment_only else 1)
+        n_env = self.n_env if self.n_env is not None else (_AUTO_ENV_SAMPLES if environment_only else 1)
         heuristic = self.heuristic if self.heuristic is not None else ("balance" if environment_only else "power")
         return replace(self, n_bsdf=n_bsdf, n_env=n_env, heuristic=heuristic)
 

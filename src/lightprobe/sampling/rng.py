@@ -227,10 +227,10 @@ def uniform_2d(state, dim):
 def group_slot(state, first, n, j):
     """Shading sample j of a group of ``n`` slots that share a technique, the group's first slot being ``first``:
     the (state, slot) whose numbers it takes.  Under ``sobol`` the group shares the first slot's dimensions and
-    sample k's j-th member takes sample index k n + j, so the group's k n directions in a pixel are one stratified
-    Sobol' set (a (0, m, 2)-net at every power-of-two count) rather than n sets interleaved without regard for one
-    another; ``independent`` keeps one slot per member.  Either way a pure function of (seed, pixel, sample index,
-    dimension)."""
+    sample k's j-th member takes sample index k n + j, so a pixel's first k samples give the group k n directions
+    from one stratified Sobol' set (a (0, m, 2)-net whenever k n = 2^m) rather than n sets laid side by side without
+    regard for one another; ``independent`` keeps one slot per member.  Either way a pure function of (seed, pixel,
+    sample index, dimension)."""
     sampler, key, pkey, sample = state
     if sampler == SOBOL:
         return (sampler, key, pkey, sample * n + j), first
