@@ -48,7 +48,7 @@ from ..geometry.intersect import (
     ray_offset,
 )
 from ..sampling.mis import mis_weight
-from ..sampling.rng import SOBOL, group_slot, sample_state, uniform, uniform_2d
+from ..sampling.rng import group_slot, sample_state, uniform, uniform_2d
 from .techniques import (
     BLOCKED,
     BRDF,
@@ -90,13 +90,8 @@ def _pick_slot(state, n_bsdf, n_per_light, m, strategy, j):
     camera sample are one stratified group (``sampling.rng.group_slot``), under ``independent`` the first slot of
     j's ``n_per_light`` takes it."""
     if strategy == MIS:
-        first, g, picks = n_bsdf, (j - n_bsdf) // n_per_light, (m - n_bsdf) // n_per_light
-        if state[0] == SOBOL:
-            return group_slot(state, first, picks, g)
-        return state, first + g * n_per_light
-    if state[0] == SOBOL:
-        return group_slot(state, 0, m, j)
-    return state, j
+        return group_slot(state, n_bsdf, (m - n_bsdf) // n_per_light, (j - n_bsdf) // n_per_light, n_per_light)
+    return group_slot(state, 0, m, j)
 
 
 @jit_parallel

@@ -224,17 +224,17 @@ def uniform_2d(state, dim):
 
 
 @jit
-def group_slot(state, first, n, j):
+def group_slot(state, first, n, j, spacing=1):
     """Shading sample j of a group of ``n`` slots that share a technique, the group's first slot being ``first``:
     the (state, slot) whose numbers it takes.  Under ``sobol`` the group shares the first slot's dimensions and
     sample k's j-th member takes sample index k n + j, so a pixel's first k samples give the group k n directions
     from one stratified Sobol' set (a (0, m, 2)-net whenever k n = 2^m) rather than n sets laid side by side without
-    regard for one another; ``independent`` keeps one slot per member.  Either way a pure function of (seed, pixel,
-    sample index, dimension)."""
+    regard for one another; ``independent`` keeps a slot per member, ``first + j spacing``.  Either way a pure
+    function of (seed, pixel, sample index, dimension)."""
     sampler, key, pkey, sample = state
     if sampler == SOBOL:
         return (sampler, key, pkey, sample * n + j), first
-    return state, first + j
+    return state, first + j * spacing
 
 
 @jit_parallel
