@@ -73,6 +73,7 @@ def run_one(args) -> dict:
         n_bsdf=args.bsdf_samples,
         n_env=args.env_samples,
         env_candidates=args.env_candidates,
+        adaptive=args.adaptive,
         **({"pass_samples": args.pass_samples} if args.pass_samples else {}),
     )
     tracer = RayTracer(scene.compile(), threads=args.threads or os.cpu_count() or 1)
@@ -96,6 +97,7 @@ def run_one(args) -> dict:
         "bsdf_samples": stats["n_bsdf"],
         "env_samples": stats["n_env"],
         "env_candidates": args.env_candidates,
+        "adaptive": args.adaptive,
         "env_pdf": [scene.environment.pdf_mode, scene.environment.pdf_weights, scene.environment.pdf_resolution],
         "seconds": round(stats["seconds"], 4),
         "samples_per_s": round(stats["samples_per_s"]),
@@ -137,6 +139,7 @@ def main(argv=None) -> int:
     )
     parser.add_argument("--env-candidates", type=int, default=1, help="RIS candidates per environment sample")
     parser.add_argument("--threads", type=int)
+    parser.add_argument("--adaptive", action="store_true", help="per-pixel adaptive sampling (spp on average)")
     parser.add_argument("--pass-samples", type=int, help="camera samples per wavefront pass [the renderer's default]")
     parser.add_argument("--reference", help="EXR to compute relMSE against")
     parser.add_argument("--out", help="write the render here")

@@ -108,6 +108,13 @@ def render_command(
         str | None, typer.Option(help="How an area light is sampled: area, solid-angle, hemisphere, cosine.")
     ] = None,
     time_limit: Annotated[float | None, typer.Option(help="Stop after this many seconds (keeps the result).")] = None,
+    adaptive: Annotated[
+        bool | None,
+        typer.Option(
+            "--adaptive/--no-adaptive",
+            help="spp / 4 samples in every pixel, then --spp on average where the noise is (spp a power of 2).",
+        ),
+    ] = None,
     threads: Annotated[int | None, typer.Option(help="Threads [all cores].")] = None,
     width: Annotated[int | None, typer.Option(help="Override the image width (height keeps the aspect).")] = None,
     variance: Annotated[bool, typer.Option(help="Add variance.R/G/B channels to an EXR.")] = False,
@@ -159,6 +166,7 @@ def render_command(
         "light_strategy": light_strategy,
         "time_limit": time_limit,
         "threads": threads,
+        "adaptive": adaptive,
     }
     settings = _render_settings(defaults, chosen)
     check_output(output, variance=variance, png=png, resolution=scene.camera.resolution)
@@ -214,7 +222,8 @@ def reference_command(
     check_output(output, variance=True)
     scene, defaults = load_scene(scene_file)
     chosen = {"spp": spp, "strategy": strategy, "seed": seed, "sampler": sampler, "time_limit": time_limit}
-    settings = _render_settings(defaults, {**chosen, "threads": threads})
+    # a reference is resumable and mergeable by sample range, which per-pixel counts are not
+    settings = _render_settings(defaults, {**chosen, "threads": threads, "adaptive": False})
     check_output(output, variance=True, resolution=scene.camera.resolution)
     typer.echo(scene.summary(), err=True)
     start = time.perf_counter()

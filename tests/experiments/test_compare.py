@@ -32,6 +32,7 @@ def test_strategy_tokens():
         ("mis/colour=red", "is not key=value with a key among"),
         ("mis/bsdf_samples=0/env_samples=0", "sample counts"),
         ("mis/spp=4", "is not key=value"),
+        ("mis/adaptive=true", "an adaptive render cannot be resumed"),
     ]:
         with pytest.raises(LightprobeError, match=message):
             parse_strategy(token, base)

@@ -206,6 +206,56 @@ def test_bit_identical_across_threads_and_pass_sizes(sampler):
     assert render(scene, RenderSettings(spp=12, seed=1, sampler=sampler)).image.tobytes() != base.image.tobytes()
 
 
+def test_an_adaptive_render_is_unbiased_and_spends_its_samples_where_the_noise_is(reference):
+    """Adaptive sampling (integrators/adaptive.py): a 256-spp pilot, then 1024 spp on average.  Counts differ by
+    pixel, the mean stays within the budget, and the image passes the same per-pixel z-test against the uniform
+    4096-spp reference as every strategy: a pixel's count comes from its neighbours' pilot, not its own."""
+    result = render(small_scene(), RenderSettings(spp=1024, seed=7, adaptive=True))
+    counts = result.counts
+    assert counts.min() == 256 and counts.max() > 1024 and counts.mean() <= 1024
+    assert set(np.unique(counts)) <= {256, 512, 1024, 2048, 4096, 8192}
+    z = (result.image - reference.image) / np.sqrt(result.variance + reference.variance + 1e-12)
+    assert np.mean(np.abs(z) > 4) < 0.005, np.sort(np.abs(z).ravel())[-5:]
+    assert np.abs(z).max() < 8
+    assert abs(np.mean(z)) < 0.1
+    # equal samples on average, lower error than spending them evenly
+    uniform = render(small_scene(), RenderSettings(spp=1024, seed=7))
+    adaptive_err = np.mean((result.image - reference.image) ** 2 / (reference.image**2 + 0.01))
+    uniform_err = np.mean((uniform.image - reference.image) ** 2 / (reference.image**2 + 0.01))
+    assert adaptive_err < uniform_err, (adaptive_err, uniform_err)
+
+
+def test_an_adaptive_render_is_bit_identical_across_threads_and_pass_sizes():
+    scene = small_scene((20, 12))
+    base = render(scene, RenderSettings(spp=32, threads=2, adaptive=True))
+    assert base.counts.min() < base.counts.max()  # the counts do differ, so the passes differ in shape
+    for settings in (
+        RenderSettings(spp=32, threads=1, adaptive=True),
+        RenderSettings(spp=32, pass_samples=100, adaptive=True),
+        RenderSettings(spp=32, pass_samples=7, threads=1, adaptive=True),
+    ):
+        other = render(scene, settings)
+        np.testing.assert_array_equal(other.counts, base.counts)
+        np.testing.assert_array_equal(other.image, base.image)
+        np.testing.assert_array_equal(other.variance, base.variance)
+    assert not np.array_equal(render(scene, RenderSettings(spp=32, seed=1, adaptive=True)).image, base.image)
+
+
+def test_adaptive_settings_are_checked():
+    scene = small_scene((4, 3))
+    for settings, match in (
+        (RenderSettings(spp=12, adaptive=True), "power of two >= 4"),
+        (RenderSettings(spp=2, adaptive=True), "power of two >= 4"),
+        (RenderSettings(spp=8, first_sample=8, adaptive=True), "first_sample must be 0"),
+        (RenderSettings(spp=8, adaptive=1), "adaptive must be true or false"),
+    ):
+        with pytest.raises(ParameterError, match=match):
+            render(scene, settings)
+    first = render(scene, RenderSettings(spp=4))
+    with pytest.raises(ParameterError, match="cannot be resumed"):
+        render(scene, RenderSettings(spp=8, adaptive=True), resume=first.accumulator)
+
+
 @pytest.mark.parametrize("sampler", ["sobol", "independent"])
 def test_split_sample_ranges_resume_bit_for_bit_and_merge_exactly(sampler):
     scene = small_scene((20, 12))

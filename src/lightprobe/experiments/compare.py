@@ -66,6 +66,11 @@ def parse_strategy(token: str, base: RenderSettings) -> tuple[str, RenderSetting
             raise LightprobeError(f"strategy {token!r}: {item!r} is not key=value with a key among {keys}")
         changes.update(settings_fields({key.strip(): _value(value)}))
     settings = dataclasses.replace(base, **changes)
+    if settings.adaptive is True:
+        raise LightprobeError(
+            f"strategy {token!r}: compare renders in rounds that resume each other, and an adaptive render cannot "
+            "be resumed (its sample counts need the whole pilot); render it with `lightprobe render --adaptive`"
+        )
     try:
         settings.validate()
     except LightprobeError as exc:

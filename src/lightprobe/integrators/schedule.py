@@ -19,7 +19,7 @@ from functools import lru_cache
 
 import numpy as np
 
-__all__ = ["BLOCK", "pass_pixels"]
+__all__ = ["BLOCK", "pass_pixels", "spread"]
 
 BLOCK = 1024  # consecutive pixels kept together (coherent camera rays); a 512^2 pass still has 256 blocks
 
@@ -47,3 +47,8 @@ def pass_pixels(first: int, count: int) -> np.ndarray:
     """The pixels first .. first + count - 1 of a pass, in the order their samples sit in the pass's buffers
     (int64).  Pixels after the last full block keep their places."""
     return first + _offsets(count)
+
+
+def spread(pixels: np.ndarray) -> np.ndarray:
+    """Any list of pixels (an adaptive round's) in the same spread-out block order."""
+    return pixels[_offsets(pixels.size)]

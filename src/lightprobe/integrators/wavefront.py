@@ -56,6 +56,7 @@ from ..geometry.raytracer import RayTracer
 from ..geometry.scene import Scene
 from ..sampling.mis import mis_weight
 from ..sampling.rng import SAMPLERS, sample_state, uniform, uniform_2d
+from . import adaptive
 from .schedule import pass_pixels
 from .techniques import (
     BLOCKED,
@@ -115,6 +116,7 @@ class RenderSettings:
     time_limit: float | None = None
     threads: int | None = None
     pass_samples: int = 1 << 19
+    adaptive: bool = False  # spp / 4 in every pixel, then spp on average where the noise is (integrators/adaptive.py)
 
     def validate(self) -> None:
         """Raise :class:`ParameterError` naming the first setting of the wrong type or out of range."""
@@ -136,6 +138,7 @@ class RenderSettings:
             _require("heuristic", self.heuristic, "string")
         if self.mis_compensation is not None:
             _require("mis_compensation", self.mis_compensation, "true or false")
+        _require("adaptive", self.adaptive, "true or false")
         if self.time_limit is not None:
             _require("time_limit", self.time_limit, "number")
         if self.threads is not None:
@@ -178,6 +181,11 @@ class RenderSettings:
             raise ParameterError(f"first_sample must be in [0, 2^62), got {self.first_sample!r}")
         if self.pass_samples < 1:
             raise ParameterError(f"pass_samples must be >= 1, got {self.pass_samples!r}")
+        if self.adaptive:
+            if (problem := adaptive.check_spp(self.spp)) is not None:
+                raise ParameterError(problem)
+            if self.first_sample != 0:
+                raise ParameterError("adaptive sampling renders samples from 0 (first_sample must be 0)")
 
     @property
     def light_samples(self) -> int:
@@ -761,6 +769,8 @@ def render(
     m = settings.shading_samples
     spp_pass = max(1, min(settings.spp, settings.pass_samples // n_pixels))
     band = max(1, min(n_pixels, settings.pass_samples // spp_pass))
+    if resume is not None and settings.adaptive:
+        raise ParameterError("an adaptive render cannot be resumed: its sample counts need the whole pilot first")
     if resume is not None and resume.count.size != n_pixels:
         raise ParameterError(f"cannot resume a render of {resume.count.size} pixels at {width}x{height}")
     acc = resume.copy() if resume is not None else Accumulator(n_pixels)
@@ -797,6 +807,7 @@ def render(
         "interrupted": False,
         "stopped_by_time_limit": False,
         "triangles": scene.triangle_count,
+        "adaptive": settings.adaptive,
     }
     largest_pass = max(1, band * spp_pass)
     buffers = _pass_buffers(largest_pass, m)  # every pass uses leading views of these: memory bounded by one pass
@@ -852,12 +863,12 @@ def render(
         **light_constants,
     }
 
-    def run_pass(acc: Accumulator, pixel_start: int, count: int, spp_now: int, sample_start: int) -> int:
-        """One pass over ``count`` pixels x ``spp_now`` samples; returns the number of shadow rays traced."""
-        n = count * spp_now
+    def run_pass(acc: Accumulator, pixels: np.ndarray, spp_now: int, sample_start: int) -> int:
+        """One pass over ``pixels`` x ``spp_now`` samples; returns the number of shadow rays traced."""
+        n = pixels.size * spp_now
         b = {k: v[: n * m] if v.shape[0] == largest_pass * m else v[:n] for k, v in buffers.items()}
         values = {**constants, **b, "spp_pass": spp_now, "sample_start": sample_start}
-        values["pixels"] = pass_pixels(pixel_start, count)
+        values["pixels"] = pixels
         _launch(_camera_pass, values)
         for kernel in stages:
             if kernel in worklists:
@@ -869,34 +880,46 @@ def render(
         _launch(_accumulate, values)
         return shadow_rays
 
+    def passes():
+        """(pixels, samples per pixel, first sample index, pixels done) of every pass, in order: the uniform rounds
+        over the image (of the pilot, if adaptive), then the adaptive rounds (integrators/adaptive.py)."""
+        uniform_spp = adaptive.pilot_spp(settings.spp) if settings.adaptive else settings.spp
+        for sample_start, spp_now in _sample_rounds(settings.first_sample, uniform_spp, spp_pass):
+            for pixel_start in range(0, n_pixels, band):
+                count = min(band, n_pixels - pixel_start)
+                yield pass_pixels(pixel_start, count), spp_now, sample_start, pixel_start + count
+        if settings.adaptive:  # the pilot is complete here: the generator runs as the passes are made
+            counts = adaptive.sample_counts(acc.mean, acc.m2, acc.count, width, height, settings.spp)
+            stats["adaptive_max_spp"] = int(counts.max())
+            for pixels, spp_now, sample_start in adaptive.sample_rounds(counts, uniform_spp, largest_pass):
+                yield pixels, spp_now, sample_start, n_pixels
+
     counted_before = 0
     start = time.perf_counter()
     with _InterruptAtPassEnd() as interrupt:
         try:
             # warm up every kernel on one pixel (loads cached machine code) before the clock starts
-            run_pass(Accumulator(n_pixels), 0, 1, 1, 0)
+            run_pass(Accumulator(n_pixels), pass_pixels(0, 1), 1, 0)
             if PROFILE is not None:
                 PROFILE.clear()  # the warm-up (and any compiling) is not the render
             counted_before = ray_counts.sum()
             stats["setup_seconds"] = time.perf_counter() - t_setup
             start = time.perf_counter()
-            for sample_start, spp_now in _sample_rounds(settings.first_sample, settings.spp, spp_pass):
-                for pixel_start in range(0, n_pixels, band):
-                    count = min(band, n_pixels - pixel_start)
-                    stats["shadow_rays"] += run_pass(acc, pixel_start, count, spp_now, sample_start)
-                    stats["camera_rays"] += count * spp_now
-                    stats["passes"] += 1
-                    stats["seconds"] = time.perf_counter() - start
-                    stats["spp_done"] = int(acc.count.min())
-                    if progress is not None:
-                        progress(dict(stats, spp_target=settings.spp, pixels_done=pixel_start + count))
-                    if stats["spp_done"] < 1:
-                        continue  # a stop waits until every pixel holds a sample (the first round is 1 spp)
-                    if interrupt.requested:
-                        raise KeyboardInterrupt
-                    if settings.time_limit is not None and stats["seconds"] >= settings.time_limit:
-                        stats["stopped_by_time_limit"] = True
-                        raise _Stop
+            for pixels, spp_now, sample_start, pixels_done in passes():
+                stats["shadow_rays"] += run_pass(acc, pixels, spp_now, sample_start)
+                stats["camera_rays"] += pixels.size * spp_now
+                stats["passes"] += 1
+                stats["seconds"] = time.perf_counter() - start
+                stats["spp_done"] = int(acc.count.min())
+                if progress is not None:
+                    progress(dict(stats, spp_target=settings.spp, pixels_done=pixels_done))
+                if stats["spp_done"] < 1:
+                    continue  # a stop waits until every pixel holds a sample (the first round is 1 spp)
+                if interrupt.requested:
+                    raise KeyboardInterrupt
+                if settings.time_limit is not None and stats["seconds"] >= settings.time_limit:
+                    stats["stopped_by_time_limit"] = True
+                    raise _Stop
         except _Stop:
             pass  # pixels of the unfinished pass have one pass fewer: their counts say so
         except KeyboardInterrupt:

@@ -123,6 +123,7 @@ RENDER_KEYS = {
     "light_sampler",
     "lights_per_sample",
     "light_strategy",
+    "adaptive",
 }
 
 
@@ -373,6 +374,7 @@ def _render_defaults(t: _Table) -> dict:
         "light_sampler": lambda: t.choice("light_sampler", list(SELECTORS)),
         "lights_per_sample": lambda: t.integer("lights_per_sample", minimum=1),
         "light_strategy": lambda: t.choice("light_strategy", list(LIGHT_STRATEGIES)),
+        "adaptive": lambda: t.boolean("adaptive"),
     }
     assert set(readers) == RENDER_KEYS
     defaults = {key: read() for key, read in readers.items() if key in t.data}

@@ -1,0 +1,50 @@
+"""Adaptive sample counts from a pilot's statistics (integrators/adaptive.py)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from lightprobe.integrators.adaptive import MAX_FACTOR, sample_counts, sample_rounds
+
+
+def pilot_stats(variance: np.ndarray, mean: float = 1.0, count: int = 16):
+    """Accumulator fields of a pilot whose per-sample variance per pixel is ``variance`` (H, W)."""
+    h, w = variance.shape
+    m2 = np.repeat(variance.reshape(-1, 1) * (count - 1), 3, axis=1)
+    return np.full((h * w, 3), mean), m2, np.full(h * w, count), w, h
+
+
+def test_a_pixel_is_sampled_by_its_neighbours_noise_not_its_own():
+    """One noisy pixel in a quiet image: its 8 neighbours get more samples than the others, and the pixel itself
+    no more than a quiet one with quiet neighbours -- its own pilot never decides its count (which would bias it)."""
+    variance = np.full((7, 7), 0.01)
+    variance[3, 3] = 100.0
+    counts = sample_counts(*pilot_stats(variance), spp=64).reshape(7, 7)
+    ring = np.zeros((7, 7), bool)
+    ring[2:5, 2:5] = True
+    ring[3, 3] = False
+    assert counts[ring].min() > counts[~ring].max() // 2 and counts[ring].min() > counts[0, 0]
+    assert counts[3, 3] <= counts[0, 0]
+    assert counts.mean() <= 64
+
+
+def test_counts_follow_the_noise_within_the_budget():
+    rng = np.random.default_rng(0)
+    variance = np.exp(rng.normal(0.0, 2.0, (16, 24)))
+    counts = sample_counts(*pilot_stats(variance), spp=64)
+    assert counts.mean() <= 64 and counts.mean() > 48  # the budget, nearly all of it
+    assert set(np.unique(counts)) <= {16 * 2**k for k in range(6)}  # pilot x 2^k up to 8 spp
+    assert counts.max() <= MAX_FACTOR * 64
+    # a noiseless image spends its samples evenly
+    np.testing.assert_array_equal(sample_counts(*pilot_stats(np.zeros((4, 5))), spp=64), np.full(20, 64))
+
+
+def test_rounds_give_each_pixel_its_samples_in_order():
+    counts = np.array([16, 32, 64, 256, 16, 128])
+    taken = {p: [] for p in range(6)}
+    for pixels, spp_now, start in sample_rounds(counts, 16, largest_pass=40):
+        assert pixels.size * spp_now <= 40
+        for p in pixels:
+            taken[int(p)].extend(range(start, start + spp_now))
+    for p, n in enumerate(counts):
+        assert taken[p] == list(range(16, n))  # after the pilot's 0 .. 15, every index once, in order
