@@ -226,6 +226,8 @@ def _scene_file(tmp_path, render_table: str = "") -> Path:
         ('strategy = "best"', "strategy must be one of"),
         ("mis_compensation = 1", "mis_compensation must be true or false"),
         ("env_samples = -1", "env_samples must be >= 0"),
+        ("adaptive = 1", "adaptive must be true or false"),
+        ("adaptive = true\nspp = 12", "adaptive sampling needs spp a power of two"),
     ],
 )
 def test_wrong_typed_render_keys_are_one_line(capsys, tmp_path, entry, message):
@@ -431,3 +433,20 @@ def test_render_writes_an_object_id_pass_on_request(tmp_path):
     seen = {int(v) for v in np.unique(ids)} - {-1}
     assert seen and all(0 <= v < len(names) for v in seen) and len(seen) >= 3  # ground, blob, spheres
     assert main(["render", "--demo", "-o", str(out), "--object-ids", str(tmp_path / "ids.png")]) != 0
+
+
+def test_adaptive_from_the_scene_file_or_the_option(capsys, tmp_path):
+    """``adaptive = true`` in [render] (or --adaptive) renders with per-pixel counts; compare, whose rounds resume
+    each other, refuses it in one line before rendering anything."""
+    path = _scene_file(tmp_path, "adaptive = true\nspp = 8")
+    assert main(["render", str(path), "-o", str(tmp_path / "a.exr"), "-q"]) == 0
+    meta = json.loads((tmp_path / "a.exr.json").read_text())
+    assert meta["adaptive"] is True and meta["spp_done"] == 2
+    assert main(["render", str(path), "--no-adaptive", "-o", str(tmp_path / "b.exr"), "-q"]) == 0
+    meta = json.loads((tmp_path / "b.exr.json").read_text())
+    assert meta["adaptive"] is False and meta["spp_done"] == meta["spp_max"] == 8
+    capsys.readouterr()
+    assert main(["compare", str(path), "-o", str(tmp_path / "r.html"), "--spp", "2", "-q"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "adaptive = true" in err[0] and "s.toml" in err[0], err
+    assert not (tmp_path / "r.html").exists()

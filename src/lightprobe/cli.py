@@ -304,7 +304,17 @@ def compare_command(
             raise LightprobeError(f"--width must be >= 1, got {width}")
         w, h = scene.camera.resolution
         scene.camera = scene.camera.with_resolution(width, max(1, round(h * width / w)))
+    if defaults.get("adaptive"):
+        raise LightprobeError(
+            f"{name}: [render] adaptive = true, but compare renders in rounds that resume each other, which an "
+            "adaptive render cannot; set it to false here, or render it with `lightprobe render`"
+        )
     base = _render_settings(defaults, {"seed": seed, "spp": 1})
+    from .experiments.compare import parse_strategy
+
+    tokens = [t for t in strategies.split(",") if t.strip()]
+    for token in tokens:  # a bad token is an error before the reference is rendered, not after
+        parse_strategy(token, base)
     w, h = scene.camera.resolution
     if reference is not None:
         ref = read_image(reference)
@@ -318,7 +328,6 @@ def compare_command(
         ref_settings = RenderSettings(**{**_settings_dict(base), "spp": reference_spp, "seed": seed + 1_000_003})
         ref_result = render(scene, ref_settings)
         ref_image, ref_var = ref_result.image, ref_result.variance
-    tokens = [t for t in strategies.split(",") if t.strip()]
     from .analysis.masks import object_id_pass
 
     ids, names = object_id_pass(scene)
