@@ -440,6 +440,7 @@ def test_adaptive_from_the_scene_file_or_the_option(capsys, tmp_path):
     each other, refuses it in one line before rendering anything."""
     path = _scene_file(tmp_path, "adaptive = true\nspp = 8")
     assert main(["render", str(path), "-o", str(tmp_path / "a.exr"), "-q"]) == 0
+    assert "spp (adaptive, " in capsys.readouterr().err
     meta = json.loads((tmp_path / "a.exr.json").read_text())
     assert meta["adaptive"] is True and meta["spp_done"] == 2
     assert main(["render", str(path), "--no-adaptive", "-o", str(tmp_path / "b.exr"), "-q"]) == 0

@@ -186,7 +186,9 @@ def render_command(
     typer.echo(
         f"wrote {', '.join(str(f) for f in files)}: {stats['spp_done']}"
         + (f"-{stats['spp_max']}" if stats["spp_max"] != stats["spp_done"] else "")
-        + f" spp in {stats['seconds']:.2f} s, {stats['samples_per_s'] / 1e6:.2f} M samples/s, "
+        + " spp"
+        + (f" (adaptive, {result.counts.mean():.1f} on average)" if stats["adaptive"] else "")
+        + f" in {stats['seconds']:.2f} s, {stats['samples_per_s'] / 1e6:.2f} M samples/s, "
         f"{stats['rays_per_s'] / 1e6:.2f} M rays/s{note}",
         err=True,
     )
