@@ -23,7 +23,7 @@ def test_a_pixel_is_sampled_by_its_neighbours_noise_not_its_own():
     ring = np.zeros((7, 7), bool)
     ring[2:5, 2:5] = True
     ring[3, 3] = False
-    assert counts[ring].min() > counts[~ring].max() // 2 and counts[ring].min() > counts[0, 0]
+    assert counts[ring].min() > counts[~ring].max()  # the ring above every other pixel, the noisy one included
     assert counts[3, 3] <= counts[0, 0]
     assert counts.mean() <= 64
 
