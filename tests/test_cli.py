@@ -227,7 +227,7 @@ def _scene_file(tmp_path, render_table: str = "") -> Path:
         ("mis_compensation = 1", "mis_compensation must be true or false"),
         ("env_samples = -1", "env_samples must be >= 0"),
         ("adaptive = 1", "adaptive must be true or false"),
-        ("adaptive = true\nspp = 12", "adaptive sampling needs spp a power of two"),
+        ("adaptive = true\nspp = 3", "adaptive sampling needs spp >= 4"),
     ],
 )
 def test_wrong_typed_render_keys_are_one_line(capsys, tmp_path, entry, message):

@@ -112,7 +112,7 @@ def render_command(
         bool | None,
         typer.Option(
             "--adaptive/--no-adaptive",
-            help="spp / 4 samples in every pixel, then --spp on average where the noise is (spp a power of 2).",
+            help="A pilot of about spp / 4 samples in every pixel, then --spp on average where the noise is.",
         ),
     ] = None,
     threads: Annotated[int | None, typer.Option(help="Threads [all cores].")] = None,

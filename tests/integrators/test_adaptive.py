@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lightprobe.integrators.adaptive import MAX_FACTOR, sample_counts, sample_rounds
+from lightprobe.integrators.adaptive import MAX_FACTOR, levels, pilot_spp, sample_counts, sample_rounds
 
 
 def pilot_stats(variance: np.ndarray, mean: float = 1.0, count: int = 16):
@@ -48,3 +48,16 @@ def test_rounds_give_each_pixel_its_samples_in_order():
             taken[int(p)].extend(range(start, start + spp_now))
     for p, n in enumerate(counts):
         assert taken[p] == list(range(16, n))  # after the pilot's 0 .. 15, every index once, in order
+
+
+def test_any_spp_from_4_has_a_power_of_two_pilot_and_keeps_the_budget():
+    """The pilot is the largest power of two <= spp / 4, so every count (pilot x 2^k) is a Sobol' net."""
+    assert [pilot_spp(n) for n in (4, 7, 8, 12, 16, 64, 100, 1000)] == [1, 1, 2, 2, 4, 16, 16, 128]
+    np.testing.assert_array_equal(levels(100), [16, 32, 64, 128, 256, 512])  # up to 8 x spp
+    rng = np.random.default_rng(1)
+    variance = np.exp(rng.normal(0.0, 2.0, (16, 24)))
+    counts = sample_counts(*pilot_stats(variance), spp=100)
+    assert 80 < counts.mean() <= 100
+    assert set(np.unique(counts)) <= set(levels(100).tolist())
+    # no noise anywhere: the largest level within the budget, everywhere
+    np.testing.assert_array_equal(sample_counts(*pilot_stats(np.zeros((4, 5))), spp=100), np.full(20, 64))

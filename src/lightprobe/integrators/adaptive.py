@@ -1,5 +1,6 @@
-"""Per-pixel adaptive sampling (``RenderSettings(adaptive=True)``): a pilot of spp / 4 samples in every pixel, then
-each pixel's count chosen from its neighbours' pilot noise, spp on average.
+"""Per-pixel adaptive sampling (``RenderSettings(adaptive=True)``): a pilot of about spp / 4 samples in every pixel
+(the largest power of two that is at most spp / 4), then each pixel's count chosen from its neighbours' pilot noise,
+spp on average.
 
 Why: on the peer scene the error of a uniform 64-spp render sits in a quarter of the pixels (shadowed ground, the
 blob, the glossy spheres); spending samples where the noise is cuts the error the image has (its relMSE less the
@@ -7,8 +8,8 @@ reference's own noise) by 2.0x at the same mean spp (decisions.md 36).
 
 What it minimises: the metric's sum over pixels of sigma_i^2 / (n_i (mu_i^2 + 0.01)), given sum n_i = spp x
 pixels, which is least for n_i proportional to w_i = sigma_i / sqrt(mu_i^2 + 0.01) (Lagrange).  sigma_i and mu_i
-come from the pilot.  Counts are powers of two times the pilot (a Sobol' pixel's first 2^m samples are a net), from
-the pilot itself up to 8 x spp, with the mean at most spp.
+come from the pilot.  Counts are powers of two times the pilot, itself a power of two (a Sobol' pixel's first 2^m
+samples are a net), from the pilot up to 8 x spp, with the mean at most spp.
 
 Unbiased: pixel i's count is a function of its *neighbours'* pilot samples only (the 3 x 3 ring without the pixel
 itself).  A pixel's random numbers depend on its own (seed, pixel) key, so its samples are independent of its
@@ -24,21 +25,28 @@ import numpy as np
 
 from .schedule import spread
 
-__all__ = ["MAX_FACTOR", "PILOT_DIVISOR", "check_spp", "pilot_spp", "sample_counts", "sample_rounds"]
+__all__ = ["MAX_FACTOR", "PILOT_DIVISOR", "check_spp", "levels", "pilot_spp", "sample_counts", "sample_rounds"]
 
-PILOT_DIVISOR = 4  # the pilot is spp / 4 samples per pixel
+PILOT_DIVISOR = 4  # the pilot is at most spp / 4 samples per pixel
 MAX_FACTOR = 8  # no pixel gets more than 8 x spp
 
 
 def check_spp(spp: int) -> str | None:
-    """Why ``spp`` cannot be rendered adaptively (None if it can): it must be a power of two >= 4."""
-    if spp < PILOT_DIVISOR or spp & (spp - 1):
-        return f"adaptive sampling needs spp a power of two >= {PILOT_DIVISOR} (pilot spp / 4), got {spp}"
+    """Why ``spp`` cannot be rendered adaptively (None if it can): the pilot needs spp >= 4."""
+    if spp < PILOT_DIVISOR:
+        return f"adaptive sampling needs spp >= {PILOT_DIVISOR} (a pilot of spp / 4 first), got {spp}"
     return None
 
 
 def pilot_spp(spp: int) -> int:
-    return spp // PILOT_DIVISOR
+    """The pilot's samples per pixel: the largest power of two <= spp / 4 (16 for 64 spp, 16 for 100)."""
+    return 1 << (spp // PILOT_DIVISOR).bit_length() - 1
+
+
+def levels(spp: int) -> np.ndarray:
+    """The counts a pixel can get: the pilot x 2^k, up to 8 x spp."""
+    pilot = pilot_spp(spp)
+    return pilot << np.arange((MAX_FACTOR * spp // pilot).bit_length())
 
 
 def _ring_mean(w: np.ndarray) -> np.ndarray:
@@ -54,21 +62,20 @@ def _ring_mean(w: np.ndarray) -> np.ndarray:
 
 def sample_counts(mean: np.ndarray, m2: np.ndarray, count: np.ndarray, width: int, height: int, spp: int):
     """Samples per pixel (n_pixels,) int64 from the pilot's per-pixel statistics (``Accumulator`` fields)."""
-    pilot = pilot_spp(spp)
     n = np.maximum(count, 2).astype(np.float64)[:, None]
     sample_var = m2 / (n - 1.0)  # per sample, per channel
     w = np.sqrt((sample_var / (mean * mean + 0.01)).mean(axis=1))
     w = _ring_mean(np.nan_to_num(w, nan=0.0, posinf=0.0).reshape(height, width)).ravel()
-    levels = pilot * 2 ** np.arange(int(np.log2(MAX_FACTOR * PILOT_DIVISOR)) + 1)
-    if not w.max() > 0.0:  # no noise seen anywhere: spend the samples evenly
-        return np.full(width * height, spp, dtype=np.int64)
-    log_levels = np.log2(levels)
+    allowed = levels(spp)
+    if not w.max() > 0.0:  # no noise seen anywhere: spend the samples evenly (spp itself if it is a level)
+        return np.full(width * height, allowed[allowed <= spp].max(), dtype=np.int64)
+    log_levels = np.log2(allowed)
 
     def counts_for(scale: float) -> np.ndarray:
-        ideal = np.clip(scale * w, levels[0], levels[-1])
-        return levels[np.abs(np.log2(ideal)[:, None] - log_levels).argmin(axis=1)]
+        ideal = np.clip(scale * w, allowed[0], allowed[-1])
+        return allowed[np.abs(np.log2(ideal)[:, None] - log_levels).argmin(axis=1)]
 
-    lo, hi = 0.0, levels[-1] / w[w > 0].min()  # at hi every noisy pixel is at the cap
+    lo, hi = 0.0, allowed[-1] / w[w > 0].min()  # at hi every noisy pixel is at the cap
     for _ in range(60):  # the largest scale whose mean count stays within spp
         mid = 0.5 * (lo + hi)
         if counts_for(mid).mean() > spp:

@@ -116,7 +116,7 @@ class RenderSettings:
     time_limit: float | None = None
     threads: int | None = None
     pass_samples: int = 1 << 19
-    adaptive: bool = False  # spp / 4 in every pixel, then spp on average where the noise is (integrators/adaptive.py)
+    adaptive: bool = False  # ~spp / 4 in every pixel, then spp on average where the noise is (integrators/adaptive.py)
 
     def validate(self) -> None:
         """Raise :class:`ParameterError` naming the first setting of the wrong type or out of range."""
@@ -177,8 +177,12 @@ class RenderSettings:
             raise ParameterError(f"threads must be between 1 and 256, got {self.threads!r}")
         if not 0 <= self.seed < 2**63:
             raise ParameterError(f"seed must be in [0, 2^63), got {self.seed!r}")
-        if not 0 <= self.first_sample < 2**62:
-            raise ParameterError(f"first_sample must be in [0, 2^62), got {self.first_sample!r}")
+        if self.first_sample < 0:
+            raise ParameterError(f"first_sample must be >= 0, got {self.first_sample!r}")
+        # a group's member j of sample k takes index k n + j (n <= 64 slots, sampling.rng.group_slot), in int64
+        last = self.first_sample + self.spp * (adaptive.MAX_FACTOR if self.adaptive else 1)
+        if last > _LAST_SAMPLE:
+            raise ParameterError(f"sample indices must stay below 2^56 (first_sample + spp), got up to {last}")
         if self.pass_samples < 1:
             raise ParameterError(f"pass_samples must be >= 1, got {self.pass_samples!r}")
         if self.adaptive:
@@ -212,6 +216,8 @@ class RenderSettings:
         heuristic = self.heuristic if self.heuristic is not None else ("balance" if environment_only else "power")
         return replace(self, n_bsdf=n_bsdf, n_env=n_env, heuristic=heuristic)
 
+
+_LAST_SAMPLE = 2**56  # times 64 shading slots, still below 2^63
 
 _KINDS = {"integer": numbers.Integral, "number": numbers.Real, "string": str, "true or false": bool}
 
