@@ -10,7 +10,9 @@ res^2 * spp / seconds, Mitsuba's definition), rays_per_s (camera + shadow rays),
 reached a mesh's bounds; the kernels trace them through Embree themselves, so their time is part of the kernels' in
 the profile), peak_mb (max resident memory of the process), cores,
 and relmse = mean over pixels and channels of (x - ref)^2 / (ref^2 + 0.01) when --reference is given (the peer
-kit's metric).  For comparison: Mitsuba 3's llvm variant renders this scene at about 10 M samples/s on this
+kit's metric), with ref_floor, the part of it that is the reference's own noise, when the reference's variance
+(``ref4096_var.exr`` beside ``ref4096.exr``, from the kit's ``--variance-out``) is found: relmse - ref_floor is the
+error the image really has.  For comparison: Mitsuba 3's llvm variant renders this scene at about 10 M samples/s on this
 machine's 2 cores (../shared/peers/README.md).
 """
 
@@ -22,6 +24,7 @@ import os
 import resource
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 
@@ -118,6 +121,9 @@ def run_one(args) -> dict:
         ref = read_image(args.reference)[:, :, :3]
         line["relmse"] = relmse(result.image, ref)
         line["reference"] = args.reference
+        variance = Path(args.reference).with_name(Path(args.reference).stem + "_var.exr")
+        if variance.exists():  # as the kit's compare.py: mean of var / (ref^2 + 0.01)
+            line["ref_floor"] = float(np.mean(read_image(str(variance))[:, :, :3] / (ref**2 + 0.01)))
     if args.out:
         write_image(args.out, result.image)
         line["out"] = args.out
@@ -185,6 +191,8 @@ def main(argv=None) -> int:
             cmd += ["--env-samples", str(args.env_samples)]
         if args.threads:
             cmd += ["--threads", str(args.threads)]
+        if args.adaptive:
+            cmd += ["--adaptive"]
         if args.reference:
             cmd += ["--reference", args.reference]
         subprocess.run(cmd, check=True)
