@@ -69,20 +69,25 @@ def sample_counts(mean: np.ndarray, m2: np.ndarray, count: np.ndarray, width: in
     allowed = levels(spp)
     if not w.max() > 0.0:  # no noise seen anywhere: spend the samples evenly (spp itself if it is a level)
         return np.full(width * height, allowed[allowed <= spp].max(), dtype=np.int64)
-    log_levels = np.log2(allowed)
+    # counts proportional to w, as levels: level k = pilot x 2^k nearest to scale x w in log2 (ties to the lower),
+    # i.e. k = ceil(log2(w / pilot) + log2(scale) - 1/2) clipped to the levels; bisect on log2(scale).  (In log
+    # space each step is a few array operations: a search over the levels per pixel took 1.1 s at 512 x 512.)
+    top = allowed.size - 1
+    noisy = w > 0.0
+    lw = np.full(w.shape, -np.inf)
+    lw[noisy] = np.log2(w[noisy] / allowed[0])
 
-    def counts_for(scale: float) -> np.ndarray:
-        ideal = np.clip(scale * w, allowed[0], allowed[-1])
-        return allowed[np.abs(np.log2(ideal)[:, None] - log_levels).argmin(axis=1)]
+    def counts_for(shift: float) -> np.ndarray:
+        return allowed[np.clip(np.ceil(lw + (shift - 0.5)), 0, top).astype(np.int64)]
 
-    lo, hi = 0.0, allowed[-1] / w[w > 0].min()  # at hi every noisy pixel is at the cap
+    lo, hi = -lw[noisy].max() - 1.0, top + 1.0 - lw[noisy].min()  # at lo every pixel at the pilot, at hi the cap
     for _ in range(60):  # the largest scale whose mean count stays within spp
         mid = 0.5 * (lo + hi)
         if counts_for(mid).mean() > spp:
             hi = mid
         else:
             lo = mid
-    return counts_for(lo).astype(np.int64)
+    return counts_for(lo)
 
 
 def sample_rounds(counts: np.ndarray, pilot: int, largest_pass: int):
