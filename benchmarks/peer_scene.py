@@ -12,8 +12,8 @@ the profile), peak_mb (max resident memory of the process), cores,
 and relmse = mean over pixels and channels of (x - ref)^2 / (ref^2 + 0.01) when --reference is given (the peer
 kit's metric), with ref_floor, the part of it that is the reference's own noise, when the reference's variance
 (``ref4096_var.exr`` beside ``ref4096.exr``, from the kit's ``--variance-out``) is found: relmse - ref_floor is the
-error the image really has.  For comparison: Mitsuba 3's llvm variant renders this scene at about 10 M samples/s on this
-machine's 2 cores (../shared/peers/README.md).
+error the image really has.  For comparison: Mitsuba 3's llvm variant renders this scene at about 10 M samples/s
+on this machine's 2 cores (../shared/peers/README.md).
 """
 
 from __future__ import annotations

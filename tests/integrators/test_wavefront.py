@@ -238,8 +238,8 @@ def test_adaptive_settings_are_checked():
         (RenderSettings(spp=3, adaptive=True), "adaptive sampling needs spp >= 4"),
         (RenderSettings(spp=8, first_sample=8, adaptive=True), "first_sample must be 0"),
         (RenderSettings(spp=8, first_sample=-1), "first_sample must be >= 0"),
-        (RenderSettings(spp=8, first_sample=2**56 - 7), "sample indices must stay below 2"),
-        (RenderSettings(spp=2**53 + 1, adaptive=True), "sample indices must stay below 2"),
+        (RenderSettings(spp=8, first_sample=2**56 - 7), r"first_sample \+ spp must be at most 2\^56"),
+        (RenderSettings(spp=2**53 + 1, adaptive=True), r"8 x spp \(adaptive\) must be at most 2\^56"),
         (RenderSettings(spp=8, adaptive=1), "adaptive must be true or false"),
     ):
         with pytest.raises(ParameterError, match=match):

@@ -182,7 +182,8 @@ class RenderSettings:
         # a group's member j of sample k takes index k n + j (n <= 64 slots, sampling.rng.group_slot), in int64
         last = self.first_sample + self.spp * (adaptive.MAX_FACTOR if self.adaptive else 1)
         if last > _LAST_SAMPLE:
-            raise ParameterError(f"sample indices must stay below 2^56 (first_sample + spp), got up to {last}")
+            what = "8 x spp (adaptive)" if self.adaptive else "first_sample + spp"
+            raise ParameterError(f"{what} must be at most 2^56 (sample indices x 64 slots in 64 bits), got {last}")
         if self.pass_samples < 1:
             raise ParameterError(f"pass_samples must be >= 1, got {self.pass_samples!r}")
         if self.adaptive:
