@@ -306,17 +306,22 @@ def compare_command(
             raise LightprobeError(f"--width must be >= 1, got {width}")
         w, h = scene.camera.resolution
         scene.camera = scene.camera.with_resolution(width, max(1, round(h * width / w)))
-    if defaults.get("adaptive"):
+    adaptive = bool(defaults.get("adaptive"))
+    if adaptive and equal == "time":
         raise LightprobeError(
-            f"{name}: [render] adaptive = true, but compare renders in rounds that resume each other, which an "
-            "adaptive render cannot; set it to false here, or render it with `lightprobe render`"
+            f"{name}: [render] adaptive = true, but an adaptive render spends a mean sample count, not a time "
+            "budget; compare it with --equal spp, or set it to false here"
         )
-    base = _render_settings(defaults, {"seed": seed, "spp": 1})
+    if adaptive and spp < 4:
+        raise LightprobeError(f"{name}: [render] adaptive = true needs --spp >= 4 (a pilot first), got {spp}")
+    base = _render_settings(defaults, {"seed": seed, "spp": 4 if adaptive else 1})
     from .experiments.compare import parse_strategy
 
     tokens = [t for t in strategies.split(",") if t.strip()]
     for token in tokens:  # a bad token is an error before the reference is rendered, not after
-        parse_strategy(token, base)
+        _, parsed = parse_strategy(token, base, equal)
+        if parsed.adaptive and spp < 4:
+            raise LightprobeError(f"strategy {token!r}: adaptive sampling needs --spp >= 4 (a pilot first), got {spp}")
     w, h = scene.camera.resolution
     if reference is not None:
         ref = read_image(reference)
@@ -327,7 +332,9 @@ def compare_command(
         if reference_spp < 1:
             raise LightprobeError(f"--reference-spp must be >= 1, got {reference_spp}")
         _echo_err(f"rendering the reference: {reference_spp} spp, MIS (use --reference to bring your own) ...")
-        ref_settings = RenderSettings(**{**_settings_dict(base), "spp": reference_spp, "seed": seed + 1_000_003})
+        ref_settings = RenderSettings(  # uniform, as `lightprobe reference` renders one
+            **{**_settings_dict(base), "spp": reference_spp, "seed": seed + 1_000_003, "adaptive": False}
+        )
         ref_result = render(scene, ref_settings)
         ref_image, ref_var = ref_result.image, ref_result.variance
     from .analysis.masks import object_id_pass

@@ -32,10 +32,13 @@ def test_strategy_tokens():
         ("mis/colour=red", "is not key=value with a key among"),
         ("mis/bsdf_samples=0/env_samples=0", "sample counts"),
         ("mis/spp=4", "is not key=value"),
-        ("mis/adaptive=true", "an adaptive render cannot be resumed"),
     ]:
         with pytest.raises(LightprobeError, match=message):
             parse_strategy(token, base)
+    _, s = parse_strategy("mis/adaptive=true", base)  # an adaptive strategy at equal samples; not at equal time
+    assert s.adaptive is True
+    with pytest.raises(LightprobeError, match="a mean sample count, not a time budget"):
+        parse_strategy("mis/adaptive=true", base, "time")
 
 
 def test_equal_samples(scene_and_reference):
@@ -92,3 +95,22 @@ def test_per_object_metrics(scene_and_reference):
     assert set(run.metrics["objects"]) == seen and len(seen) >= 2
     for name in seen:
         assert run.metrics["objects"][name]["mse"] == pytest.approx(metrics.mse(run.image, ref.image, masks[name]))
+
+
+def test_an_adaptive_strategy_renders_each_round_afresh(scene_and_reference):
+    """Adaptive counts need a whole pilot, so its rounds (4, 8, 16 spp on average) are separate renders: each has
+    at most its mean count, its own seconds, and the last is the run's image -- unbiased against the reference."""
+    scene, ref = scene_and_reference
+    uniform, adaptive = compare(scene, ["mis", "mis/adaptive=true"], ref.image, ref.variance, equal="spp", spp=16)
+    assert [round(row["spp"]) for row in uniform.rounds] == [1, 2, 4, 8, 16]
+    assert len(adaptive.rounds) == 3
+    for row, n in zip(adaptive.rounds, (4, 8, 16), strict=True):
+        assert n / 2 < row["spp"] <= n
+    assert adaptive.seconds == adaptive.rounds[-1]["seconds"] and adaptive.spp == adaptive.rounds[-1]["spp"]
+    assert adaptive.rounds[-1]["mse"] == pytest.approx(adaptive.metrics["mse"])
+    assert adaptive.settings.adaptive and np.isfinite(adaptive.image).all()
+    assert adaptive.metrics["bias_low"] <= 0.0 <= adaptive.metrics["bias_high"]
+    with pytest.raises(LightprobeError, match="adaptive sampling needs spp >= 4"):
+        compare(scene, ["mis/adaptive=true"], ref.image, equal="spp", spp=2)
+    with pytest.raises(LightprobeError, match="not a time budget"):
+        compare(scene, ["mis/adaptive=true"], ref.image, equal="time", seconds=0.1)

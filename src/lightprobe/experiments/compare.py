@@ -9,6 +9,10 @@ Each strategy renders in doubling rounds (1, 2, 4, ... samples per pixel), each 
 last round stops at the time budget (at the end of a short pass), so every strategy gets the same seconds of
 rendering; in ``spp`` mode every strategy gets the same samples.  Metrics (``lightprobe.analysis.metrics``) are
 taken against the reference after every round.
+
+An adaptive strategy (``/adaptive=true``, integrators/adaptive.py) cannot continue a render: its counts need the
+whole pilot.  Its rounds (4, 8, ... spp, then spp on average) are separate renders, each timed on its own, so its
+curve costs about twice its final image; it takes ``spp`` mode only, since its budget is a mean sample count.
 """
 
 from __future__ import annotations
@@ -51,8 +55,9 @@ def _value(text: str):
     return text.strip()
 
 
-def parse_strategy(token: str, base: RenderSettings) -> tuple[str, RenderSettings]:
-    """(label, settings) for a strategy token; a :class:`LightprobeError` names a bad token."""
+def parse_strategy(token: str, base: RenderSettings, equal: str = "spp") -> tuple[str, RenderSettings]:
+    """(label, settings) for a strategy token, to be compared at ``equal`` samples or time; a
+    :class:`LightprobeError` names a bad token."""
     from ..io.scene_file import RENDER_KEYS, settings_fields
 
     name, *overrides = [part.strip() for part in token.strip().split("/")]
@@ -66,13 +71,13 @@ def parse_strategy(token: str, base: RenderSettings) -> tuple[str, RenderSetting
             raise LightprobeError(f"strategy {token!r}: {item!r} is not key=value with a key among {keys}")
         changes.update(settings_fields({key.strip(): _value(value)}))
     settings = dataclasses.replace(base, **changes)
-    if settings.adaptive is True:
+    if settings.adaptive is True and equal == "time":
         raise LightprobeError(
-            f"strategy {token!r}: compare renders in rounds that resume each other, and an adaptive render cannot "
-            "be resumed (its sample counts need the whole pilot); render it with `lightprobe render --adaptive`"
+            f"strategy {token!r}: an adaptive render spends a mean sample count, not a time budget (its counts "
+            "need the whole pilot first); compare it with --equal spp"
         )
-    try:
-        settings.validate()
+    try:  # an adaptive strategy's spp is each round's (>= 4, checked against compare's spp when it runs)
+        (dataclasses.replace(settings, spp=max(settings.spp, 4)) if settings.adaptive else settings).validate()
     except LightprobeError as exc:
         raise LightprobeError(f"strategy {token!r}: {exc}") from None
     return token.strip(), settings
@@ -127,6 +132,8 @@ def run_strategy(
     target = 1
     settings = settings_for(scene, settings)  # the report states the allocation and heuristic actually used
     run = StrategyRun(label, settings, np.zeros((height, width, 3), np.float32), np.zeros((height, width, 3)))
+    if settings.adaptive:
+        return _finish(_adaptive_rounds(scene, run, reference, spp, progress), reference, reference_variance, masks)
     # short passes in time mode, so that the budget is met within a pass of a few milliseconds: a pass holds about
     # 2^17 shading samples (RIS candidates counted), whatever the strategy's samples per camera sample
     work = settings.n_bsdf + settings.light_samples * settings.env_candidates
@@ -161,6 +168,32 @@ def run_strategy(
         raise LightprobeError(f"strategy {label!r} rendered nothing")
     run.seconds = spent
     run.spp = float(acc.count.mean())
+    return _finish(run, reference, reference_variance, masks)
+
+
+def _adaptive_rounds(scene, run: StrategyRun, reference, spp: int, progress) -> StrategyRun:
+    """An adaptive strategy's rounds: separate renders at 4, 8, ... spp and finally ``spp`` (each mean counts), the
+    last one the strategy's image and seconds."""
+    if spp < 4:
+        raise LightprobeError(f"strategy {run.label!r}: adaptive sampling needs spp >= 4 (a pilot first), got {spp}")
+    targets = [n for n in (4 << k for k in range(spp.bit_length())) if n < spp] + [spp]
+    for n in targets:
+        result = render(scene, dataclasses.replace(run.settings, spp=n, first_sample=0, time_limit=None))
+        run.image, run.variance = result.image, result.variance
+        run.seconds, run.spp = result.stats["seconds"], float(result.counts.mean())
+        run.rounds.append(
+            {"spp": run.spp, "seconds": run.seconds, **_measure(result.image, result.variance, reference, None)}
+        )
+        if progress is not None:
+            progress(run.label, n / spp)
+        if result.stats["interrupted"]:
+            break
+    return run
+
+
+def _finish(run: StrategyRun, reference, reference_variance, masks) -> StrategyRun:
+    """The final image's metrics: against the reference, per object, FLIP and efficiency."""
+    spent = run.seconds
     run.metrics = _measure(run.image, run.variance, reference, reference_variance)
     run.metrics["flip"] = metrics.flip(run.image, reference)
     run.metrics["efficiency"] = metrics.efficiency(max(run.metrics["mse"], 1e-300), max(spent, 1e-9))
@@ -200,7 +233,7 @@ def compare(
     if reference.shape[:2] != (height, width):
         raise LightprobeError(f"the reference is {reference.shape[1]}x{reference.shape[0]}, the scene {width}x{height}")
     base = base or RenderSettings()
-    parsed = [parse_strategy(token, base) for token in strategies]
+    parsed = [parse_strategy(token, base, equal) for token in strategies]
     runs = []
     for label, settings in parsed:
         start = time.perf_counter()
