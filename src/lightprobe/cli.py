@@ -319,9 +319,7 @@ def compare_command(
 
     tokens = [t for t in strategies.split(",") if t.strip()]
     for token in tokens:  # a bad token is an error before the reference is rendered, not after
-        _, parsed = parse_strategy(token, base, equal)
-        if parsed.adaptive and spp < 4:
-            raise LightprobeError(f"strategy {token!r}: adaptive sampling needs --spp >= 4 (a pilot first), got {spp}")
+        parse_strategy(token, base, equal, spp)
     w, h = scene.camera.resolution
     if reference is not None:
         ref = read_image(reference)

@@ -55,9 +55,11 @@ def _value(text: str):
     return text.strip()
 
 
-def parse_strategy(token: str, base: RenderSettings, equal: str = "spp") -> tuple[str, RenderSettings]:
-    """(label, settings) for a strategy token, to be compared at ``equal`` samples or time; a
-    :class:`LightprobeError` names a bad token."""
+def parse_strategy(
+    token: str, base: RenderSettings, equal: str = "spp", spp: int | None = None
+) -> tuple[str, RenderSettings]:
+    """(label, settings) for a strategy token, to be compared at ``equal`` samples (``spp`` of them, if given) or
+    time; a :class:`LightprobeError` names a bad token."""
     from ..io.scene_file import RENDER_KEYS, settings_fields
 
     name, *overrides = [part.strip() for part in token.strip().split("/")]
@@ -76,6 +78,8 @@ def parse_strategy(token: str, base: RenderSettings, equal: str = "spp") -> tupl
             f"strategy {token!r}: an adaptive render spends a mean sample count, not a time budget (its counts "
             "need the whole pilot first); compare it with --equal spp"
         )
+    if settings.adaptive is True and equal == "spp" and spp is not None and spp < 4:
+        raise LightprobeError(f"strategy {token!r}: adaptive sampling needs spp >= 4 (a pilot first), got {spp}")
     try:  # an adaptive strategy's spp is each round's (>= 4, checked against compare's spp when it runs)
         (dataclasses.replace(settings, spp=max(settings.spp, 4)) if settings.adaptive else settings).validate()
     except LightprobeError as exc:
@@ -133,7 +137,8 @@ def run_strategy(
     settings = settings_for(scene, settings)  # the report states the allocation and heuristic actually used
     run = StrategyRun(label, settings, np.zeros((height, width, 3), np.float32), np.zeros((height, width, 3)))
     if settings.adaptive:
-        return _finish(_adaptive_rounds(scene, run, reference, spp, progress), reference, reference_variance, masks)
+        _adaptive_rounds(scene, run, reference, spp, progress)
+        return _final_metrics(run, reference, reference_variance, masks)
     # short passes in time mode, so that the budget is met within a pass of a few milliseconds: a pass holds about
     # 2^17 shading samples (RIS candidates counted), whatever the strategy's samples per camera sample
     work = settings.n_bsdf + settings.light_samples * settings.env_candidates
@@ -168,14 +173,12 @@ def run_strategy(
         raise LightprobeError(f"strategy {label!r} rendered nothing")
     run.seconds = spent
     run.spp = float(acc.count.mean())
-    return _finish(run, reference, reference_variance, masks)
+    return _final_metrics(run, reference, reference_variance, masks)
 
 
-def _adaptive_rounds(scene, run: StrategyRun, reference, spp: int, progress) -> StrategyRun:
-    """An adaptive strategy's rounds: separate renders at 4, 8, ... spp and finally ``spp`` (each mean counts), the
-    last one the strategy's image and seconds."""
-    if spp < 4:
-        raise LightprobeError(f"strategy {run.label!r}: adaptive sampling needs spp >= 4 (a pilot first), got {spp}")
+def _adaptive_rounds(scene, run: StrategyRun, reference, spp: int, progress) -> None:
+    """An adaptive strategy's rounds: separate renders at 4, 8, ... and finally ``spp`` samples per pixel on
+    average, the last one the strategy's image and seconds."""
     targets = [n for n in (4 << k for k in range(spp.bit_length())) if n < spp] + [spp]
     for n in targets:
         result = render(scene, dataclasses.replace(run.settings, spp=n, first_sample=0, time_limit=None))
@@ -188,10 +191,9 @@ def _adaptive_rounds(scene, run: StrategyRun, reference, spp: int, progress) -> 
             progress(run.label, n / spp)
         if result.stats["interrupted"]:
             break
-    return run
 
 
-def _finish(run: StrategyRun, reference, reference_variance, masks) -> StrategyRun:
+def _final_metrics(run: StrategyRun, reference, reference_variance, masks) -> StrategyRun:
     """The final image's metrics: against the reference, per object, FLIP and efficiency."""
     spent = run.seconds
     run.metrics = _measure(run.image, run.variance, reference, reference_variance)
@@ -233,7 +235,7 @@ def compare(
     if reference.shape[:2] != (height, width):
         raise LightprobeError(f"the reference is {reference.shape[1]}x{reference.shape[0]}, the scene {width}x{height}")
     base = base or RenderSettings()
-    parsed = [parse_strategy(token, base, equal) for token in strategies]
+    parsed = [parse_strategy(token, base, equal, spp) for token in strategies]
     runs = []
     for label, settings in parsed:
         start = time.perf_counter()
