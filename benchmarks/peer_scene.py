@@ -24,7 +24,6 @@ import os
 import resource
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 
@@ -59,7 +58,7 @@ def run_one(args) -> dict:
     from lightprobe.integrators import wavefront
     from lightprobe.integrators.wavefront import RenderSettings, render
     from lightprobe.io.images import read_image, write_image
-    from lightprobe.peer import peer_scene
+    from lightprobe.peer import peer_scene, reference_floor
 
     if args.mesh:
         _replace_blob(args.mesh)
@@ -121,9 +120,8 @@ def run_one(args) -> dict:
         ref = read_image(args.reference)[:, :, :3]
         line["relmse"] = relmse(result.image, ref)
         line["reference"] = args.reference
-        variance = Path(args.reference).with_name(Path(args.reference).stem + "_var.exr")
-        if variance.exists():  # as the kit's compare.py: mean of var / (ref^2 + 0.01)
-            line["ref_floor"] = float(np.mean(read_image(str(variance))[:, :, :3] / (ref**2 + 0.01)))
+        if (floor := reference_floor(args.reference)) is not None:
+            line["ref_floor"] = floor
     if args.out:
         write_image(args.out, result.image)
         line["out"] = args.out

@@ -97,7 +97,9 @@ def main() -> int:
             file=sys.stderr,
         )
     reference = _reference(py, kit, cache)
-    floor = _floor(reference)
+    from lightprobe.peer import reference_floor  # importable: _kit() put src on the path
+
+    floor = reference_floor(reference) if reference is not None else None
     here = Path(__file__).resolve().parent
     configs = [(sampler, []) for sampler in args.lightprobe_samplers]
     if args.adaptive:
@@ -133,17 +135,6 @@ def main() -> int:
     if args.plot:
         _plot(best, args.plot, floor)
     return 0
-
-
-def _floor(reference: Path | None) -> float | None:
-    """The part of every relMSE that is the reference's own noise (the kit's ``ref_floor``: the mean of the
-    variance of its mean over ref^2 + 0.01), or None without the variance image."""
-    if reference is None or not (variance := reference.with_name(reference.stem + "_var.exr")).exists():
-        return None
-    from lightprobe.io.images import read_image
-
-    ref = read_image(str(reference))[:, :, :3]
-    return float((read_image(str(variance))[:, :, :3] / (ref**2 + 0.01)).mean())
 
 
 def _pick(r: dict, floor: float | None = None) -> dict:

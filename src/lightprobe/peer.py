@@ -22,7 +22,7 @@ from .geometry.mesh import TriangleMesh
 from .geometry.scene import Scene
 from .geometry.shapes import Rectangle, Sphere
 
-__all__ = ["find_peers", "peer_assets", "peer_scene"]
+__all__ = ["find_peers", "peer_assets", "peer_scene", "reference_floor"]
 
 
 def find_peers() -> Path | None:
@@ -92,3 +92,17 @@ def peer_scene(peers: Path | None = None, *, resolution: tuple[int, int] | None 
         else:
             raise SceneError(f"peer scene: unknown shape {obj['shape']!r}")
     return scene
+
+
+def reference_floor(reference: str | Path) -> float | None:
+    """The part of every relMSE against ``reference`` that is the reference's own noise (the peer kit's
+    ``ref_floor``: the mean over pixels and channels of var / (ref^2 + 0.01), var the variance of its mean, from
+    ``NAME_var.exr`` beside ``NAME.exr`` as the kit's ``render.py --variance-out`` writes it), or None without it."""
+    from .io.images import read_image
+
+    reference = Path(reference)
+    variance = reference.with_name(reference.stem + "_var.exr")
+    if not variance.exists():
+        return None
+    ref = read_image(str(reference))[:, :, :3]
+    return float(np.mean(read_image(str(variance))[:, :, :3] / (ref**2 + 0.01)))
