@@ -98,6 +98,7 @@ def reference_floor(reference: str | Path) -> float | None:
     """The part of every relMSE against ``reference`` that is the reference's own noise (the peer kit's
     ``ref_floor``: the mean over pixels and channels of var / (ref^2 + 0.01), var the variance of its mean, from
     ``NAME_var.exr`` beside ``NAME.exr`` as the kit's ``render.py --variance-out`` writes it), or None without it."""
+    from .analysis.metrics import RELMSE_EPSILON
     from .io.images import read_image
 
     reference = Path(reference)
@@ -105,4 +106,4 @@ def reference_floor(reference: str | Path) -> float | None:
     if not variance.exists():
         return None
     ref = read_image(str(reference))[:, :, :3]
-    return float(np.mean(read_image(str(variance))[:, :, :3] / (ref**2 + 0.01)))
+    return float(np.mean(read_image(str(variance))[:, :, :3] / (ref**2 + RELMSE_EPSILON)))
