@@ -76,6 +76,7 @@ def run_one(args) -> dict:
         n_env=args.env_samples,
         env_candidates=args.env_candidates,
         adaptive=args.adaptive,
+        time_limit=args.time_limit,
         **({"pass_samples": args.pass_samples} if args.pass_samples else {}),
     )
     tracer = RayTracer(scene.compile(), threads=args.threads or os.cpu_count() or 1)
@@ -100,6 +101,9 @@ def run_one(args) -> dict:
         "env_samples": stats["n_env"],
         "env_candidates": args.env_candidates,
         "adaptive": args.adaptive,
+        "time_limit": args.time_limit,
+        "spp_mean": round(float(result.counts.mean()), 3),
+        **{k: stats[k] for k in _PLAN_KEYS if k in stats},
         "env_pdf": [scene.environment.pdf_mode, scene.environment.pdf_weights, scene.environment.pdf_resolution],
         "seconds": round(stats["seconds"], 4),
         "samples_per_s": round(stats["samples_per_s"]),
@@ -128,6 +132,16 @@ def run_one(args) -> dict:
     return line
 
 
+# an adaptive render's plan under a time limit (integrators/adaptive.py), and whether the limit stopped it
+_PLAN_KEYS = (
+    "adaptive_pilot_spp",
+    "adaptive_pilot_seconds",
+    "adaptive_seconds_per_spp",
+    "adaptive_mean_planned",
+    "stopped_by_time_limit",
+)
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--spp", type=int, help="samples per pixel (default: 16, 64, 256 in separate processes)")
@@ -144,6 +158,7 @@ def main(argv=None) -> int:
     parser.add_argument("--env-candidates", type=int, default=1, help="RIS candidates per environment sample")
     parser.add_argument("--threads", type=int)
     parser.add_argument("--adaptive", action="store_true", help="per-pixel adaptive sampling (spp on average)")
+    parser.add_argument("--time-limit", type=float, help="stop (or, with --adaptive, plan the counts) at these seconds")
     parser.add_argument("--pass-samples", type=int, help="camera samples per wavefront pass [the renderer's default]")
     parser.add_argument("--reference", help="EXR to compute relMSE against")
     parser.add_argument("--out", help="write the render here")
@@ -191,6 +206,8 @@ def main(argv=None) -> int:
             cmd += ["--threads", str(args.threads)]
         if args.adaptive:
             cmd += ["--adaptive"]
+        if args.time_limit is not None:
+            cmd += ["--time-limit", str(args.time_limit)]
         if args.reference:
             cmd += ["--reference", args.reference]
         subprocess.run(cmd, check=True)

@@ -112,7 +112,8 @@ def render_command(
         bool | None,
         typer.Option(
             "--adaptive/--no-adaptive",
-            help="A pilot of about spp / 4 samples in every pixel, then --spp on average where the noise is.",
+            help="A pilot of about spp / 4 samples in every pixel, then --spp on average where the noise is "
+            "(with --time-limit: as much of both as the limit affords).",
         ),
     ] = None,
     threads: Annotated[int | None, typer.Option(help="Threads [all cores].")] = None,
@@ -307,12 +308,7 @@ def compare_command(
         w, h = scene.camera.resolution
         scene.camera = scene.camera.with_resolution(width, max(1, round(h * width / w)))
     adaptive = bool(defaults.get("adaptive"))
-    if adaptive and equal == "time":
-        raise LightprobeError(
-            f"{name}: [render] adaptive = true, but an adaptive render spends a mean sample count, not a time "
-            "budget; compare it with --equal spp, or set it to false here"
-        )
-    if adaptive and spp < 4:
+    if adaptive and equal == "spp" and spp < 4:
         raise LightprobeError(f"{name}: [render] adaptive = true needs --spp >= 4 (a pilot first), got {spp}")
     base = _render_settings(defaults, {"seed": seed, "spp": 4 if adaptive else 1})
     from .experiments.compare import parse_strategy
@@ -509,9 +505,12 @@ def _render_with_progress(scene, settings, render, *, quiet: bool):
                 bar.reset(task, visible=True)
             compiled(bar.console.print)
             rate = stats["camera_rays"] / max(stats["seconds"], 1e-9)
+            done = stats["camera_rays"]
+            if settings.time_limit is not None:  # the limit may end it first (an adaptive render plans for it)
+                done = max(done, min(1.0, stats["seconds"] / settings.time_limit) * total)
             bar.update(
                 task,
-                completed=stats["camera_rays"],
+                completed=done,
                 spp=stats["spp_done"],
                 passes=stats["passes"],
                 rate=f"{rate / 1e6:.2f} M samples/s",

@@ -35,10 +35,11 @@ def test_strategy_tokens():
     ]:
         with pytest.raises(LightprobeError, match=message):
             parse_strategy(token, base)
-    _, s = parse_strategy("mis/adaptive=true", base)  # an adaptive strategy at equal samples; not at equal time
-    assert s.adaptive is True
-    with pytest.raises(LightprobeError, match="a mean sample count, not a time budget"):
-        parse_strategy("mis/adaptive=true", base, "time")
+    for equal in ("spp", "time"):  # an adaptive strategy at equal samples or at equal time
+        _, s = parse_strategy("mis/adaptive=true", base, equal)
+        assert s.adaptive is True
+    with pytest.raises(LightprobeError, match="adaptive sampling needs spp >= 4"):
+        parse_strategy("mis/adaptive=true", base, "spp", 2)
 
 
 def test_equal_samples(scene_and_reference):
@@ -112,5 +113,15 @@ def test_an_adaptive_strategy_renders_each_round_afresh(scene_and_reference):
     assert adaptive.metrics["bias_low"] <= 0.0 <= adaptive.metrics["bias_high"]
     with pytest.raises(LightprobeError, match="adaptive sampling needs spp >= 4"):
         compare(scene, ["mis/adaptive=true"], ref.image, equal="spp", spp=2)
-    with pytest.raises(LightprobeError, match="not a time budget"):
-        compare(scene, ["mis/adaptive=true"], ref.image, equal="time", seconds=0.1)
+
+
+def test_an_adaptive_strategy_at_equal_time_plans_each_round_to_its_budget(scene_and_reference):
+    """At equal time an adaptive strategy's rounds are renders limited to an eighth, a quarter, half and all of
+    the budget, each planning its pilot and mean count from the time its pilot took."""
+    scene, ref = scene_and_reference
+    budget = 1.0
+    (run,) = compare(scene, ["mis/adaptive=true"], ref.image, ref.variance, equal="time", seconds=budget)
+    assert len(run.rounds) == 4 and run.settings.adaptive
+    assert run.seconds == run.rounds[-1]["seconds"] <= 1.1 * budget, run.rounds
+    assert run.rounds[-1]["spp"] > 2 * run.rounds[0]["spp"]  # eight times the seconds buy more samples
+    assert np.isfinite(run.image).all() and run.metrics["bias_low"] <= 0.0 <= run.metrics["bias_high"]

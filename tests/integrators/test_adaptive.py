@@ -3,8 +3,18 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
-from lightprobe.integrators.adaptive import MAX_FACTOR, levels, pilot_spp, sample_counts, sample_rounds
+from lightprobe.integrators.adaptive import (
+    COST_FACTOR,
+    MAX_FACTOR,
+    budget_mean,
+    levels,
+    pilot_spp,
+    sample_counts,
+    sample_rounds,
+    time_pilot_continues,
+)
 
 
 def pilot_stats(variance: np.ndarray, mean: float = 1.0, count: int = 16):
@@ -61,3 +71,19 @@ def test_any_spp_from_4_has_a_power_of_two_pilot_and_keeps_the_budget():
     assert set(np.unique(counts)) <= set(levels(100).tolist())
     # no noise anywhere: the largest level within the budget, everywhere
     np.testing.assert_array_equal(sample_counts(*pilot_stats(np.zeros((4, 5))), spp=100), np.full(20, 64))
+
+
+def test_a_time_limit_plans_the_pilot_and_the_mean_count():
+    """Under a time limit the pilot doubles while its next round (as long as all before it) fits in a quarter of
+    the limit, up to spp / 4; the mean count is what the rest buys at the pilot's time per sample x COST_FACTOR."""
+    assert time_pilot_continues(4, 64, 1.0, 10.0)  # 2 x 1 s within 2.5 s
+    assert not time_pilot_continues(4, 64, 1.5, 10.0)  # 3 s would not be
+    assert not time_pilot_continues(16, 64, 1e-3, 10.0)  # spp / 4 reached
+    assert budget_mean(4, 1000, 2.0, 10.0, 0.5) == pytest.approx(4 + 8.0 / (0.5 * COST_FACTOR))
+    assert budget_mean(4, 12, 2.0, 10.0, 0.5) == 12  # never above spp (4 + 11.9 without the cap)
+    assert budget_mean(4, 1000, 12.0, 10.0, 0.5) == 4  # the limit spent: the pilot alone
+    rng = np.random.default_rng(2)
+    variance = np.exp(rng.normal(0.0, 2.0, (16, 24)))
+    counts = sample_counts(*pilot_stats(variance, count=2), spp=10.5, pilot=2)  # a fractional mean
+    assert 8 < counts.mean() <= 10.5 and counts.min() == 2
+    assert set(np.unique(counts)) <= set(levels(10.5, 2).tolist()) == {2, 4, 8, 16, 32, 64}

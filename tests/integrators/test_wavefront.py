@@ -17,6 +17,7 @@ from lightprobe.errors import ParameterError
 from lightprobe.geometry.camera import Camera
 from lightprobe.geometry.scene import Scene
 from lightprobe.geometry.shapes import Rectangle, Sphere
+from lightprobe.integrators import wavefront
 from lightprobe.integrators.wavefront import RenderSettings, render, result_from
 from lightprobe.peer import find_peers, peer_scene
 
@@ -230,6 +231,31 @@ def test_an_adaptive_render_is_unbiased_and_spends_its_samples_where_the_noise_i
     uniform = render(small_scene(), RenderSettings(spp=1024, seed=7))
     adaptive_err, uniform_err = relmse(result.image, reference.image), relmse(uniform.image, reference.image)
     assert adaptive_err < uniform_err, (adaptive_err, uniform_err)
+
+
+def test_an_adaptive_render_plans_its_counts_within_a_time_limit(monkeypatch):
+    """With a time limit an adaptive render's pilot and mean count come from the time the pilot took.  A limit
+    with room to spare gives the image of the same render without one, bit for bit; a tight one (here a clock that
+    ticks 10 ms each time it is read, so the plan is the same every run) a smaller pilot and mean, still pilot x 2^k
+    per pixel, and the same image twice."""
+    scene = small_scene((20, 12))
+    free = render(scene, RenderSettings(spp=24, adaptive=True))
+    roomy = render(scene, RenderSettings(spp=24, adaptive=True, time_limit=1e6))
+    assert not roomy.stats["stopped_by_time_limit"] and roomy.stats["adaptive_pilot_spp"] == 4
+    for name in ("counts", "image", "variance"):
+        np.testing.assert_array_equal(getattr(roomy, name), getattr(free, name))
+    tight = []
+    for _ in range(2):
+        ticks = iter(range(10**6))
+        monkeypatch.setattr(wavefront, "_clock", lambda ticks=ticks: 0.01 * next(ticks))
+        tight.append(render(scene, RenderSettings(spp=4096, adaptive=True, time_limit=0.3)))
+    stats, counts = tight[0].stats, tight[0].counts
+    pilot = stats["adaptive_pilot_spp"]
+    assert 1 <= pilot < 1024 and pilot < stats["adaptive_mean_planned"] < 4096
+    assert counts.min() >= pilot and counts.max() > counts.min() and counts.mean() <= stats["adaptive_mean_planned"]
+    assert set(np.unique(counts)) <= {pilot << k for k in range(16)}
+    np.testing.assert_array_equal(tight[1].counts, counts)
+    np.testing.assert_array_equal(tight[1].image, tight[0].image)
 
 
 def test_adaptive_settings_are_checked():

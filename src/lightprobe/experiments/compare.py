@@ -11,8 +11,9 @@ rendering; in ``spp`` mode every strategy gets the same samples.  Metrics (``lig
 taken against the reference after every round.
 
 An adaptive strategy (``/adaptive=true``, integrators/adaptive.py) cannot continue a render: its counts need the
-whole pilot.  Its rounds (4, 8, ... spp, then spp on average) are separate renders, each timed on its own, so its
-curve costs about twice its final image; it takes ``spp`` mode only, since its budget is a mean sample count.
+whole pilot.  Its rounds are separate renders, each timed on its own, so its curve costs about twice its final
+image: 4, 8, ... spp, then spp on average in ``spp`` mode; an eighth, a quarter, half and all of the budget in
+``time`` mode, where each render plans its pilot and mean count to fit its time limit.
 """
 
 from __future__ import annotations
@@ -30,6 +31,9 @@ from ..geometry.scene import Scene
 from ..integrators.wavefront import RenderSettings, render, result_from, settings_for
 
 __all__ = ["PRESETS", "StrategyRun", "compare", "parse_strategy"]
+
+# An adaptive strategy's mean count at equal time is what its time limit buys; this only keeps it finite.
+_TIME_MODE_SPP = 1 << 20
 
 PRESETS = {
     "uniform": {"strategy": "uniform"},
@@ -73,11 +77,6 @@ def parse_strategy(
             raise LightprobeError(f"strategy {token!r}: {item!r} is not key=value with a key among {keys}")
         changes.update(settings_fields({key.strip(): _value(value)}))
     settings = dataclasses.replace(base, **changes)
-    if settings.adaptive is True and equal == "time":
-        raise LightprobeError(
-            f"strategy {token!r}: an adaptive render spends a mean sample count, not a time budget (its counts "
-            "need the whole pilot first); compare it with --equal spp"
-        )
     if settings.adaptive is True and equal == "spp" and spp is not None and spp < 4:
         raise LightprobeError(f"strategy {token!r}: adaptive sampling needs spp >= 4 (a pilot first), got {spp}")
     try:  # an adaptive strategy's spp is each round's (>= 4, checked against compare's spp when it runs)
@@ -136,13 +135,14 @@ def run_strategy(
     target = 1
     settings = settings_for(scene, settings)  # the report states the allocation and heuristic actually used
     run = StrategyRun(label, settings, np.zeros((height, width, 3), np.float32), np.zeros((height, width, 3)))
-    if settings.adaptive:
-        _adaptive_rounds(scene, run, reference, spp, progress)
-        return _final_metrics(run, reference, reference_variance, masks)
     # short passes in time mode, so that the budget is met within a pass of a few milliseconds: a pass holds about
     # 2^17 shading samples (RIS candidates counted), whatever the strategy's samples per camera sample
     work = settings.n_bsdf + settings.light_samples * settings.env_candidates
     pass_samples = max(width * height, (1 << 17) // work) if equal == "time" else settings.pass_samples
+    if settings.adaptive:
+        timed = dataclasses.replace(settings, pass_samples=pass_samples)
+        _adaptive_rounds(scene, run, timed, reference, spp if equal == "spp" else None, seconds, progress)
+        return _final_metrics(run, reference, reference_variance, masks)
     while True:
         if equal == "spp":
             if done >= spp:
@@ -176,19 +176,27 @@ def run_strategy(
     return _final_metrics(run, reference, reference_variance, masks)
 
 
-def _adaptive_rounds(scene, run: StrategyRun, reference, spp: int, progress) -> None:
-    """An adaptive strategy's rounds: separate renders at 4, 8, ... and finally ``spp`` samples per pixel on
-    average, the last one the strategy's image and seconds."""
-    targets = [n for n in (4 << k for k in range(spp.bit_length())) if n < spp] + [spp]
-    for n in targets:
-        result = render(scene, dataclasses.replace(run.settings, spp=n, first_sample=0, time_limit=None))
+def _adaptive_rounds(
+    scene, run: StrategyRun, settings: RenderSettings, reference, spp: int | None, seconds: float, progress
+) -> None:
+    """An adaptive strategy's rounds, separate renders, the last one the strategy's image and seconds: 4, 8, ...
+    and finally ``spp`` samples per pixel on average, or (``spp`` None) an eighth, a quarter, half and all of
+    ``seconds`` as time limits, each render planning its own pilot and mean count (integrators/adaptive.py)."""
+    if spp is not None:
+        targets = [n for n in (4 << k for k in range(spp.bit_length())) if n < spp] + [spp]
+        budgets = [None] * len(targets)
+    else:
+        budgets = [seconds / 8, seconds / 4, seconds / 2, seconds]
+        targets = [_TIME_MODE_SPP] * len(budgets)
+    for i, (n, budget) in enumerate(zip(targets, budgets, strict=True)):
+        result = render(scene, dataclasses.replace(settings, spp=n, first_sample=0, time_limit=budget))
         run.image, run.variance = result.image, result.variance
         run.seconds, run.spp = result.stats["seconds"], float(result.counts.mean())
         run.rounds.append(
             {"spp": run.spp, "seconds": run.seconds, **_measure(result.image, result.variance, reference, None)}
         )
         if progress is not None:
-            progress(run.label, n / spp)
+            progress(run.label, (i + 1) / len(targets))
         if result.stats["interrupted"]:
             break
 

@@ -17,6 +17,12 @@ count, and the mean of its n_i samples is an unbiased estimate whatever n_i is. 
 own pilot bias it: a pixel whose pilot happened to read low would be given fewer samples to correct it.)  The same
 seed gives the same counts and the same image for any thread count or pass size; a render cannot be split into
 sample ranges or resumed, since the counts need the whole pilot first.
+
+With a time limit the budget is seconds (``time_pilot_continues``, ``budget_mean``): the pilot doubles (1, 2, 4 ...
+spp, up to spp / 4) while its next round fits in a quarter of the limit, and the mean count is what the rest of the
+limit buys at the pilot's measured time per camera sample, times ``COST_FACTOR`` (never more than spp).  Counts
+still come from the neighbours' pilot, so the estimate stays unbiased; a limit that leaves room for the whole
+plan gives the image of the same render without a limit, bit for bit.
 """
 
 from __future__ import annotations
@@ -25,10 +31,27 @@ import numpy as np
 
 from .schedule import spread
 
-__all__ = ["MAX_FACTOR", "PILOT_DIVISOR", "check_spp", "levels", "pilot_spp", "sample_counts", "sample_rounds"]
+__all__ = [
+    "COST_FACTOR",
+    "MAX_FACTOR",
+    "PILOT_DIVISOR",
+    "PILOT_SHARE",
+    "budget_mean",
+    "check_spp",
+    "levels",
+    "pilot_spp",
+    "sample_counts",
+    "sample_rounds",
+    "time_pilot_continues",
+]
 
 PILOT_DIVISOR = 4  # the pilot is at most spp / 4 samples per pixel
-MAX_FACTOR = 8  # no pixel gets more than 8 x spp
+MAX_FACTOR = 8  # no pixel gets more than 8 x the mean count
+PILOT_SHARE = 0.25  # under a time limit the pilot takes at most a quarter of it
+# The samples after the pilot cost this much more per camera sample than the pilot's: they go to the blob, the
+# glossy spheres and the shadows rather than to the sky (peer scene, 64 spp: 19.5 s for the 48 spp after a 16-spp
+# pilot against 14.4 s uniform, 1.35x; decisions.md 36-38).
+COST_FACTOR = 1.35
 
 
 def check_spp(spp: int) -> str | None:
@@ -43,10 +66,26 @@ def pilot_spp(spp: int) -> int:
     return 1 << (spp // PILOT_DIVISOR).bit_length() - 1
 
 
-def levels(spp: int) -> np.ndarray:
-    """The counts a pixel can get: the pilot x 2^k, up to 8 x spp."""
-    pilot = pilot_spp(spp)
-    return pilot << np.arange((MAX_FACTOR * spp // pilot).bit_length())
+def levels(spp: float, pilot: int | None = None) -> np.ndarray:
+    """The counts a pixel can get: the pilot (``pilot_spp(spp)`` unless given) x 2^k, up to 8 x spp."""
+    pilot = pilot_spp(int(spp)) if pilot is None else pilot
+    return pilot << np.arange(max(1, int(MAX_FACTOR * spp // pilot).bit_length()))
+
+
+def time_pilot_continues(pilot: int, spp: int, elapsed: float, time_limit: float) -> bool:
+    """Whether a time-limited pilot of ``pilot`` samples per pixel, done in ``elapsed`` seconds, doubles once
+    more: the next round has as many samples as all before it, so it takes about ``elapsed`` again."""
+    return 2 * pilot <= pilot_spp(spp) and 2.0 * elapsed <= PILOT_SHARE * time_limit
+
+
+def budget_mean(pilot: int, spp: int, elapsed: float, time_limit: float, per_spp: float) -> float:
+    """The mean count (pilot included) that a time limit affords after a pilot of ``pilot`` samples per pixel,
+    ``elapsed`` seconds into the render: the remaining seconds at ``per_spp`` seconds per sample per pixel (the
+    pilot's, over the whole image) x ``COST_FACTOR``, at most spp and at least the pilot."""
+    if not per_spp > 0.0:
+        return float(spp)
+    extra = max(0.0, time_limit - elapsed) / (per_spp * COST_FACTOR)
+    return float(min(spp, max(pilot, pilot + extra)))
 
 
 def _ring_mean(w: np.ndarray) -> np.ndarray:
@@ -60,13 +99,22 @@ def _ring_mean(w: np.ndarray) -> np.ndarray:
     return np.where(count > 0, total / np.maximum(count, 1.0), 0.0)
 
 
-def sample_counts(mean: np.ndarray, m2: np.ndarray, count: np.ndarray, width: int, height: int, spp: int):
-    """Samples per pixel (n_pixels,) int64 from the pilot's per-pixel statistics (``Accumulator`` fields)."""
+def sample_counts(
+    mean: np.ndarray,
+    m2: np.ndarray,
+    count: np.ndarray,
+    width: int,
+    height: int,
+    spp: float,
+    pilot: int | None = None,
+):
+    """Samples per pixel (n_pixels,) int64 from the pilot's per-pixel statistics (``Accumulator`` fields), ``spp``
+    on average at most (a time limit's mean may be fractional); ``pilot`` defaults to ``pilot_spp(spp)``."""
     n = np.maximum(count, 2).astype(np.float64)[:, None]
     sample_var = m2 / (n - 1.0)  # per sample, per channel
     w = np.sqrt((sample_var / (mean * mean + 0.01)).mean(axis=1))
     w = _ring_mean(np.nan_to_num(w, nan=0.0, posinf=0.0).reshape(height, width)).ravel()
-    allowed = levels(spp)
+    allowed = levels(spp, pilot)
     if not w.max() > 0.0:  # no noise seen anywhere: spend the samples evenly (spp itself if it is a level)
         return np.full(width * height, allowed[allowed <= spp].max(), dtype=np.int64)
     # counts proportional to w, as levels: level k = pilot x 2^k nearest to scale x w in log2 (ties to the lower),

@@ -219,6 +219,7 @@ class RenderSettings:
 
 
 _LAST_SAMPLE = 2**56  # times 64 shading slots, still below 2^63
+_clock = time.perf_counter  # the render's clock (time limits, seconds); tests replace it with one that ticks
 
 _KINDS = {"integer": numbers.Integral, "number": numbers.Real, "string": str, "true or false": bool}
 
@@ -887,22 +888,45 @@ def render(
         _launch(_accumulate, values)
         return shadow_rays
 
-    def passes():
-        """(pixels, samples per pixel, first sample index, pixels done) of every pass, in order: the uniform rounds
-        over the image (of the pilot, if adaptive), then the adaptive rounds (integrators/adaptive.py)."""
-        uniform_spp = adaptive.pilot_spp(settings.spp) if settings.adaptive else settings.spp
-        for sample_start, spp_now in _sample_rounds(settings.first_sample, uniform_spp, spp_pass):
+    def uniform_passes(first: int, spp: int):
+        for sample_start, spp_now in _sample_rounds(first, spp, spp_pass):
             for pixel_start in range(0, n_pixels, band):
                 count = min(band, n_pixels - pixel_start)
                 yield pass_pixels(pixel_start, count), spp_now, sample_start, pixel_start + count
-        if settings.adaptive:  # the pilot is complete here: the generator runs as the passes are made
-            counts = adaptive.sample_counts(acc.mean, acc.m2, acc.count, width, height, settings.spp)
-            stats["adaptive_max_spp"] = int(counts.max())
-            for pixels, spp_now, sample_start in adaptive.sample_rounds(counts, uniform_spp, largest_pass):
-                yield pixels, spp_now, sample_start, n_pixels
+
+    def passes():
+        """(pixels, samples per pixel, first sample index, pixels done) of every pass, in order: the uniform rounds
+        over the image (of the pilot, if adaptive), then the adaptive rounds (integrators/adaptive.py).  The
+        generator runs as the passes are made, so it sees the time spent and the pilot's statistics."""
+        if not settings.adaptive:
+            yield from uniform_passes(settings.first_sample, settings.spp)
+            return
+        pilot, mean_spp = adaptive.pilot_spp(settings.spp), float(settings.spp)
+        if settings.time_limit is None:
+            yield from uniform_passes(0, pilot)
+        else:  # a time budget: the pilot doubles while it fits in a share of it, then the rest buys the mean
+            pilot, round_start = 1, _clock()
+            yield from uniform_passes(0, 1)
+            while adaptive.time_pilot_continues(pilot, settings.spp, _clock() - start, settings.time_limit):
+                round_start = _clock()
+                for sample_start in range(pilot, 2 * pilot, spp_pass):  # samples pilot .. 2 pilot - 1
+                    spp_now = min(spp_pass, 2 * pilot - sample_start)
+                    for pixel_start in range(0, n_pixels, band):
+                        count = min(band, n_pixels - pixel_start)
+                        yield pass_pixels(pixel_start, count), spp_now, sample_start, pixel_start + count
+                pilot *= 2
+            # time per sample per pixel from the pilot's last round, the one in full-sized passes
+            per_spp = (_clock() - round_start) / max(1, pilot // 2)
+            mean_spp = adaptive.budget_mean(pilot, settings.spp, _clock() - start, settings.time_limit, per_spp)
+            stats["adaptive_pilot_seconds"], stats["adaptive_seconds_per_spp"] = _clock() - start, per_spp
+        counts = adaptive.sample_counts(acc.mean, acc.m2, acc.count, width, height, mean_spp, pilot)
+        stats["adaptive_pilot_spp"], stats["adaptive_mean_planned"] = pilot, mean_spp
+        stats["adaptive_max_spp"] = int(counts.max())
+        for pixels, spp_now, sample_start in adaptive.sample_rounds(counts, pilot, largest_pass):
+            yield pixels, spp_now, sample_start, n_pixels
 
     counted_before = 0
-    start = time.perf_counter()
+    start = _clock()
     with _InterruptAtPassEnd() as interrupt:
         try:
             # warm up every kernel on one pixel (loads cached machine code) before the clock starts
@@ -911,12 +935,12 @@ def render(
                 PROFILE.clear()  # the warm-up (and any compiling) is not the render
             counted_before = ray_counts.sum()
             stats["setup_seconds"] = time.perf_counter() - t_setup
-            start = time.perf_counter()
+            start = _clock()
             for pixels, spp_now, sample_start, pixels_done in passes():
                 stats["shadow_rays"] += run_pass(acc, pixels, spp_now, sample_start)
                 stats["camera_rays"] += pixels.size * spp_now
                 stats["passes"] += 1
-                stats["seconds"] = time.perf_counter() - start
+                stats["seconds"] = _clock() - start
                 stats["spp_done"] = int(acc.count.min())
                 if progress is not None:
                     progress(dict(stats, spp_target=settings.spp, pixels_done=pixels_done))
@@ -931,7 +955,7 @@ def render(
             pass  # pixels of the unfinished pass have one pass fewer: their counts say so
         except KeyboardInterrupt:
             stats["interrupted"] = True
-    stats["seconds"] = time.perf_counter() - start
+    stats["seconds"] = _clock() - start
     stats["embree_rays"] = int(ray_counts.sum() - counted_before)  # every Embree call of a render is in a kernel
     if own_tracer:
         tracer.close()
