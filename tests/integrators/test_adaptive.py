@@ -79,6 +79,8 @@ def test_a_time_limit_plans_the_pilot_and_the_mean_count():
     assert time_pilot_continues(4, 64, 1.0, 10.0)  # 2 x 1 s within 2.5 s
     assert not time_pilot_continues(4, 64, 1.5, 10.0)  # 3 s would not be
     assert not time_pilot_continues(16, 64, 1e-3, 10.0)  # spp / 4 reached
+    assert time_pilot_continues(1, 64, 2.0, 10.0)  # one sample shows no noise: 1 -> 2 may take half the limit
+    assert not time_pilot_continues(1, 64, 2.6, 10.0) and not time_pilot_continues(2, 64, 2.0, 10.0)
     assert budget_mean(4, 1000, 2.0, 10.0, 0.5) == pytest.approx(4 + 8.0 / (0.5 * COST_FACTOR))
     assert budget_mean(4, 12, 2.0, 10.0, 0.5) == 12  # never above spp (4 + 11.9 without the cap)
     assert budget_mean(4, 1000, 12.0, 10.0, 0.5) == 4  # the limit spent: the pilot alone

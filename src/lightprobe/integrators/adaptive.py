@@ -19,10 +19,10 @@ seed gives the same counts and the same image for any thread count or pass size;
 sample ranges or resumed, since the counts need the whole pilot first.
 
 With a time limit the budget is seconds (``time_pilot_continues``, ``budget_mean``): the pilot doubles (1, 2, 4 ...
-spp, up to spp / 4) while its next round fits in a quarter of the limit, and the mean count is what the rest of the
-limit buys at the pilot's measured time per camera sample, times ``COST_FACTOR`` (never more than spp).  Counts
-still come from the neighbours' pilot, so the estimate stays unbiased; a limit that leaves room for the whole
-plan gives the image of the same render without a limit, bit for bit.
+spp, up to spp / 4) while its next round fits in a quarter of the limit (half, from 1 to 2 spp), and the mean
+count is what the rest of the limit buys at the time per sample of the pilot's last round, times ``COST_FACTOR``
+(never more than spp).  Counts still come from the neighbours' pilot, so the estimate stays unbiased; a limit
+that leaves room for the whole plan gives the image of the same render without a limit, bit for bit.
 """
 
 from __future__ import annotations
@@ -74,8 +74,11 @@ def levels(spp: float, pilot: int | None = None) -> np.ndarray:
 
 def time_pilot_continues(pilot: int, spp: int, elapsed: float, time_limit: float) -> bool:
     """Whether a time-limited pilot of ``pilot`` samples per pixel, done in ``elapsed`` seconds, doubles once
-    more: the next round has as many samples as all before it, so it takes about ``elapsed`` again."""
-    return 2 * pilot <= pilot_spp(spp) and 2.0 * elapsed <= PILOT_SHARE * time_limit
+    more: the next round has as many samples as all before it, so it takes about ``elapsed`` again.  A pilot of
+    one sample shows no noise (a pixel's variance needs two), so that first doubling may take up to half the
+    limit."""
+    share = 2.0 * PILOT_SHARE if pilot == 1 else PILOT_SHARE
+    return 2 * pilot <= pilot_spp(spp) and 2.0 * elapsed <= share * time_limit
 
 
 def budget_mean(pilot: int, spp: int, elapsed: float, time_limit: float, per_spp: float) -> float:
