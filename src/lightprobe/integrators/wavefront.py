@@ -888,11 +888,15 @@ def render(
         _launch(_accumulate, values)
         return shadow_rays
 
+    def over_image(sample_start: int, spp_now: int):
+        """The passes that give every pixel samples sample_start .. sample_start + spp_now - 1."""
+        for pixel_start in range(0, n_pixels, band):
+            count = min(band, n_pixels - pixel_start)
+            yield pass_pixels(pixel_start, count), spp_now, sample_start, pixel_start + count
+
     def uniform_passes(first: int, spp: int):
         for sample_start, spp_now in _sample_rounds(first, spp, spp_pass):
-            for pixel_start in range(0, n_pixels, band):
-                count = min(band, n_pixels - pixel_start)
-                yield pass_pixels(pixel_start, count), spp_now, sample_start, pixel_start + count
+            yield from over_image(sample_start, spp_now)
 
     def passes():
         """(pixels, samples per pixel, first sample index, pixels done) of every pass, in order: the uniform rounds
@@ -910,10 +914,7 @@ def render(
             while adaptive.time_pilot_continues(pilot, settings.spp, _clock() - start, settings.time_limit):
                 round_start = _clock()
                 for sample_start in range(pilot, 2 * pilot, spp_pass):  # samples pilot .. 2 pilot - 1
-                    spp_now = min(spp_pass, 2 * pilot - sample_start)
-                    for pixel_start in range(0, n_pixels, band):
-                        count = min(band, n_pixels - pixel_start)
-                        yield pass_pixels(pixel_start, count), spp_now, sample_start, pixel_start + count
+                    yield from over_image(sample_start, min(spp_pass, 2 * pilot - sample_start))
                 pilot *= 2
             # time per sample per pixel from the pilot's last round, the one in full-sized passes
             per_spp = (_clock() - round_start) / max(1, pilot // 2)
