@@ -9,7 +9,9 @@ from lightprobe.integrators.adaptive import (
     COST_FACTOR,
     MAX_FACTOR,
     budget_mean,
+    counts_from_noise,
     levels,
+    next_round,
     pilot_spp,
     sample_counts,
     sample_rounds,
@@ -89,3 +91,25 @@ def test_a_time_limit_plans_the_pilot_and_the_mean_count():
     counts = sample_counts(*pilot_stats(variance, count=2), spp=10.5, pilot=2)  # a fractional mean
     assert 8 < counts.mean() <= 10.5 and counts.min() == 2
     assert set(np.unique(counts)) <= set(levels(10.5, 2).tolist()) == {2, 4, 8, 16, 32, 64}
+
+
+def test_counts_planned_again_keep_what_is_done_and_fit_the_budget():
+    """A time-limited render plans again after every round: no count falls below what a pixel has done, the
+    samples still to take fit the budget (nearly all of it), and the next round starts at the lowest level a pixel
+    still needs -- below the current one if the new plan gives a finished pixel more."""
+    rng = np.random.default_rng(3)
+    w = np.exp(rng.normal(0.0, 1.5, 4000))
+    first = counts_from_noise(w, 4, 32.0)
+    done = np.minimum(first, 8)  # the rounds at 4 are over
+    for budget in (0.0, 2000.0, 40000.0):
+        more = counts_from_noise(w, 4, 4096, done, budget)
+        extra = (more - done).sum()
+        assert (more >= done).all() and extra <= budget and extra >= 0.75 * budget
+        assert set(np.unique(more)) <= {4 << k for k in range(16)}
+    np.testing.assert_array_equal(counts_from_noise(w, 4, 32.0, np.full(4000, 4), np.inf), first)
+    done = np.array([4, 8, 8, 16])
+    level, chosen = next_round(done, np.array([16, 16, 8, 16]))
+    assert level == 4 and chosen.tolist() == [0]
+    level, chosen = next_round(np.array([8, 8, 8, 16]), np.array([16, 16, 8, 16]))
+    assert level == 8 and chosen.tolist() == [0, 1]
+    assert next_round(done, done) is None
