@@ -52,6 +52,7 @@ __all__ = [
     "sample_counts",
     "sample_rounds",
     "time_pilot_continues",
+    "warm_up",
 ]
 
 PILOT_DIVISOR = 4  # the pilot is at most spp / 4 samples per pixel
@@ -148,6 +149,11 @@ def counts_from_noise(
             hi = mid
     top = allowed.size - 1
     return np.maximum(allowed[np.clip(np.ceil(lw + (lo - 0.5)), 0, top).astype(np.int64)], done)
+
+
+def warm_up() -> None:
+    """Load (or compile, ~0.4 s on a first run) the planner's loop, so that a render does it before its clock."""
+    counts_from_noise(np.ones(1), 1, 1.0)
 
 
 @jit

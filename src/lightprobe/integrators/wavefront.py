@@ -948,6 +948,8 @@ def render(
         try:
             # warm up every kernel on one pixel (loads cached machine code) before the clock starts
             run_pass(Accumulator(n_pixels), pass_pixels(0, 1), 1, 0)
+            if settings.adaptive:
+                adaptive.warm_up()
             if PROFILE is not None:
                 PROFILE.clear()  # the warm-up (and any compiling) is not the render
             counted_before = ray_counts.sum()
