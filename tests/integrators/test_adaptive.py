@@ -60,6 +60,14 @@ def test_rounds_give_each_pixel_its_samples_in_order():
             taken[int(p)].extend(range(start, start + spp_now))
     for p, n in enumerate(counts):
         assert taken[p] == list(range(16, n))  # after the pilot's 0 .. 15, every index once, in order
+    # planned again after every round (a time limit): a finished pixel given more continues where it stopped
+    later = np.array([64, 32, 64, 32])
+    taken = {p: [] for p in range(4)}
+    for pixels, spp_now, start in sample_rounds(np.array([16, 32, 64, 16]), 16, 40, lambda done: later):
+        for p in pixels:
+            taken[int(p)].extend(range(start, start + spp_now))
+    for p, n in enumerate(later):
+        assert taken[p] == list(range(16, n))
 
 
 def test_any_spp_from_4_has_a_power_of_two_pilot_and_keeps_the_budget():

@@ -210,12 +210,16 @@ def next_round(done: np.ndarray, counts: np.ndarray) -> tuple[int, np.ndarray] |
     return level, np.flatnonzero(short & (done == level))
 
 
-def sample_rounds(counts: np.ndarray, pilot: int, largest_pass: int):
+def sample_rounds(counts: np.ndarray, pilot: int, largest_pass: int, replan=None):
     """(pixels, samples per pixel, first sample index) of the passes after the pilot: round L gives samples
     L .. 2L - 1 to the pixels whose count exceeds L, for L = pilot, 2 pilot, ...  Each pass holds at most
-    ``largest_pass`` camera samples, and a pixel's samples come in index order."""
+    ``largest_pass`` camera samples, and a pixel's samples come in index order.  ``replan(done)``, if given, is
+    called after every round with the samples each pixel holds and returns the counts from then on (at least
+    ``done``); the next round then starts at the lowest level a pixel still needs."""
     done = np.full(counts.shape, pilot, dtype=np.int64)
     while (step := next_round(done, counts)) is not None:
         level, chosen = step
         yield from round_passes(chosen, level, largest_pass)
         done[chosen] = 2 * level
+        if replan is not None:
+            counts = replan(done)

@@ -905,42 +905,39 @@ def render(
         if not settings.adaptive:
             yield from uniform_passes(settings.first_sample, settings.spp)
             return
-        pilot = adaptive.pilot_spp(settings.spp)
+        pilot, replan = adaptive.pilot_spp(settings.spp), None
         if settings.time_limit is None:
             yield from uniform_passes(0, pilot)
             counts = adaptive.sample_counts(acc.mean, acc.m2, acc.count, width, height, settings.spp)
-            stats["adaptive_pilot_spp"], stats["adaptive_max_spp"] = pilot, int(counts.max())
-            for pixels, spp_now, sample_start in adaptive.sample_rounds(counts, pilot, largest_pass):
-                yield pixels, spp_now, sample_start, n_pixels
-            return
-        # a time budget: the pilot doubles while it fits in a share of it, then the rest buys the mean
-        pilot, round_start = 1, _clock()
-        yield from uniform_passes(0, 1)
-        while adaptive.time_pilot_continues(pilot, settings.spp, _clock() - start, settings.time_limit):
-            round_start = _clock()
-            for sample_start in range(pilot, 2 * pilot, spp_pass):  # samples pilot .. 2 pilot - 1
-                yield from over_image(sample_start, min(spp_pass, 2 * pilot - sample_start))
-            pilot *= 2
-        # time per sample per pixel from the pilot's last round, the one in full-sized passes
-        per_spp = (_clock() - round_start) / max(1, pilot // 2)
-        mean_spp = adaptive.budget_mean(pilot, settings.spp, _clock() - start, settings.time_limit, per_spp)
-        w = adaptive.relative_noise(acc.mean, acc.m2, acc.count, width, height)
-        counts = adaptive.counts_from_noise(w, pilot, mean_spp)
-        stats["adaptive_pilot_spp"], stats["adaptive_mean_planned"] = pilot, mean_spp
-        stats["adaptive_pilot_seconds"], stats["adaptive_seconds_per_spp"] = _clock() - start, per_spp
-        # after every round, the counts are planned again at the time the rounds' samples have taken so far:
-        # the pilot's price for them (x COST_FACTOR) is only a first guess
-        done = np.full(n_pixels, pilot, dtype=np.int64)
-        rounds_start, taken = _clock(), 0
-        while (step := adaptive.next_round(done, counts)) is not None:
-            level, chosen = step
-            for pixels, spp_now, sample_start in adaptive.round_passes(chosen, level, largest_pass):
-                yield pixels, spp_now, sample_start, n_pixels
-                taken += pixels.size * spp_now
-            done[chosen] = 2 * level
-            affordable = (settings.time_limit - (_clock() - start)) * taken / (_clock() - rounds_start)
-            counts = adaptive.counts_from_noise(w, pilot, settings.spp, done, max(0.0, affordable))
-        stats["adaptive_max_spp"] = int(done.max())
+        else:  # a time budget: the pilot doubles while it fits in a share of it, then the rest buys the counts
+            pilot, round_start = 1, _clock()
+            yield from uniform_passes(0, 1)
+            while adaptive.time_pilot_continues(pilot, settings.spp, _clock() - start, settings.time_limit):
+                round_start = _clock()
+                for sample_start in range(pilot, 2 * pilot, spp_pass):  # samples pilot .. 2 pilot - 1
+                    yield from over_image(sample_start, min(spp_pass, 2 * pilot - sample_start))
+                pilot *= 2
+            # time per sample per pixel from the pilot's last round, the one in full-sized passes
+            per_spp = (_clock() - round_start) / max(1, pilot // 2)
+            mean_spp = adaptive.budget_mean(pilot, settings.spp, _clock() - start, settings.time_limit, per_spp)
+            w = adaptive.relative_noise(acc.mean, acc.m2, acc.count, width, height)
+            counts = adaptive.counts_from_noise(w, pilot, mean_spp)
+            stats["adaptive_mean_planned"] = mean_spp
+            stats["adaptive_pilot_seconds"], stats["adaptive_seconds_per_spp"] = _clock() - start, per_spp
+            rounds_start = _clock()
+
+            def replan(done: np.ndarray) -> np.ndarray:
+                """The counts again, at the time per camera sample the rounds after the pilot have taken: the
+                pilot's price for them (x COST_FACTOR) was only a first guess."""
+                affordable = (settings.time_limit - (_clock() - start)) * taken / max(_clock() - rounds_start, 1e-9)
+                return adaptive.counts_from_noise(w, pilot, settings.spp, done, max(0.0, affordable))
+
+        stats["adaptive_pilot_spp"] = pilot
+        taken = 0  # camera samples after the pilot
+        for pixels, spp_now, sample_start in adaptive.sample_rounds(counts, pilot, largest_pass, replan):
+            yield pixels, spp_now, sample_start, n_pixels
+            taken += pixels.size * spp_now
+        stats["adaptive_max_spp"] = int(acc.count.max())
 
     counted_before = 0
     start = _clock()
