@@ -930,14 +930,16 @@ def render(
                 """The counts again, at the time per camera sample the rounds after the pilot have taken: the
                 pilot's price for them (x COST_FACTOR) was only a first guess."""
                 affordable = (settings.time_limit - (_clock() - start)) * taken / max(_clock() - rounds_start, 1e-9)
-                return adaptive.counts_from_noise(w, pilot, settings.spp, done, max(0.0, affordable))
+                planned = adaptive.counts_from_noise(w, pilot, settings.spp, done, max(0.0, affordable))
+                stats["adaptive_max_spp"] = int(planned.max())
+                return planned
 
-        stats["adaptive_pilot_spp"] = pilot
+        # the plan's largest count (the image's own is spp_max: they differ if the render stops early)
+        stats["adaptive_pilot_spp"], stats["adaptive_max_spp"] = pilot, int(counts.max())
         taken = 0  # camera samples after the pilot
         for pixels, spp_now, sample_start in adaptive.sample_rounds(counts, pilot, largest_pass, replan):
             yield pixels, spp_now, sample_start, n_pixels
             taken += pixels.size * spp_now
-        stats["adaptive_max_spp"] = int(acc.count.max())
 
     counted_before = 0
     start = _clock()
