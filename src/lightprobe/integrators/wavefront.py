@@ -898,12 +898,33 @@ def render(
         for sample_start, spp_now in _sample_rounds(first, spp, spp_pass):
             yield from over_image(sample_start, spp_now)
 
+    def timed_uniform_passes(first: int, spp: int):
+        """The uniform rounds under a time limit, each sized from the time per sample per pixel of the round
+        before so that the render ends at the limit, not up to a whole pass after it: a round takes the samples
+        that fit in the time left (rounded to the nearest), and none are left once half of one no longer fits.
+        The image is the one the same samples give in any rounds: only how many there are follows the clock."""
+        round_start = _clock()
+        yield from over_image(first, 1)  # every pixel gets a sample before the clock can stop the render
+        per_spp = _clock() - round_start
+        sample, end = first + 1, first + spp
+        while sample < end:
+            round_start = _clock()
+            left = settings.time_limit - (round_start - start)
+            spp_now = min(spp_pass, end - sample, int(left / max(per_spp, 1e-9) + 0.5))
+            if spp_now < 1:
+                stats["stopped_by_time_limit"] = True
+                return
+            yield from over_image(sample, spp_now)
+            per_spp = (_clock() - round_start) / spp_now
+            sample += spp_now
+
     def passes():
         """(pixels, samples per pixel, first sample index, pixels done) of every pass, in order: the uniform rounds
         over the image (of the pilot, if adaptive), then the adaptive rounds (integrators/adaptive.py).  The
         generator runs as the passes are made, so it sees the time spent and the pilot's statistics."""
         if not settings.adaptive:
-            yield from uniform_passes(settings.first_sample, settings.spp)
+            rounds = uniform_passes if settings.time_limit is None else timed_uniform_passes
+            yield from rounds(settings.first_sample, settings.spp)
             return
         pilot, replan = adaptive.pilot_spp(settings.spp), None
         if settings.time_limit is None:
