@@ -28,10 +28,6 @@ import sys
 import numpy as np
 
 
-def relmse(image: np.ndarray, reference: np.ndarray) -> float:
-    return float(np.mean((image - reference) ** 2 / (reference**2 + 0.01)))
-
-
 def _replace_blob(path: str) -> None:
     """Put the mesh at ``path`` in the blob's place: scaled uniformly and centred into the blob's bounding box
     (its largest extent matched), so the image stays comparable."""
@@ -54,6 +50,7 @@ def _replace_blob(path: str) -> None:
 
 
 def run_one(args) -> dict:
+    from lightprobe.analysis.metrics import relmse
     from lightprobe.geometry.raytracer import RayTracer
     from lightprobe.integrators import wavefront
     from lightprobe.integrators.wavefront import RenderSettings, render
@@ -126,10 +123,40 @@ def run_one(args) -> dict:
         line["reference"] = args.reference
         if (floor := reference_floor(args.reference)) is not None:
             line["ref_floor"] = floor
+        if args.by_object:
+            line["by_object"] = _by_object(scene, result.image, ref, args.reference)
     if args.out:
         write_image(args.out, result.image)
         line["out"] = args.out
     return line
+
+
+def _by_object(scene, image: np.ndarray, ref: np.ndarray, reference: str) -> dict:
+    """Where the relMSE is: per object seen at the pixels' centres (``sky`` where none is), its share of the
+    pixels and its part of the image's relMSE (the mean over its pixels x that share, so the parts add up to the
+    image's), with the reference's own noise there (``floor``) when its variance is beside it."""
+    from pathlib import Path
+
+    from lightprobe.analysis.masks import object_id_pass
+    from lightprobe.analysis.metrics import RELMSE_EPSILON, relmse
+    from lightprobe.io.images import read_image
+
+    ids, names = object_id_pass(scene)
+    variance = Path(reference).with_name(Path(reference).stem + "_var.exr")
+    noise = None
+    if variance.exists():  # the floor per pixel: var / (ref^2 + epsilon), as lightprobe.peer.reference_floor
+        ref64 = ref.astype(np.float64)
+        noise = (read_image(str(variance))[:, :, :3] / (ref64**2 + RELMSE_EPSILON)).mean(axis=2)
+    parts = {}
+    for index, name in [(-1, "sky"), *enumerate(names)]:
+        mask = ids == index
+        if not mask.any():
+            continue
+        share = float(mask.mean())
+        parts[name] = {"pixels": round(share, 4), "relmse": relmse(image, ref, mask) * share}
+        if noise is not None:
+            parts[name]["floor"] = float(noise[mask].sum() / noise.size)
+    return parts
 
 
 # an adaptive render's plan under a time limit (integrators/adaptive.py), and whether the limit stopped it
@@ -163,6 +190,9 @@ def main(argv=None) -> int:
     parser.add_argument("--reference", help="EXR to compute relMSE against")
     parser.add_argument("--out", help="write the render here")
     parser.add_argument("--profile", action="store_true", help="add seconds per kernel (warm-up excluded)")
+    parser.add_argument(
+        "--by-object", action="store_true", help="with --reference: each object's part of the relMSE (and floor)"
+    )
     parser.add_argument("--pdf", choices=["exact", "pbrt", "bilinear"], help="the environment PDF [bilinear]")
     parser.add_argument("--pdf-weights", choices=["bilinear", "texel", "blur"], help="exact/pbrt PDFs [bilinear]")
     parser.add_argument(
@@ -170,6 +200,8 @@ def main(argv=None) -> int:
     )
     parser.add_argument("--mesh", help="a mesh file to put in the blob's place (e.g. the 871k-triangle dragon)")
     args = parser.parse_args(argv)
+    if args.by_object and not args.reference:
+        parser.error("--by-object needs --reference (the image to measure the error against)")
 
     from lightprobe.peer import find_peers
 
@@ -209,7 +241,7 @@ def main(argv=None) -> int:
         if args.time_limit is not None:
             cmd += ["--time-limit", str(args.time_limit)]
         if args.reference:
-            cmd += ["--reference", args.reference]
+            cmd += ["--reference", args.reference] + (["--by-object"] if args.by_object else [])
         subprocess.run(cmd, check=True)
     return 0
 
