@@ -165,6 +165,19 @@ def test_render_user_errors(capsys, tmp_path, args, message):
     assert len(err) == 1 and err[0].startswith("lightprobe: error:") and message in err[0], err
 
 
+def test_ctrl_c_before_the_render_is_an_interruption_not_a_success(tmp_path, monkeypatch, capsys):
+    """Ctrl-C while the scene loads: Typer hands main() exit code 130 instead of raising, which main() once
+    dropped (exit 0, no message)."""
+    import lightprobe.demo
+
+    def interrupted():
+        raise KeyboardInterrupt
+
+    monkeypatch.setitem(lightprobe.demo.DEMOS, "default", interrupted)
+    assert main(["render", "--demo", "-o", str(tmp_path / "x.exr"), "-q"]) == 130
+    assert "interrupted" in capsys.readouterr().err and not (tmp_path / "x.exr").exists()
+
+
 def test_ctrl_c_writes_what_was_accumulated(tmp_path):
     """A real SIGINT to a running render: it stops, writes the image and says so."""
     import signal

@@ -818,7 +818,11 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point: runs the Typer app, turning user errors into one line and exit status 2."""
     warnings.formatwarning = _format_warning
     try:
-        app(args=argv, standalone_mode=False)
+        # outside standalone mode Typer turns Ctrl-C into a returned 130 (and typer.Exit into its code) instead of
+        # raising: a Ctrl-C while a scene loads came back as a silent success before this was read
+        status = app(args=argv, standalone_mode=False)
+        if status == 130:
+            raise KeyboardInterrupt
     except LightprobeError as exc:
         print(f"lightprobe: error: {exc}", file=sys.stderr)
         return 2
@@ -833,7 +837,7 @@ def main(argv: list[str] | None = None) -> int:
             exc.show()
             return exc.exit_code
         raise
-    return 0
+    return status if type(status) is int else 0  # a command returns None; Typer returns an exit code
 
 
 if __name__ == "__main__":
