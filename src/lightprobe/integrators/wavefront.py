@@ -684,11 +684,12 @@ def _check_material_strategy(scene: Scene, settings: RenderSettings) -> None:
                 raise ParameterError(f"material {name!r}: MIS needs Phong's mixture estimator (seed eq. 19)")
 
 
-def _pass_buffers(n: int, m: int) -> dict[str, np.ndarray]:
-    """Arrays of one pass: ``n`` camera samples, ``m`` shading slots each, keyed by kernel parameter name.  (Mapped
-    without huge pages: their first touch, in the first passes, took twice a pass's time with NumPy's.)"""
+def _pass_buffers(n: int, m: int, environment_stages: bool = True) -> dict[str, np.ndarray]:
+    """Arrays of one pass: ``n`` camera samples, ``m`` shading slots each, keyed by kernel parameter name; without
+    the environment stages' own three when the render takes the area-light path.  (Mapped without huge pages, and
+    populated when mapped: first touches in the first passes took up to twice a pass's time, decisions.md 32, 39.)"""
     nm = n * m
-    return {
+    buffers = {
         # camera samples
         "dirs": fresh_array((n, 3)),  # camera ray directions
         "t": fresh_array(n),  # hit distance (inf: miss)
@@ -709,13 +710,15 @@ def _pass_buffers(n: int, m: int) -> dict[str, np.ndarray]:
         "wloc": fresh_array((nm, 3)),  # direction, local
         "tpdf": fresh_array(nm),  # density of the technique that made it
         "bweight": fresh_array((nm, 3)),  # BSDF sample weight
-        "env_u": fresh_array((nm, 2)),  # random numbers of environment samples
-        "uv": fresh_array((nm, 2)),  # lat-long coordinates of environment samples
         "radiance": fresh_array((nm, 3)),  # environment radiance along the direction
-        "epdf": fresh_array(nm),  # environment density of BSDF samples (MIS)
         "contrib": fresh_array((nm, 3)),  # unoccluded contribution
         "flags": fresh_array(nm, np.int8),  # NONE / VISIBLE / TEST_MESH / BLOCKED
     }
+    if environment_stages:
+        buffers["env_u"] = fresh_array((nm, 2))  # random numbers of environment samples
+        buffers["uv"] = fresh_array((nm, 2))  # lat-long coordinates of environment samples
+        buffers["epdf"] = fresh_array(nm)  # environment density of BSDF samples (MIS)
+    return buffers
 
 
 #: when a dict, every kernel launch adds its seconds under the kernel's name (``benchmarks/peer_scene.py --profile``)
@@ -818,7 +821,6 @@ def render(
         "adaptive": settings.adaptive,
     }
     largest_pass = max(1, band * spp_pass)
-    buffers = _pass_buffers(largest_pass, m)  # every pass uses leading views of these: memory bounded by one pass
     strategy = STRATEGIES[settings.strategy]
     sample_stage = _env_resample_stage if settings.env_candidates > 1 else _env_sample_stage
     stages = (_shade_setup, sample_stage, _env_lookup_stage, _shade_finish)
@@ -837,9 +839,6 @@ def render(
             settings.light_sampler, lights, env_power=scene.environment_power() if has_env else None
         )
         stats["area_lights"] = int(lights.kind.shape[0])
-        for name in ("env_u", "uv", "epdf"):  # the environment stages' own arrays: this path has no use for them
-            del buffers[name]
-        buffers.update(slot_buffers(largest_pass * m))
         stages = area_stages(bool(tracer.mesh_scene))
         worklists = AREA_WORKLISTS
         light_constants = {
@@ -870,6 +869,13 @@ def render(
         "mis": strategy == MIS,
         **light_constants,
     }
+
+    def make_buffers() -> dict[str, np.ndarray]:
+        """Every pass uses leading views of these: memory bounded by one pass."""
+        made = _pass_buffers(largest_pass, m, environment_stages=not area_path)
+        if area_path:
+            made.update(slot_buffers(largest_pass * m))
+        return made
 
     def run_pass(acc: Accumulator, pixels: np.ndarray, spp_now: int, sample_start: int) -> int:
         """One pass over ``pixels`` x ``spp_now`` samples; returns the number of shadow rays traced."""
@@ -966,6 +972,9 @@ def render(
     start = _clock()
     with _InterruptAtPassEnd() as interrupt:
         try:
+            # made under the Ctrl-C handler: the kernel maps them page by page (about a second per GB here), and a
+            # Ctrl-C meanwhile waits for the first pass like any other
+            buffers = make_buffers()
             # warm up every kernel on one pixel (loads cached machine code) before the clock starts
             run_pass(Accumulator(n_pixels), pass_pixels(0, 1), 1, 0)
             if settings.adaptive:
