@@ -460,6 +460,9 @@ def test_adaptive_from_the_scene_file_or_the_option(capsys, tmp_path):
     meta = json.loads((tmp_path / "b.exr.json").read_text())
     assert meta["adaptive"] is False and meta["spp_done"] == meta["spp_max"] == 8
     capsys.readouterr()
+    # under a time limit the counts are planned to end at it: the line says so, stopped there or not
+    assert main(["render", str(path), "--time-limit", "60", "-o", str(tmp_path / "c.exr"), "-q"]) == 0
+    assert "(counts planned for the time limit)" in capsys.readouterr().err
     assert main(["compare", str(path), "-o", str(tmp_path / "r.html"), "--spp", "2", "-q"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "adaptive = true" in err[0] and "s.toml" in err[0] and "needs --spp >= 4" in err[0], err

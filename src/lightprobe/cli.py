@@ -182,6 +182,8 @@ def render_command(
     note = ""
     if stats["interrupted"]:
         note = " (interrupted: the image holds the samples accumulated so far)"
+    elif stats["adaptive"] and settings.time_limit is not None:
+        note = " (counts planned for the time limit)"  # it ends at the limit by design, stopped there or not
     elif stats["stopped_by_time_limit"]:
         note = " (stopped by the time limit)"
     typer.echo(
