@@ -9,8 +9,9 @@ which touch its 330 MB of fresh pass buffers, took 0.51-0.62 s each against 0.20
 kernel zeroed, four kilobytes at a time; later passes run at the same speed either way.
 
 The map is populated when it is made (``MAP_POPULATE``): one call maps every page, where first touches took a page
-fault each, 1.9 s for 1 GB on a fresh VM against 0.29 s populated.  A render's pass buffers are made before its
-clock starts, so the time they take is setup, not a render's first passes (decisions.md 39).
+fault each (1 GB on a fresh VM: 1.9 s touched page by page, 0.29 s populated; but populating took up to 2.3 s a GB
+where the host had not backed the memory yet).  A render's pass buffers are made before its clock starts, so that
+time is setup, not part of a render's first passes (decisions.md 39).
 """
 
 from __future__ import annotations

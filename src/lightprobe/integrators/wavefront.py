@@ -972,8 +972,8 @@ def render(
     start = _clock()
     with _InterruptAtPassEnd() as interrupt:
         try:
-            # made under the Ctrl-C handler: the kernel maps them page by page (about a second per GB here), and a
-            # Ctrl-C meanwhile waits for the first pass like any other
+            # made under the Ctrl-C handler: populating their pages can take a second or more per GB on this VM,
+            # and a Ctrl-C meanwhile waits for the first pass like any other
             buffers = make_buffers()
             # warm up every kernel on one pixel (loads cached machine code) before the clock starts
             run_pass(Accumulator(n_pixels), pass_pixels(0, 1), 1, 0)
