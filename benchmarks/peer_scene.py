@@ -135,18 +135,12 @@ def _by_object(scene, image: np.ndarray, ref: np.ndarray, reference: str) -> dic
     """Where the relMSE is: per object seen at the pixels' centres (``sky`` where none is), its share of the
     pixels and its part of the image's relMSE (the mean over its pixels x that share, so the parts add up to the
     image's), with the reference's own noise there (``floor``) when its variance is beside it."""
-    from pathlib import Path
-
     from lightprobe.analysis.masks import object_id_pass
-    from lightprobe.analysis.metrics import RELMSE_EPSILON, relmse
-    from lightprobe.io.images import read_image
+    from lightprobe.analysis.metrics import relmse
+    from lightprobe.peer import reference_noise
 
     ids, names = object_id_pass(scene)
-    variance = Path(reference).with_name(Path(reference).stem + "_var.exr")
-    noise = None
-    if variance.exists():  # the floor per pixel: var / (ref^2 + epsilon), as lightprobe.peer.reference_floor
-        ref64 = ref.astype(np.float64)
-        noise = (read_image(str(variance))[:, :, :3] / (ref64**2 + RELMSE_EPSILON)).mean(axis=2)
+    noise = reference_noise(reference)
     parts = {}
     for index, name in [(-1, "sky"), *enumerate(names)]:
         mask = ids == index
@@ -155,7 +149,7 @@ def _by_object(scene, image: np.ndarray, ref: np.ndarray, reference: str) -> dic
         share = float(mask.mean())
         parts[name] = {"pixels": round(share, 4), "relmse": relmse(image, ref, mask) * share}
         if noise is not None:
-            parts[name]["floor"] = float(noise[mask].sum() / noise.size)
+            parts[name]["floor"] = float(noise[mask].sum(dtype=np.float64) / noise.size)
     return parts
 
 

@@ -94,10 +94,10 @@ def peer_scene(peers: Path | None = None, *, resolution: tuple[int, int] | None 
     return scene
 
 
-def reference_floor(reference: str | Path) -> float | None:
-    """The part of every relMSE against ``reference`` that is the reference's own noise (the peer kit's
-    ``ref_floor``: the mean over pixels and channels of var / (ref^2 + 0.01), var the variance of its mean, from
-    ``NAME_var.exr`` beside ``NAME.exr`` as the kit's ``render.py --variance-out`` writes it), or None without it."""
+def reference_noise(reference: str | Path) -> np.ndarray | None:
+    """The reference's own noise in the relMSE, per pixel and channel, (H, W, 3): var / (ref^2 + 0.01), var the
+    variance of its mean, from ``NAME_var.exr`` beside ``NAME.exr`` as the kit's ``render.py --variance-out`` writes
+    it; None without that file."""
     from .analysis.metrics import RELMSE_EPSILON
     from .io.images import read_image
 
@@ -106,4 +106,11 @@ def reference_floor(reference: str | Path) -> float | None:
     if not variance.exists():
         return None
     ref = read_image(str(reference))[:, :, :3]
-    return float(np.mean(read_image(str(variance))[:, :, :3] / (ref**2 + RELMSE_EPSILON)))
+    return read_image(str(variance))[:, :, :3] / (ref**2 + RELMSE_EPSILON)
+
+
+def reference_floor(reference: str | Path) -> float | None:
+    """The part of every relMSE against ``reference`` that is the reference's own noise (the peer kit's
+    ``ref_floor``): the mean of :func:`reference_noise` over pixels and channels, or None without the variance."""
+    noise = reference_noise(reference)
+    return None if noise is None else float(np.mean(noise))
