@@ -9,7 +9,7 @@ every kernel hold the same mix of sky and objects.  A pass runs as a wavefront o
    (called from the kernel) for the rays that may reach one;
 2. shading: for each hit, ``n_bsdf + K n_env`` directions from the chosen strategy, their unoccluded
    contributions, and shadow rays (tested against spheres and rectangles on the spot).  Scenes lit by an
-   environment map alone shade in the four stages below (their measured fast path); scenes with area lights in
+   environment map alone shade in the five stages below (their measured fast path); scenes with area lights in
    the stages of :mod:`lightprobe.integrators.area_lights`;
 3. Embree occlusion for the shadow rays that may reach a mesh (with the segment's end for area lights), in a
    kernel over the list of those rays;
@@ -44,7 +44,17 @@ from ..bsdfs.dispatch import bsdf_eval, bsdf_pdf
 from ..bsdfs.lambert import LAMBERT
 from ..bsdfs.phong import PHONG
 from ..emitters.area import STRATEGIES as LIGHT_STRATEGIES
-from ..emitters.envmap import env_coords, env_eval, env_lookup, env_pdf_at, env_sample_coords, env_sample_full
+from ..emitters.envmap import (
+    BILINEAR,
+    env_coords,
+    env_eval,
+    env_lookup,
+    env_pdf_at,
+    env_sample_coords,
+    env_sample_full,
+)
+from ..emitters.envmap_lanes import LANES, radiance_block
+from ..emitters.envmap_lanes import applies as lanes_apply
 from ..emitters.selection import SELECTORS, build_selector
 from ..errors import ParameterError
 from ..geometry.camera import camera_ray
@@ -302,9 +312,11 @@ def _camera_pass(
                 t[k], kind[k], index[k], prim[k], b1[k], b2[k] = mt, MESH, mesh, face, mb1, mb2
 
 
-# Shading runs as four kernels rather than one: the environment lookups are cache misses (the map and its CDFs
+# Shading runs as five kernels rather than one: the environment lookups are cache misses (the map and its CDFs
 # are megabytes), and in small loops of independent iterations the CPU overlaps many misses, while in one large
 # loop body it stalls on each (measured: a bilinear lookup costs 35 ns in its own loop, 150 ns inside the body).
+# Nor do they run per batch of camera samples through every stage: each stage's tables stay hot for a whole pass
+# (decisions.md 41).
 # Slot r = k * m + j is shading sample j of camera sample k; its state says which technique made it.
 
 
@@ -482,19 +494,36 @@ def _env_resample_stage(
 
 
 @jit_parallel
-def _env_lookup_stage(env, compensate, m, material, mis, state, wdir, uv, radiance, epdf):
-    """Radiance for every live slot, and the environment's density for BSDF samples under MIS."""
+def _env_coords_stage(env, compensate, m, material, mis, state, wdir, uv, epdf):
+    """Lat-long coordinates of every live slot's direction (environment samples have theirs already), and the
+    environment's density for BSDF samples under MIS."""
     for r in prange(state.shape[0]):
         st = state[r]
-        if st == SLOT_NONE:
-            continue
-        if st == SLOT_ENV:
-            radiance[r, 0], radiance[r, 1], radiance[r, 2] = env_lookup(env, uv[r, 0], uv[r, 1])
+        if st == SLOT_NONE or st == SLOT_ENV:
             continue
         u, v, cos_theta = env_coords(env, wdir[r, 0], wdir[r, 1], wdir[r, 2])
-        radiance[r, 0], radiance[r, 1], radiance[r, 2] = env_lookup(env, u, v)
+        uv[r, 0] = u
+        uv[r, 1] = v
         if mis and st == SLOT_BSDF:
             epdf[r] = env_pdf_at(env, compensate[material[r // m]], u, v, cos_theta)
+
+
+# The radiance lookups run 8 slots at a time in vector IR (emitters/envmap_lanes.py): half the time of the scalar
+# lookup (decisions.md 42).  Every slot of a pass takes this path, so block boundaries never change a pixel.
+@jit_parallel
+def _env_radiance_stage(env, state, uv, radiance):
+    """Radiance for every live slot, 8 slots at a time."""
+    for block in prange((state.shape[0] + LANES - 1) // LANES):
+        radiance_block(radiance, env.image, uv, state, block * LANES)
+
+
+@jit_parallel
+def _env_radiance_scalar_stage(env, state, uv, radiance):
+    """Radiance for every live slot, one at a time: for the maps :func:`radiance_block` does not take (nearest
+    lookups, one-row maps)."""
+    for r in prange(state.shape[0]):
+        if state[r] != SLOT_NONE:
+            radiance[r, 0], radiance[r, 1], radiance[r, 2] = env_lookup(env, uv[r, 0], uv[r, 1])
 
 
 @jit_parallel
@@ -838,7 +867,10 @@ def render(
     largest_pass = max(1, band * spp_pass)
     strategy = STRATEGIES[settings.strategy]
     sample_stage = _env_resample_stage if settings.env_candidates > 1 else _env_sample_stage
-    stages = (_shade_setup, sample_stage, _env_lookup_stage, _shade_finish)
+    env_map = scene.environment
+    in_lanes = env_map is not None and lanes_apply(env_map.kernel.image, env_map.kernel.lookup == BILINEAR)
+    radiance_stage = _env_radiance_stage if in_lanes else _env_radiance_scalar_stage
+    stages = (_shade_setup, sample_stage, _env_coords_stage, radiance_stage, _shade_finish)
     if tracer.mesh_scene:
         stages += (_mesh_shadow_stage,)
     worklists = WORKLISTS
@@ -1030,7 +1062,14 @@ def kernels_cached() -> bool:
     from .._numba import is_cached
 
     return is_cached(
-        _camera_pass, _shade_setup, _env_sample_stage, _env_lookup_stage, _shade_finish, _mesh_shadow_stage, _accumulate
+        _camera_pass,
+        _shade_setup,
+        _env_sample_stage,
+        _env_coords_stage,
+        _env_radiance_stage,
+        _shade_finish,
+        _mesh_shadow_stage,
+        _accumulate,
     )
 
 

@@ -1,0 +1,130 @@
+"""The environment's radiance lookups 8 slots at a time (emitters/envmap_lanes.py): the scalar lookup's values, no
+read or write outside the live slots, and the renderer's choice between the two stages."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from numba import njit, prange
+
+from lightprobe.emitters.envmap import EnvironmentMap, env_lookup
+from lightprobe.emitters.envmap_lanes import LANES, applies, radiance_block
+from lightprobe.emitters.procedural import constant, sky_with_sun
+from lightprobe.integrators import wavefront
+from lightprobe.integrators.wavefront import RenderSettings, render
+
+
+@njit(parallel=True)
+def _in_lanes(radiance, image, uv, state):
+    for block in prange((state.shape[0] + LANES - 1) // LANES):
+        radiance_block(radiance, image, uv, state, block * LANES)
+
+
+@njit
+def _one_at_a_time(k, uv, state, radiance):
+    for r in range(state.shape[0]):
+        if state[r] != 0:
+            radiance[r, 0], radiance[r, 1], radiance[r, 2] = env_lookup(k, uv[r, 0], uv[r, 1])
+
+
+def _map():
+    return EnvironmentMap.from_array(sky_with_sun(96, 48, sun_diameter_deg=8.0))
+
+
+def _slots(n, seed=0):
+    rng = np.random.default_rng(seed)
+    uv = rng.random((n, 2))
+    # the edges of the domain: u = 0 and just below 1 (the wrap), v = 0 and 1 (the clamped rows)
+    edges = [[0.0, 0.0], [1.0 - 2**-53, 1.0], [0.999, 0.5], [1e-4, 0.0], [0.5, 1.0], [0.0, 1.0]]
+    uv[: min(n, 6)] = edges[: min(n, 6)]
+    state = rng.integers(0, 4, n).astype(np.int8)  # SLOT_NONE (0) a quarter of the time
+    state[: min(n, 6)] = 1
+    return uv, state
+
+
+@pytest.mark.parametrize("n", [1, 7, 8, 9, 1003])
+def test_the_lanes_give_the_scalar_lookup_and_leave_dead_slots_alone(n):
+    k = _map().kernel
+    uv, state = _slots(n)
+    lanes, scalar = np.full((n, 3), -7.0), np.full((n, 3), -7.0)
+    _in_lanes(lanes, k.image, uv, state)
+    _one_at_a_time(k, uv, state, scalar)
+    live = state != 0
+    # the same formula; the scalar kernel may fuse a multiply-add, so allow an ulp
+    np.testing.assert_allclose(lanes[live], scalar[live], rtol=1e-15, atol=0)
+    assert np.all(lanes[~live] == -7.0)
+
+
+def test_the_lanes_never_write_past_the_arrays():
+    k = _map().kernel
+    n = 13  # the second block has 3 slots in the arrays and 5 lanes past them
+    uv, state = _slots(n + 5)
+    state[:] = 1
+    radiance = np.full((n + 5, 3), -7.0)
+    _in_lanes(radiance[:n], k.image, uv[:n], state[:n])
+    assert np.all(radiance[:n] != -7.0)
+    assert np.all(radiance[n:] == -7.0)
+
+
+def test_coordinates_outside_the_domain_give_finite_radiance():
+    k = _map().kernel
+    uv = np.array([[np.nan, np.nan], [1e300, -1e300], [-5.0, 7.0], [np.inf, -np.inf]])
+    state = np.ones(4, np.int8)
+    radiance = np.zeros((4, 3))
+    _in_lanes(radiance, k.image, uv, state)  # an index from a NaN would read anywhere: must not crash
+    assert np.all(np.isfinite(radiance))
+
+
+def test_which_maps_the_lanes_take():
+    image = np.zeros((4, 8, 3), np.float32)
+    assert applies(image, True)
+    assert not applies(image, False)  # nearest lookups
+    assert not applies(np.zeros((1, 8, 3), np.float32), True)  # one row: nothing to interpolate between
+    assert not applies(image.astype(np.float64), True)
+    assert not applies(np.zeros((8, 4, 3), np.float32).transpose(1, 0, 2), True)  # not C-contiguous
+
+
+def _scene(**env_options):
+    from ..integrators.test_wavefront import small_scene
+
+    return small_scene((20, 12), **env_options)
+
+
+def test_a_render_with_the_lanes_equals_one_with_the_scalar_stage(monkeypatch):
+    """The whole environment path, either radiance stage: the same image to float32 rounding (bit for bit on the
+    machines measured; the scalar kernel may fuse a multiply-add where the lanes do not)."""
+    settings = RenderSettings(spp=4, seed=3)
+    profile = {}
+    monkeypatch.setattr(wavefront, "PROFILE", profile)
+    lanes = render(_scene(), settings)
+    assert "env_radiance_stage" in profile and "env_radiance_scalar_stage" not in profile
+    profile.clear()
+    monkeypatch.setattr(wavefront, "lanes_apply", lambda image, bilinear: False)
+    scalar = render(_scene(), settings)
+    assert "env_radiance_scalar_stage" in profile and "env_radiance_stage" not in profile
+    np.testing.assert_allclose(lanes.image, scalar.image, rtol=1e-6, atol=0)
+    assert np.all(lanes.counts == scalar.counts)
+
+
+@pytest.mark.parametrize("env", ["nearest", "one row"])
+def test_maps_the_lanes_do_not_take_render_through_the_scalar_stage(env, monkeypatch):
+    """A white furnace with a map the lanes refuse: a Lambertian sphere under constant radiance L shows rho L, exactly
+    with cosine-weighted BSDF samples."""
+    from lightprobe.bsdfs import Lambert
+    from lightprobe.geometry.camera import Camera
+    from lightprobe.geometry.scene import Scene
+    from lightprobe.geometry.shapes import Sphere
+
+    radiance, albedo = 1.5, 0.6
+    if env == "nearest":
+        environment = EnvironmentMap.from_array(constant(radiance), lookup="nearest", pdf="exact")
+    else:
+        environment = EnvironmentMap.from_array(constant(radiance, width=8, height=1))
+    scene = Scene(Camera([0, 0, 4], [0, 0, 0], fov=40, resolution=(16, 16)), environment)
+    scene.add(Sphere([0, 0, 0], 1.0), Lambert(albedo))
+    profile = {}
+    monkeypatch.setattr(wavefront, "PROFILE", profile)
+    result = render(scene, RenderSettings(spp=4, strategy="brdf"))
+    assert "env_radiance_scalar_stage" in profile
+    np.testing.assert_allclose(result.image[6:10, 6:10], albedo * radiance, rtol=1e-5)
+    np.testing.assert_allclose(result.image[0, 0], radiance, rtol=1e-6)
