@@ -90,18 +90,21 @@ def _scene(**env_options):
     return small_scene((20, 12), **env_options)
 
 
-def test_a_render_with_the_lanes_equals_one_with_the_scalar_stage(monkeypatch):
-    """The whole environment path, either radiance stage: the same image to float32 rounding (bit for bit on the
-    machines measured; the scalar kernel may fuse a multiply-add where the lanes do not)."""
+def test_a_render_with_the_lanes_equals_one_with_the_scalar_stages(monkeypatch):
+    """The whole environment path, with the lanes' sampling and radiance stages or the scalar ones: the same image
+    to float32 rounding (bit for bit on the machine measured; a fused multiply-add may differ elsewhere)."""
     settings = RenderSettings(spp=4, seed=3)
     profile = {}
     monkeypatch.setattr(wavefront, "PROFILE", profile)
     lanes = render(_scene(), settings)
-    assert "env_radiance_stage" in profile and "env_radiance_scalar_stage" not in profile
+    assert {"env_radiance_stage", "env_sample_lanes_stage"} <= profile.keys()
+    assert not {"env_radiance_scalar_stage", "env_sample_stage"} & profile.keys()
     profile.clear()
     monkeypatch.setattr(wavefront, "lanes_apply", lambda image, bilinear: False)
+    monkeypatch.setattr(wavefront, "samples_in_lanes", lambda k: False)
     scalar = render(_scene(), settings)
-    assert "env_radiance_scalar_stage" in profile and "env_radiance_stage" not in profile
+    assert {"env_radiance_scalar_stage", "env_sample_stage"} <= profile.keys()
+    assert not {"env_radiance_stage", "env_sample_lanes_stage"} & profile.keys()
     np.testing.assert_allclose(lanes.image, scalar.image, rtol=1e-6, atol=0)
     assert np.all(lanes.counts == scalar.counts)
 
@@ -128,3 +131,56 @@ def test_maps_the_lanes_do_not_take_render_through_the_scalar_stage(env, monkeyp
     assert "env_radiance_scalar_stage" in profile
     np.testing.assert_allclose(result.image[6:10, 6:10], albedo * radiance, rtol=1e-5)
     np.testing.assert_allclose(result.image[0, 0], radiance, rtol=1e-6)
+
+
+def _sampling_case(m=8, n_bsdf=4, n=3001, seed=4):
+    """A pass's worth of environment slots on a map large enough for the small-angle tables: random numbers,
+    materials (compensated or not), shading normals, and slots that are dead or BSDF samples."""
+    from lightprobe.emitters.envmap_bilinear import SMALL_ANGLE_COLUMNS, SMALL_ANGLE_ROWS
+
+    env = EnvironmentMap.from_array(sky_with_sun(2 * SMALL_ANGLE_COLUMNS, SMALL_ANGLE_ROWS + 8, sun_diameter_deg=6.0))
+    rng = np.random.default_rng(seed)
+    slots = n * m
+    j = np.arange(slots) % m
+    state = np.where(j < n_bsdf, 1, np.where(rng.random(slots) < 0.9, 2, 0)).astype(np.int8)
+    normals = rng.normal(size=(n, 3))
+    frame = np.zeros((n, 9))
+    frame[:, 6:] = normals / np.linalg.norm(normals, axis=1)[:, None]
+    return {
+        "env": env.kernel,
+        "compensate": np.array([True, False]),
+        "m": m,
+        "material": rng.integers(0, 2, n).astype(np.int64),
+        "frame": frame,
+        "state": state,
+        "env_u": rng.random((slots, 2)),
+    }
+
+
+def _sample(stage, case, *extra):
+    slots = case["state"].shape[0]
+    out = {"state": case["state"].copy(), "wdir": np.full((slots, 3), -7.0), "tpdf": np.full(slots, -7.0)}
+    out["uv"] = np.full((slots, 2), -7.0)
+    c = case
+    stage(c["env"], c["compensate"], *extra, c["m"], c["material"], c["frame"], out["state"], c["env_u"],
+          out["wdir"], out["tpdf"], out["uv"])  # fmt: skip
+    return out
+
+
+@pytest.mark.parametrize(("m", "n_bsdf", "n"), [(8, 4, 3001), (5, 2, 7), (1, 0, 13)])
+def test_environment_samples_in_lanes_are_the_scalar_stages(m, n_bsdf, n):
+    """Directions, densities and dropped slots the same bits as wavefront._env_sample_stage's; lat-long
+    coordinates within an ulp (a fused multiply-add may differ); BSDF slots and dead slots untouched."""
+    from lightprobe.integrators.techniques import ENV, MIS
+
+    case = _sampling_case(m, n_bsdf, n)
+    scalar = _sample(wavefront._env_sample_stage, case)
+    strategy = MIS if n_bsdf else ENV
+    lanes = _sample(wavefront._env_sample_lanes_stage, case, strategy, n_bsdf)
+    assert np.array_equal(lanes["state"], scalar["state"])
+    assert np.count_nonzero(scalar["state"] == 0) > np.count_nonzero(case["state"] == 0)  # some were dropped
+    assert np.array_equal(lanes["wdir"], scalar["wdir"])
+    assert np.array_equal(lanes["tpdf"], scalar["tpdf"])
+    np.testing.assert_allclose(lanes["uv"], scalar["uv"], rtol=3e-16, atol=1e-300)
+    untouched = case["state"] != 2
+    assert np.all(lanes["wdir"][untouched] == -7.0) and np.all(lanes["tpdf"][untouched] == -7.0)

@@ -1,22 +1,29 @@
-"""The environment's bilinear radiance lookups eight shading slots at a time, as vector LLVM IR.
+"""The environment map's work for eight shading slots at a time, as vector LLVM IR: radiance lookups and samples
+of the bilinear density.
 
 Numba compiles the renderer's kernels one slot at a time: its vectoriser gives up on any loop that reads a table
-(docs/decisions.md 35), so each lookup's 12 texel reads and its arithmetic run in scalar code.  Written as vector IR
-(a Numba ``@intrinsic``) the same lookup takes half the time: 9.4 against 20 core-ns for random coordinates on the
-peer map, 6.7 against 13 for coherent ones (decisions.md 41, ``benchmarks/simd_lookup.py``).
+(docs/decisions.md 35), so each lookup's texel reads and each sample's bisections run in scalar code.  Here each is
+a Numba ``@intrinsic`` that emits the whole operation for 8 slots as vector IR: the arithmetic in 8 float64 lanes,
+the table reads as 8 loads whose addresses come from the lanes, the writes as masked scatters.  Per operation
+(decisions.md 41 and 42, ``benchmarks/simd_lookup.py``): a lookup takes 9.4 against 20 core-ns for random
+coordinates on the peer map.
 
-:func:`radiance_block` computes what :func:`lightprobe.emitters.envmap.env_lookup` does for a bilinear lat-long
-map -- Mitsuba's texel placement, see :func:`lightprobe.emitters.mappings.bilinear_latlong_weights` -- for the
-slots ``start .. start + 7`` of a pass: the lanes past the end of the arrays and the lanes of dead slots
-(``SLOT_NONE``) neither read nor write anything (masked gathers and scatters).  Every slot of a pass goes through
-it, whatever the pass size, so the image does not depend on how slots fall into blocks.  It runs the formula in
-float64 without fused multiply-adds; the scalar kernels may fuse some, so the two differ by at most an ulp.
+Every lane computes what the scalar code computes, operation for operation and in its order, with the kernels'
+fast-math flags (``_numba.FASTMATH``): :func:`radiance_block` is :func:`lightprobe.emitters.envmap.env_lookup` for a
+bilinear lat-long map, :func:`env_sample_block` is ``wavefront._env_sample_stage`` for the bilinear density.  On
+the machine measured the renders are the same bits; where LLVM fuses a multiply-add in one and not the other they
+may differ by an ulp (the tests allow for it).
 
-Coordinates outside the lookup's domain (a NaN, or far outside [0, 1]) are clamped before they become texel
-indices: a vector lane cannot take the scalar code's slow path, and an index from a NaN would address any memory.
+Lanes of dead slots and lanes past a pass's last slot write nothing, and every slot of a pass goes through the
+lanes whatever the pass size, so the image does not depend on how slots fall into blocks.  So that no load needs a
+mask, a lane past the end reads the last slot, and a coordinate outside the lookup's domain (a NaN, or far outside
+[0, 1]: a dead slot's stale value) is clamped before it becomes an index, since a vector lane cannot take the
+scalar code's slow path and an index from a NaN would address any memory.
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from llvmlite import ir
@@ -31,42 +38,159 @@ LANES = 8
 _F32, _F64, _I8, _I32, _I64 = ir.FloatType(), ir.DoubleType(), ir.IntType(8), ir.IntType(32), ir.IntType(64)
 _VF64, _VI64, _VF32 = ir.VectorType(_F64, LANES), ir.VectorType(_I64, LANES), ir.VectorType(_F32, LANES)
 _VI8, _MASK = ir.VectorType(_I8, LANES), ir.VectorType(ir.IntType(1), LANES)
-
-
-def _pointers(element: ir.Type) -> ir.VectorType:
-    return ir.VectorType(element.as_pointer(), LANES)
+_FLAGS = ("contract", "arcp", "afn")  # the scalar kernels' fast-math flags (_numba.FASTMATH)
+#: (vector type, intrinsic suffix, alignment in bytes) of each element type stored here
+_ELEMENTS = {_F32: (_VF32, "v8f32", 4), _F64: (_VF64, "v8f64", 8), _I8: (_VI8, "v8i8", 1), _I64: (_VI64, "v8i64", 8)}
+_TWO_PI = 2.0 * math.pi
+_TWO_PI_SQUARED = 2.0 * math.pi * math.pi  # folded as the scalar code's 2.0 * math.pi * math.pi * sin_theta is
+SLOT_NONE, SLOT_ENV = 0, 2  # integrators.techniques' slot states
 
 
 def _intrinsic(builder, name: str, ret: ir.Type, *params: ir.Type):
     return cgutils.get_or_insert_function(builder.module, ir.FunctionType(ret, list(params)), name)
 
 
-#: (vector type, intrinsic suffix, alignment in bytes) of each element type gathered here
-_GATHERED = {_F32: (_VF32, "v8f32", 4), _F64: (_VF64, "v8f64", 8), _I8: (_VI8, "v8i8", 1)}
+def _pointers(element: ir.Type) -> ir.VectorType:
+    return ir.VectorType(element.as_pointer(), LANES)
 
 
-def _gather(builder, element: ir.Type, addresses, mask, passthrough):
-    """Masked gather of ``element`` values from integer byte addresses (llvmlite has no vector GEP)."""
-    vector, suffix, align = _GATHERED[element]
-    function = _intrinsic(
-        builder, f"llvm.masked.gather.{suffix}.v{LANES}p0", vector, _pointers(element), _I32, _MASK, vector
-    )
-    pointers = builder.inttoptr(addresses, _pointers(element))
-    return builder.call(function, [pointers, _I32(align), mask, passthrough])
+class _Lanes:
+    """The vector operations the intrinsics need, each as the scalar code's Python operator compiles: float
+    arithmetic with the kernels' fast-math flags, ``max(a, b)`` as ``b if b > a else a`` and ``min(a, b)`` as
+    ``b if b < a else a`` (Numba's builtins), integer arithmetic in int64."""
 
+    def __init__(self, builder):
+        self.b = builder
 
-def _scatter(builder, values, addresses, mask):
-    function = _intrinsic(
-        builder, f"llvm.masked.scatter.v{LANES}f64.v{LANES}p0", ir.VoidType(), _VF64, _pointers(_F64), _I32, _MASK
-    )
-    builder.call(function, [values, builder.inttoptr(addresses, _pointers(_F64)), _I32(8), mask])
+    def f(self, x):
+        return ir.Constant(_VF64, [float(x)] * LANES)
+
+    def i(self, x):
+        return ir.Constant(_VI64, [int(x)] * LANES)
+
+    def splat(self, value, t):
+        lane0 = self.b.insert_element(ir.Constant(t, None), value, _I32(0))
+        return self.b.shuffle_vector(lane0, ir.Constant(t, None), ir.Constant(ir.VectorType(_I32, LANES), [0] * 8))
+
+    def add(self, a, c):
+        return self.b.fadd(a, c, flags=_FLAGS)
+
+    def sub(self, a, c):
+        return self.b.fsub(a, c, flags=_FLAGS)
+
+    def mul(self, a, c):
+        return self.b.fmul(a, c, flags=_FLAGS)
+
+    def div(self, a, c):
+        return self.b.fdiv(a, c, flags=_FLAGS)
+
+    def neg(self, a):
+        return self.b.fneg(a, flags=_FLAGS)
+
+    def sqrt(self, a):
+        return self.b.call(_intrinsic(self.b, "llvm.sqrt.v8f64", _VF64, _VF64), [a], fastmath=_FLAGS)
+
+    def fmax(self, a, c):
+        return self.b.select(self.b.fcmp_ordered(">", c, a), c, a)
+
+    def fmin(self, a, c):
+        return self.b.select(self.b.fcmp_ordered("<", c, a), c, a)
+
+    def imin(self, a, c):
+        return self.b.select(self.b.icmp_signed("<", c, a), c, a)
+
+    def lt(self, a, c):
+        return self.b.fcmp_ordered("<", a, c)
+
+    def le(self, a, c):
+        return self.b.fcmp_ordered("<=", a, c)
+
+    def gt(self, a, c):
+        return self.b.fcmp_ordered(">", a, c)
+
+    def ge(self, a, c):
+        return self.b.fcmp_ordered(">=", a, c)
+
+    def to_f(self, a):
+        return self.b.sitofp(a, _VF64)
+
+    def address(self, array, index, size):
+        """Byte addresses of elements ``index`` (int64 lanes) of an array of ``size``-byte elements."""
+        base = self.splat(self.b.ptrtoint(array.data, _I64), _VI64)
+        return self.b.add(base, self.b.mul(index, self.i(size)))
+
+    def gather(self, element, addresses):
+        """The ``element`` values at 8 byte addresses (each must be valid), as 8 scalar loads: on AMD Zen 4 they
+        beat ``vgatherqpd`` in the sampling stage's bisections, whose loads depend on the step before (peer scene,
+        64 spp: 4.08 / 4.12 s against 4.61 / 5.03 s)."""
+        out = ir.Constant(_ELEMENTS[element][0], None)
+        for lane in range(LANES):
+            at = self.b.inttoptr(self.b.extract_element(addresses, _I32(lane)), element.as_pointer())
+            out = self.b.insert_element(out, self.b.load(at), _I32(lane))
+        return out
+
+    def load_f64(self, array, index):
+        return self.gather(_F64, self.address(array, index, 8))
+
+    def load_f32(self, array, index):
+        return self.b.fpext(self.gather(_F32, self.address(array, index, 4)), _VF64)
+
+    def store(self, element, values, addresses, mask):
+        """A masked scatter: the lanes where ``mask`` is false write nothing."""
+        vector, suffix, align = _ELEMENTS[element]
+        function = _intrinsic(
+            self.b, f"llvm.masked.scatter.{suffix}.v{LANES}p0", ir.VoidType(), vector, _pointers(element), _I32, _MASK
+        )
+        self.b.call(function, [values, self.b.inttoptr(addresses, _pointers(element)), _I32(align), mask])
+
+    def clamp(self, x, lo, hi):
+        """x clipped to [lo, hi], a NaN to lo (both compares are false for it)."""
+        x = self.b.select(self.ge(x, self.f(lo)), x, self.f(lo))
+        return self.b.select(self.le(x, self.f(hi)), x, self.f(hi))
+
+    def slots(self, start, n):
+        """(slot indices start .. start + 7, which of them are below n, the indices clipped to n - 1 for reading)."""
+        slots = self.b.add(self.splat(start, _VI64), ir.Constant(_VI64, list(range(LANES))))
+        n = self.splat(n, _VI64)
+        return slots, self.b.icmp_signed("<", slots, n), self.imin(slots, self.b.sub(n, self.i(1)))
+
+    def any(self, mask):
+        reduce = _intrinsic(self.b, f"llvm.vector.reduce.or.v{LANES}i1", ir.IntType(1), _MASK)
+        return self.b.call(reduce, [mask])
+
+    def bisect(self, lo, hi, mask, below):
+        """Per lane, envmap_bilinear's bisection: while hi - lo > 1, mid = (lo + hi) >> 1 becomes lo where
+        ``below(mid, active)`` (the value at mid <= the target) and hi elsewhere.  Lanes stop one by one; the loop
+        runs while any lane is active.  Returns lo."""
+        b = self.b
+        entry = b.block
+        loop = b.append_basic_block("bisect")
+        body = b.append_basic_block("bisect.step")
+        done = b.append_basic_block("bisect.done")
+        b.branch(loop)
+        b.position_at_end(loop)
+        lo_phi, hi_phi = b.phi(_VI64), b.phi(_VI64)
+        lo_phi.add_incoming(lo, entry)
+        hi_phi.add_incoming(hi, entry)
+        active = b.and_(mask, b.icmp_signed(">", b.sub(hi_phi, lo_phi), self.i(1)))
+        b.cbranch(self.any(active), body, done)
+        b.position_at_end(body)
+        mid = b.ashr(b.add(lo_phi, hi_phi), self.i(1))
+        up = below(mid, active)
+        go_up = b.and_(active, up)
+        go_down = b.and_(active, b.not_(up))
+        lo_phi.add_incoming(b.select(go_up, mid, lo_phi), b.block)
+        hi_phi.add_incoming(b.select(go_down, mid, hi_phi), b.block)
+        b.branch(loop)
+        b.position_at_end(done)
+        return lo_phi
 
 
 @intrinsic
 def radiance_block(typingctx, radiance, image, uv, state, start):
     """radiance[r] = bilinear lat-long lookup of ``image`` at uv[r] for r in start .. start + 7 where r is inside
-    the arrays and state[r] != 0 (``SLOT_NONE``).  radiance (N, 3) float64, image (H, W, 3) float32 with H >= 2,
-    uv (N, 2) float64, state (N,) int8, all C-contiguous."""
+    the arrays and state[r] is not SLOT_NONE.  radiance (N, 3) float64, image (H, W, 3) float32 with H >= 2, uv (N,
+    2) float64, state (N,) int8, all C-contiguous."""
     float64_2d = types.Array(types.float64, 2, "C")
     if not (
         radiance == float64_2d
@@ -78,73 +202,269 @@ def radiance_block(typingctx, radiance, image, uv, state, start):
         return None
 
     def codegen(context, builder, signature, args):
-        radiance_v, image_v, uv_v, state_v, start_v = args
-        radiance_a = context.make_array(signature.args[0])(context, builder, radiance_v)
-        image_a = context.make_array(signature.args[1])(context, builder, image_v)
-        uv_a = context.make_array(signature.args[2])(context, builder, uv_v)
-        state_a = context.make_array(signature.args[3])(context, builder, state_v)
-        start_v = context.cast(builder, start_v, signature.args[4], types.int64)
-
-        def same(t, x):
-            return ir.Constant(t, [x] * LANES)
-
-        def splat(value, t):
-            lane0 = builder.insert_element(ir.Constant(t, None), value, _I32(0))
-            return builder.shuffle_vector(lane0, ir.Constant(t, None), ir.Constant(ir.VectorType(_I32, LANES), [0] * 8))
-
-        def address_of(array, byte_offsets):
-            return builder.add(splat(builder.ptrtoint(array.data, _I64), _VI64), byte_offsets)
-
-        def clamp(x, lo, hi):  # also maps NaN to lo (the compare is false for NaN)
-            x = builder.select(builder.fcmp_ordered(">=", x, same(_VF64, lo)), x, same(_VF64, lo))
-            return builder.select(builder.fcmp_ordered("<=", x, same(_VF64, hi)), x, same(_VF64, hi))
-
-        # which lanes hold a live slot
-        n = cgutils.unpack_tuple(builder, state_a.shape, 1)[0]
-        slots = builder.add(splat(start_v, _VI64), ir.Constant(_VI64, list(range(LANES))))
-        inside = builder.icmp_signed("<", slots, splat(n, _VI64))
-        states = _gather(builder, _I8, address_of(state_a, slots), inside, same(_VI8, 0))
-        live = builder.and_(inside, builder.icmp_signed("!=", states, same(_VI8, 0)))
-        uv_at = address_of(uv_a, builder.mul(slots, same(_VI64, 16)))
-        u = _gather(builder, _F64, uv_at, live, same(_VF64, 0.5))
-        v = _gather(builder, _F64, builder.add(uv_at, same(_VI64, 8)), live, same(_VF64, 0.5))
-
-        # texels and weights, as mappings.bilinear_latlong_weights: columns at u = (i + 0.5) / W, periodic; rows at
-        # v = j / (H - 1), clamped
-        h, w, _ = cgutils.unpack_tuple(builder, image_a.shape, 3)
-        wv, hv = splat(w, _VI64), splat(h, _VI64)
-        fx = builder.fsub(builder.fmul(clamp(u, -1.0, 2.0), builder.sitofp(wv, _VF64)), same(_VF64, 0.5))
-        x0f = builder.call(_intrinsic(builder, "llvm.floor.v8f64", _VF64, _VF64), [fx])
-        tx = builder.fsub(fx, x0f)
-        x0 = builder.fptosi(x0f, _VI64)
-        x0 = builder.select(builder.icmp_signed("<", x0, same(_VI64, 0)), builder.add(x0, wv), x0)
-        x0 = builder.select(builder.icmp_signed(">=", x0, wv), builder.sub(x0, wv), x0)
-        x1 = builder.add(x0, same(_VI64, 1))
-        x1 = builder.select(builder.icmp_signed("<", x1, wv), x1, same(_VI64, 0))
-        fy = builder.fmul(clamp(v, 0.0, 1.0), builder.sitofp(builder.sub(hv, same(_VI64, 1)), _VF64))
-        last = builder.sub(hv, same(_VI64, 2))
-        y0 = builder.fptosi(fy, _VI64)
-        y0 = builder.select(builder.icmp_signed("<", y0, last), y0, last)
-        ty = builder.fsub(fy, builder.sitofp(y0, _VF64))
-        y1 = builder.add(y0, same(_VI64, 1))
-        corners = [builder.mul(builder.add(builder.mul(y, wv), x), same(_VI64, 12)) for y in (y0, y1) for x in (x0, x1)]
-        one_tx, one_ty = builder.fsub(same(_VF64, 1.0), tx), builder.fsub(same(_VF64, 1.0), ty)
-        radiance_at = address_of(radiance_a, builder.mul(slots, same(_VI64, 24)))
+        radiance_a, image_a, uv_a, state_a = (
+            context.make_array(t)(context, builder, value)
+            for t, value in zip(signature.args[:4], args[:4], strict=True)
+        )
+        v, b = _Lanes(builder), builder
+        start_v = context.cast(b, args[4], signature.args[4], types.int64)
+        _, inside, read = v.slots(start_v, cgutils.unpack_tuple(b, state_a.shape, 1)[0])
+        states = v.gather(_I8, v.address(state_a, read, 1))
+        live = b.and_(inside, b.icmp_signed("!=", states, ir.Constant(_VI8, [SLOT_NONE] * LANES)))
+        u = v.load_f64(uv_a, b.mul(read, v.i(2)))
+        vv = v.load_f64(uv_a, b.add(b.mul(read, v.i(2)), v.i(1)))
+        # mappings.bilinear_latlong_weights: columns at u = (i + 0.5) / W, periodic; rows at v = j / (H - 1), clamped
+        h, w, _ = cgutils.unpack_tuple(b, image_a.shape, 3)
+        wv, hv = v.splat(w, _VI64), v.splat(h, _VI64)
+        fx = v.sub(v.mul(v.clamp(u, -1.0, 2.0), v.to_f(wv)), v.f(0.5))
+        x0f = b.call(_intrinsic(b, "llvm.floor.v8f64", _VF64, _VF64), [fx])
+        tx = v.sub(fx, x0f)
+        x0 = b.fptosi(x0f, _VI64)
+        x0 = b.select(b.icmp_signed("<", x0, v.i(0)), b.add(x0, wv), x0)
+        x0 = b.select(b.icmp_signed(">=", x0, wv), b.sub(x0, wv), x0)
+        x1 = b.add(x0, v.i(1))
+        x1 = b.select(b.icmp_signed("<", x1, wv), x1, v.i(0))
+        fy = v.mul(v.clamp(vv, 0.0, 1.0), v.to_f(b.sub(hv, v.i(1))))
+        y0 = v.imin(b.fptosi(fy, _VI64), b.sub(hv, v.i(2)))
+        ty = v.sub(fy, v.to_f(y0))
+        y1 = b.add(y0, v.i(1))
+        corners = [b.mul(b.add(b.mul(y, wv), x), v.i(3)) for y in (y0, y1) for x in (x0, x1)]
+        one_tx, one_ty = v.sub(v.f(1.0), tx), v.sub(v.f(1.0), ty)
+        out = v.address(radiance_a, read, 24)
         for c in range(3):
-            texels = []
-            for corner in corners:
-                at = address_of(image_a, builder.add(corner, same(_VI64, 4 * c)))
-                texels.append(builder.fpext(_gather(builder, _F32, at, live, same(_VF32, 0.0)), _VF64))
+            t00, t01, t10, t11 = (v.load_f32(image_a, b.add(corner, v.i(c))) for corner in corners)
             # mappings._bilerp: (1 - ty) ((1 - tx) t00 + tx t01) + ty ((1 - tx) t10 + tx t11)
-            top = builder.fadd(builder.fmul(one_tx, texels[0]), builder.fmul(tx, texels[1]))
-            bottom = builder.fadd(builder.fmul(one_tx, texels[2]), builder.fmul(tx, texels[3]))
-            value = builder.fadd(builder.fmul(one_ty, top), builder.fmul(ty, bottom))
-            _scatter(builder, value, builder.add(radiance_at, same(_VI64, 8 * c)), live)
+            top = v.add(v.mul(one_tx, t00), v.mul(tx, t01))
+            bottom = v.add(v.mul(one_tx, t10), v.mul(tx, t11))
+            v.store(_F64, v.add(v.mul(one_ty, top), v.mul(ty, bottom)), b.add(out, v.i(8 * c)), live)
         return context.get_dummy_value()
 
     return types.void(radiance, image, uv, state, start), codegen
 
 
+# --- environment samples from the bilinear density ----------------------------------------------------------------
+def _invert_linear_lanes(v: _Lanes, a, c, m):
+    """envmap_bilinear._invert_linear: t in [0, 1] with a t + (c - a) t^2 / 2 = m."""
+    discriminant = v.add(v.mul(a, a), v.mul(v.mul(v.f(2.0), v.sub(c, a)), m))
+    den = v.add(a, v.sqrt(v.fmax(discriminant, v.f(0.0))))
+    t = v.fmin(v.fmax(v.div(v.mul(v.f(2.0), m), den), v.f(0.0)), v.f(1.0))
+    return v.b.select(v.le(den, v.f(0.0)), v.f(0.0), t)
+
+
+def _small_cos_sin_lanes(v: _Lanes, d):
+    """envmap_bilinear._small_cos_sin, term by term."""
+    d2 = v.mul(d, d)
+    c = v.sub(v.f(1.0 / 40320.0), v.div(d2, v.f(3628800.0)))
+    c = v.sub(v.f(1.0 / 720.0), v.mul(d2, c))
+    c = v.sub(v.f(1.0 / 24.0), v.mul(d2, c))
+    c = v.sub(v.f(0.5), v.mul(d2, c))
+    c = v.sub(v.f(1.0), v.mul(d2, c))
+    s = v.sub(v.f(1.0 / 5040.0), v.div(d2, v.f(362880.0)))
+    s = v.sub(v.f(1.0 / 120.0), v.mul(d2, s))
+    s = v.sub(v.f(1.0 / 6.0), v.mul(d2, s))
+    s = v.mul(d, v.sub(v.f(1.0), v.mul(d2, s)))
+    return c, s
+
+
+_SAMPLE_ARGS = (
+    "env_u state material compensate m frame luminance sines plain_rows plain_marginal comp_rows comp_marginal "
+    "comp_offset row_angles column_angles to_world wdir tpdf uv first count start"
+).split()
+
+
+#: dtype and dimensions of each array argument of env_sample_block (every one C-contiguous)
+_SAMPLE_DTYPES = {
+    "env_u": (types.float64, 2),
+    "state": (types.int8, 1),
+    "material": (types.int64, 1),
+    "compensate": (types.boolean, 1),
+    "frame": (types.float64, 2),
+    "luminance": (types.float32, 2),
+    "sines": (types.float64, 1),
+    "plain_rows": (types.float64, 2),
+    "plain_marginal": (types.float64, 1),
+    "comp_rows": (types.float64, 2),
+    "comp_marginal": (types.float64, 1),
+    "row_angles": (types.float64, 2),
+    "column_angles": (types.float64, 2),
+    "to_world": (types.float64, 2),
+    "wdir": (types.float64, 2),
+    "tpdf": (types.float64, 1),
+    "uv": (types.float64, 2),
+}
+
+
+@intrinsic
+def env_sample_block(
+    typingctx,
+    env_u,
+    state,
+    material,
+    compensate,
+    m,
+    frame,
+    luminance,
+    sines,
+    plain_rows,
+    plain_marginal,
+    comp_rows,
+    comp_marginal,
+    comp_offset,
+    row_angles,
+    column_angles,
+    to_world,
+    wdir,
+    tpdf,
+    uv,
+    first,
+    count,
+    start,
+):
+    """wavefront._env_sample_stage for environment slots ``start .. start + 7`` of a pass, numbered over its camera
+    samples: slot ``first + q % count`` of camera sample ``q // count`` (its ``count`` environment samples begin
+    at shading slot ``first``), so that all 8 lanes hold environment samples.  Each live one (state 2) gets the
+    direction, density and lat-long coordinates of :func:`lightprobe.emitters.envmap.env_sample_full` for the
+    bilinear density with the small-angle tables (``pdf="bilinear"``, maps of at least 64 node rows and 128
+    columns), state 0 where the direction is below the shading point's surface or has no density.  Each lane runs
+    the scalar code's operations in its order; the density (plain or compensated) is the slot's material's."""
+    signature_args = (
+        env_u, state, material, compensate, m, frame, luminance, sines, plain_rows, plain_marginal, comp_rows,
+        comp_marginal, comp_offset, row_angles, column_angles, to_world, wdir, tpdf, uv, first, count, start,
+    )  # fmt: skip
+    for name, t in zip(_SAMPLE_ARGS, signature_args, strict=True):
+        if name in _SAMPLE_DTYPES:
+            dtype, ndim = _SAMPLE_DTYPES[name]
+            if not (isinstance(t, types.Array) and t.dtype == dtype and t.ndim == ndim and t.layout == "C"):
+                return None
+        elif not isinstance(t, types.Float if name == "comp_offset" else types.Integer):
+            return None
+
+    def codegen(context, builder, signature, args):
+        a = dict(zip(_SAMPLE_ARGS, args, strict=True))
+        arrays = {
+            name: context.make_array(t)(context, builder, a[name])
+            for name, t in zip(_SAMPLE_ARGS, signature.args, strict=True)
+            if isinstance(t, types.Array)
+        }
+        v = _Lanes(builder)
+        b = builder
+
+        def shape(name, axis):
+            ndim = signature.args[_SAMPLE_ARGS.index(name)].ndim
+            return v.splat(cgutils.unpack_tuple(b, arrays[name].shape, ndim)[axis], _VI64)
+
+        def integer(name):
+            return v.splat(context.cast(b, a[name], signature.args[_SAMPLE_ARGS.index(name)], types.int64), _VI64)
+
+        m_v, first_v, count_v = integer("m"), integer("first"), integer("count")
+        q = b.add(integer("start"), ir.Constant(_VI64, list(range(LANES))))
+        n_q = b.mul(shape("material", 0), count_v)
+        inside = b.icmp_signed("<", q, n_q)
+        # lanes past the end read the last slot (and write nothing), so that every load has a valid address and
+        # needs no mask: the loads' indices below all stay inside their tables
+        q = v.imin(q, b.sub(n_q, v.i(1)))
+        # q // count without an integer division (none in vector form): (q + 1/2) / count is at least 1/(2 count)
+        # away from an integer, far above the rounding of a double
+        k = b.fptosi(v.div(v.add(v.to_f(q), v.f(0.5)), v.to_f(count_v)), _VI64)
+        slots = b.add(b.add(b.mul(k, m_v), first_v), b.sub(q, b.mul(k, count_v)))
+        states = v.gather(_I8, v.address(arrays["state"], slots, 1))
+        live = b.and_(inside, b.icmp_signed("==", states, ir.Constant(_VI8, [SLOT_ENV] * LANES)))
+        kind = v.gather(_I64, v.address(arrays["material"], k, 8))
+        compensated = b.icmp_signed(
+            "!=", v.gather(_I8, v.address(arrays["compensate"], kind, 1)), ir.Constant(_VI8, [0] * LANES)
+        )
+        u0 = v.load_f64(arrays["env_u"], b.mul(slots, v.i(2)))
+        u1 = v.load_f64(arrays["env_u"], b.add(b.mul(slots, v.i(2)), v.i(1)))
+
+        def pick(name_comp, name_plain):  # per lane, the compensated or the plain table's base address
+            comp_base = v.splat(b.ptrtoint(arrays[name_comp].data, _I64), _VI64)
+            plain_base = v.splat(b.ptrtoint(arrays[name_plain].data, _I64), _VI64)
+            return b.select(compensated, comp_base, plain_base)
+
+        rows_base, marginal_base = pick("comp_rows", "plain_rows"), pick("comp_marginal", "plain_marginal")
+        offset = b.select(compensated, v.splat(a["comp_offset"], _VF64), v.f(0.0))
+        ny, n1 = shape("plain_rows", 0), shape("plain_rows", 1)
+        w = b.sub(n1, v.i(1))
+
+        def marginal_at(index):
+            return v.gather(_F64, b.add(marginal_base, b.mul(index, v.i(8))))
+
+        def rows_at(row, column):
+            return v.gather(_F64, b.add(rows_base, b.mul(b.add(b.mul(row, n1), column), v.i(8))))
+
+        # envmap_bilinear.bilinear_sample
+        total = marginal_at(b.sub(ny, v.i(1)))
+        one_minus_epsilon = v.f(1.0 - 2.0**-53)
+        target = v.mul(v.fmin(v.fmax(u1, v.f(0.0)), one_minus_epsilon), total)
+        row = v.bisect(v.i(0), b.sub(ny, v.i(1)), live, lambda mid, mask: v.le(marginal_at(mid), target))
+        above = b.add(row, v.i(1))
+        ra, rb = rows_at(row, w), rows_at(above, w)
+        t = _invert_linear_lanes(v, ra, rb, v.sub(target, marginal_at(row)))
+        s = v.sub(v.f(1.0), t)
+        target_x = v.mul(v.fmin(v.fmax(u0, v.f(0.0)), one_minus_epsilon), v.add(v.mul(s, ra), v.mul(t, rb)))
+
+        def column_below(mid, mask):
+            return v.le(v.add(v.mul(s, rows_at(row, mid)), v.mul(t, rows_at(above, mid))), target_x)
+
+        column = v.bisect(v.i(0), w, live, column_below)
+        h, width = shape("luminance", 0), shape("luminance", 1)
+
+        def node_weight(j, i):  # envmap_bilinear.node_weight
+            jj = v.imin(j, b.sub(h, v.i(1)))
+            ii = b.select(b.icmp_signed("<", i, width), i, b.sub(i, width))
+            x = v.sub(v.load_f32(arrays["luminance"], b.add(b.mul(jj, width), ii)), offset)
+            return b.select(v.gt(x, v.f(0.0)), v.mul(x, v.load_f64(arrays["sines"], j)), v.f(0.0))
+
+        right = b.add(column, v.i(1))
+        c0 = v.add(v.mul(s, node_weight(row, column)), v.mul(t, node_weight(above, column)))
+        c1 = v.add(v.mul(s, node_weight(row, right)), v.mul(t, node_weight(above, right)))
+        base = v.add(v.mul(s, rows_at(row, column)), v.mul(t, rows_at(above, column)))
+        tx = _invert_linear_lanes(v, c0, c1, v.sub(target_x, base))
+        wf = v.to_f(w)
+        x = v.div(v.add(v.to_f(column), tx), wf)
+        x = b.select(v.ge(x, v.f(1.0)), one_minus_epsilon, x)
+        ny1 = b.sub(ny, v.i(1))
+        y = v.fmin(v.div(v.add(v.to_f(row), t), v.to_f(ny1)), v.f(1.0))
+        joint = v.div(v.mul(v.add(v.mul(v.sub(v.f(1.0), tx), c0), v.mul(tx, c1)), v.to_f(b.mul(w, ny1))), total)
+        # envmap.env_sample_full: the lookup's column centres, then the angles from the tables
+        x = v.add(x, v.div(v.f(0.5), v.to_f(width)))
+        x = b.select(v.ge(x, v.f(1.0)), v.sub(x, v.f(1.0)), x)
+        angle_rows = shape("row_angles", 0)
+        cd, sd = _small_cos_sin_lanes(v, v.div(v.mul(v.f(math.pi), t), v.to_f(b.sub(angle_rows, v.i(1)))))
+        cos_row = v.load_f64(arrays["row_angles"], b.mul(row, v.i(2)))
+        sin_row = v.load_f64(arrays["row_angles"], b.add(b.mul(row, v.i(2)), v.i(1)))
+        cos_theta = v.sub(v.mul(cos_row, cd), v.mul(sin_row, sd))
+        cd, sd = _small_cos_sin_lanes(v, v.div(v.mul(v.f(_TWO_PI), tx), v.to_f(shape("column_angles", 0))))
+        ca = v.load_f64(arrays["column_angles"], b.mul(column, v.i(2)))
+        sa = v.load_f64(arrays["column_angles"], b.add(b.mul(column, v.i(2)), v.i(1)))
+        sin_phi = v.add(v.mul(sa, cd), v.mul(ca, sd))
+        cos_phi = v.sub(v.mul(ca, cd), v.mul(sa, sd))
+        sin_theta = v.sqrt(v.fmax(v.f(0.0), v.mul(v.sub(v.f(1.0), cos_theta), v.add(v.f(1.0), cos_theta))))
+        local = (v.mul(sin_phi, sin_theta), cos_theta, v.mul(v.neg(cos_phi), sin_theta))
+        matrix = arrays["to_world"]
+        world = []
+        for i in range(3):
+            row_i = [b.load(b.gep(matrix.data, [_I64(3 * i + j)])) for j in range(3)]
+            terms = [v.mul(v.splat(row_i[j], _VF64), local[j]) for j in range(3)]
+            world.append(v.add(v.add(terms[0], terms[1]), terms[2]))
+        pdf = b.select(v.le(sin_theta, v.f(0.0)), v.f(0.0), v.div(joint, v.mul(v.f(_TWO_PI_SQUARED), sin_theta)))
+        # wavefront._env_sample_stage: below the shading point's surface, or no density: the slot is dropped
+        normal = [v.load_f64(arrays["frame"], b.add(b.mul(k, v.i(9)), v.i(6 + i))) for i in range(3)]
+        facing = v.add(v.add(v.mul(normal[0], world[0]), v.mul(normal[1], world[1])), v.mul(normal[2], world[2]))
+        dropped = b.or_(v.le(facing, v.f(0.0)), v.le(pdf, v.f(0.0)))
+        kept = b.and_(live, b.not_(dropped))
+        v.store(_I8, ir.Constant(_VI8, [0] * LANES), v.address(arrays["state"], slots, 1), b.and_(live, dropped))
+        for i in range(3):
+            v.store(_F64, world[i], b.add(v.address(arrays["wdir"], slots, 24), v.i(8 * i)), kept)
+        v.store(_F64, pdf, v.address(arrays["tpdf"], slots, 8), kept)
+        v.store(_F64, x, v.address(arrays["uv"], slots, 16), kept)
+        v.store(_F64, y, b.add(v.address(arrays["uv"], slots, 16), v.i(8)), kept)
+        return context.get_dummy_value()
+
+    return types.void(*signature_args), codegen
+
+
+# --- where the lanes apply ----------------------------------------------------------------------------------
 @jit_parallel
 def _probe(radiance, image, uv, state):
     for block in prange((state.shape[0] + LANES - 1) // LANES):
@@ -182,5 +502,24 @@ def applies(image: np.ndarray, lookup_is_bilinear: bool) -> bool:
         and image.shape[0] >= 2
         and image.shape[2] == 3
         and image.flags.c_contiguous
+        and compiles()
+    )
+
+
+def samples_apply(k) -> bool:
+    """Whether :func:`env_sample_block` samples environment kernel ``k``: the bilinear density with the small-angle
+    tables (maps of at least 64 node rows and 128 columns), on a Numba that compiles the lanes."""
+    from .envmap import BILINEAR_PDF
+    from .envmap_bilinear import SMALL_ANGLE_COLUMNS, SMALL_ANGLE_ROWS
+
+    tables = (k.luminance, k.node_sines, k.conditional_cdf, k.marginal_cdf, k.comp_conditional_cdf)
+    tables += (k.comp_marginal_cdf, k.row_angles, k.column_angles, k.to_world)
+    return (
+        k.mode == BILINEAR_PDF
+        and k.row_angles.shape[0] >= SMALL_ANGLE_ROWS
+        and k.column_angles.shape[0] >= SMALL_ANGLE_COLUMNS
+        and k.luminance.dtype == np.float32
+        and all(t.flags.c_contiguous for t in tables)
+        and all(t.dtype == np.float64 for t in tables[1:])
         and compiles()
     )

@@ -53,8 +53,9 @@ from ..emitters.envmap import (
     env_sample_coords,
     env_sample_full,
 )
-from ..emitters.envmap_lanes import LANES, radiance_block
+from ..emitters.envmap_lanes import LANES, env_sample_block, radiance_block
 from ..emitters.envmap_lanes import applies as lanes_apply
+from ..emitters.envmap_lanes import samples_apply as samples_in_lanes
 from ..emitters.selection import SELECTORS, build_selector
 from ..errors import ParameterError
 from ..geometry.camera import camera_ray
@@ -412,6 +413,39 @@ def _env_sample_stage(env, compensate, m, material, frame, state, env_u, wdir, t
         tpdf[r] = pdf
         uv[r, 0] = u
         uv[r, 1] = env_sample_coords(env, y, cos_theta)
+
+
+@jit_parallel
+def _env_sample_lanes_stage(env, compensate, strategy, n_bsdf, m, material, frame, state, env_u, wdir, tpdf, uv):
+    """:func:`_env_sample_stage` 8 environment slots at a time (emitters/envmap_lanes.py), for the bilinear
+    density: under MIS a camera sample's environment slots are its last m - n_bsdf, under ``env`` all m."""
+    first = n_bsdf if strategy == MIS else 0
+    count = m - first
+    for block in prange((material.shape[0] * count + LANES - 1) // LANES):
+        env_sample_block(
+            env_u,
+            state,
+            material,
+            compensate,
+            m,
+            frame,
+            env.luminance,
+            env.node_sines,
+            env.conditional_cdf,
+            env.marginal_cdf,
+            env.comp_conditional_cdf,
+            env.comp_marginal_cdf,
+            env.comp_offset,
+            env.row_angles,
+            env.column_angles,
+            env.to_world,
+            wdir,
+            tpdf,
+            uv,
+            first,
+            count,
+            block * LANES,
+        )
 
 
 @jit_parallel
@@ -866,9 +900,11 @@ def render(
     }
     largest_pass = max(1, band * spp_pass)
     strategy = STRATEGIES[settings.strategy]
-    sample_stage = _env_resample_stage if settings.env_candidates > 1 else _env_sample_stage
     env_map = scene.environment
     in_lanes = env_map is not None and lanes_apply(env_map.kernel.image, env_map.kernel.lookup == BILINEAR)
+    sample_stage = _env_resample_stage if settings.env_candidates > 1 else _env_sample_stage
+    if sample_stage is _env_sample_stage and env_map is not None and samples_in_lanes(env_map.kernel):
+        sample_stage = _env_sample_lanes_stage
     radiance_stage = _env_radiance_stage if in_lanes else _env_radiance_scalar_stage
     stages = (_shade_setup, sample_stage, _env_coords_stage, radiance_stage, _shade_finish)
     if tracer.mesh_scene:
