@@ -335,11 +335,11 @@ def test_compiling_is_announced(capsys, tmp_path, monkeypatch):
     """When the kernels are not in the cache, the render says it is compiling and how long it took."""
     import lightprobe.integrators.wavefront as wavefront
 
-    monkeypatch.setattr(wavefront, "kernels_cached", lambda: False)
+    monkeypatch.setattr(wavefront, "kernels_cached", lambda *scene_and_settings: False)
     assert main(["render", str(_scene_file(tmp_path)), "-o", str(tmp_path / "o.exr"), "--spp", "1", "-q"]) == 0
     err = capsys.readouterr().err
     assert "compiling kernels (first run only" in err and "compiled kernels in" in err
-    monkeypatch.setattr(wavefront, "kernels_cached", lambda: True)
+    monkeypatch.setattr(wavefront, "kernels_cached", lambda *scene_and_settings: True)
     assert main(["render", str(_scene_file(tmp_path)), "-o", str(tmp_path / "o.exr"), "--spp", "1", "-q"]) == 0
     assert "compiling kernels" not in capsys.readouterr().err
 
@@ -348,8 +348,14 @@ def test_kernels_report_whether_they_are_cached(tmp_path):
     from lightprobe._numba import is_cached, jit
     from lightprobe.integrators.wavefront import kernels_cached
 
-    assert main(["render", str(_scene_file(tmp_path)), "-o", str(tmp_path / "o.exr"), "--spp", "1", "-q"]) == 0
+    # the demo's kernels (what kernels_cached() checks by default: the environment's stages in vector lanes, Embree)
+    assert main(["render", "--demo", "--width", "24", "-o", str(tmp_path / "d.exr"), "--spp", "1", "-q"]) == 0
     assert kernels_cached()  # the render above compiled (or loaded) them into the cache
+    from lightprobe.io.scene_file import load_scene
+
+    scene, _ = load_scene(_scene_file(tmp_path))  # a small constant map: its samples are drawn one slot at a time
+    assert main(["render", str(_scene_file(tmp_path)), "-o", str(tmp_path / "o.exr"), "--spp", "1", "-q"]) == 0
+    assert kernels_cached(scene)
 
     @jit
     def never_called(x):

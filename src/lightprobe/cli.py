@@ -464,7 +464,7 @@ def _render_with_progress(scene, settings, render, *, quiet: bool):
     and the time it took), since a silent half minute looks like a hang."""
     from .integrators.wavefront import kernels_cached
 
-    compiling = not kernels_cached()
+    compiling = not kernels_cached(scene, settings)
     started = time.perf_counter()
     interactive = not quiet and sys.stderr.isatty()
     if compiling and not interactive:

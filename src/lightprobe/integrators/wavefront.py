@@ -900,13 +900,7 @@ def render(
     }
     largest_pass = max(1, band * spp_pass)
     strategy = STRATEGIES[settings.strategy]
-    env_map = scene.environment
-    in_lanes = env_map is not None and lanes_apply(env_map.kernel.image, env_map.kernel.lookup == BILINEAR)
-    sample_stage = _env_resample_stage if settings.env_candidates > 1 else _env_sample_stage
-    if sample_stage is _env_sample_stage and env_map is not None and samples_in_lanes(env_map.kernel):
-        sample_stage = _env_sample_lanes_stage
-    radiance_stage = _env_radiance_stage if in_lanes else _env_radiance_scalar_stage
-    stages = (_shade_setup, sample_stage, _env_coords_stage, radiance_stage, _shade_finish)
+    stages = (_shade_setup, *_environment_stages(scene, settings), _shade_finish)
     if tracer.mesh_scene:
         stages += (_mesh_shadow_stage,)
     worklists = WORKLISTS
@@ -1093,20 +1087,39 @@ def render(
     return _finish(acc, stats, width, height)
 
 
-def kernels_cached() -> bool:
-    """Whether the render kernels are in the on-disk cache (else the first render compiles them, ~20-45 s)."""
+def _environment_stages(scene: Scene, settings: RenderSettings) -> tuple:
+    """The environment path's sampling, coordinates and radiance stages for ``scene``: 8 slots at a time in vector
+    IR where the map allows it (emitters/envmap_lanes.py, decisions.md 42, 43), else one slot at a time."""
+    k = scene.environment.kernel if scene.environment is not None else None
+    if settings.env_candidates > 1:
+        sample_stage = _env_resample_stage
+    elif k is not None and samples_in_lanes(k):
+        sample_stage = _env_sample_lanes_stage
+    else:
+        sample_stage = _env_sample_stage
+    in_lanes = k is not None and lanes_apply(k.image, k.lookup == BILINEAR)
+    return sample_stage, _env_coords_stage, _env_radiance_stage if in_lanes else _env_radiance_scalar_stage
+
+
+def kernels_cached(scene: Scene | None = None, settings: RenderSettings | None = None) -> bool:
+    """Whether the kernels a render of ``scene`` with ``settings`` takes (by default the demo's: an environment-lit
+    scene with a mesh) are in the on-disk cache; else the first render compiles them, ~20-45 s."""
     from .._numba import is_cached
 
-    return is_cached(
-        _camera_pass,
-        _shade_setup,
-        _env_sample_stage,
-        _env_coords_stage,
-        _env_radiance_stage,
-        _shade_finish,
-        _mesh_shadow_stage,
-        _accumulate,
-    )
+    if scene is None:
+        from ..demo import demo_scene
+
+        scene = demo_scene()
+    settings = settings or RenderSettings()
+    meshes = scene.triangle_count > 0
+    if _takes_area_path(scene, settings):
+        from .area_lights import stages as area_stages
+
+        shading = area_stages(meshes)
+    else:
+        shading = (_shade_setup, *_environment_stages(scene, settings_for(scene, settings)), _shade_finish)
+        shading += (_mesh_shadow_stage,) if meshes else ()
+    return is_cached(_camera_pass, *shading, _accumulate)
 
 
 class _Stop(Exception):
