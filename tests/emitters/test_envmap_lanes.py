@@ -184,3 +184,13 @@ def test_environment_samples_in_lanes_are_the_scalar_stages(m, n_bsdf, n):
     np.testing.assert_allclose(lanes["uv"], scalar["uv"], rtol=3e-16, atol=1e-300)
     untouched = case["state"] != 2
     assert np.all(lanes["wdir"][untouched] == -7.0) and np.all(lanes["tpdf"][untouched] == -7.0)
+
+
+def test_strategies_without_environment_samples_give_the_lanes_nothing():
+    """Under ``brdf`` no slot is an environment sample: the lanes stage writes nothing (it is given no slots)."""
+    from lightprobe.integrators.techniques import BRDF
+
+    case = _sampling_case(m=4, n_bsdf=4, n=64)
+    case["state"][:] = 2  # even slots marked as environment samples are not the lanes' under BRDF
+    lanes = _sample(wavefront._env_sample_lanes_stage, case, BRDF, 4)
+    assert np.all(lanes["wdir"] == -7.0) and np.all(lanes["state"] == 2)

@@ -4,9 +4,9 @@ of the bilinear density.
 Numba compiles the renderer's kernels one slot at a time: its vectoriser gives up on any loop that reads a table
 (docs/decisions.md 35), so each lookup's texel reads and each sample's bisections run in scalar code.  Here each is
 a Numba ``@intrinsic`` that emits the whole operation for 8 slots as vector IR: the arithmetic in 8 float64 lanes,
-the table reads as 8 loads whose addresses come from the lanes, the writes as masked scatters.  Per operation
-(decisions.md 41 and 42, ``benchmarks/simd_lookup.py``): a lookup takes 9.4 against 20 core-ns for random
-coordinates on the peer map.
+the table reads as 8 loads whose addresses come from the lanes, the writes as masked scatters.  Isolated, a lookup
+took 9.4 against 20 core-ns for random coordinates on the peer map (decisions.md 41, ``benchmarks/simd_lookup.py``);
+in the peer render the environment's stages take 5.7 s against 8.3-8.9 (decisions.md 42, 43).
 
 Every lane computes what the scalar code computes, operation for operation and in its order, with the kernels'
 fast-math flags (``_numba.FASTMATH``): :func:`radiance_block` is :func:`lightprobe.emitters.envmap.env_lookup` for a
@@ -159,9 +159,9 @@ class _Lanes:
         return self.b.call(reduce, [mask])
 
     def bisect(self, lo, hi, mask, below):
-        """Per lane, envmap_bilinear's bisection: while hi - lo > 1, mid = (lo + hi) >> 1 becomes lo where
-        ``below(mid, active)`` (the value at mid <= the target) and hi elsewhere.  Lanes stop one by one; the loop
-        runs while any lane is active.  Returns lo."""
+        """Per lane of ``mask``, envmap_bilinear's bisection: while hi - lo > 1, mid = (lo + hi) >> 1 becomes lo
+        where ``below(mid)`` (the value at mid <= the target) and hi elsewhere.  Lanes stop one by one; the loop runs
+        while any lane is active.  Returns lo."""
         b = self.b
         entry = b.block
         loop = b.append_basic_block("bisect")
@@ -176,7 +176,7 @@ class _Lanes:
         b.cbranch(self.any(active), body, done)
         b.position_at_end(body)
         mid = b.ashr(b.add(lo_phi, hi_phi), self.i(1))
-        up = below(mid, active)
+        up = below(mid)
         go_up = b.and_(active, up)
         go_down = b.and_(active, b.not_(up))
         lo_phi.add_incoming(b.select(go_up, mid, lo_phi), b.block)
@@ -396,14 +396,14 @@ def env_sample_block(
         total = marginal_at(b.sub(ny, v.i(1)))
         one_minus_epsilon = v.f(1.0 - 2.0**-53)
         target = v.mul(v.fmin(v.fmax(u1, v.f(0.0)), one_minus_epsilon), total)
-        row = v.bisect(v.i(0), b.sub(ny, v.i(1)), live, lambda mid, mask: v.le(marginal_at(mid), target))
+        row = v.bisect(v.i(0), b.sub(ny, v.i(1)), live, lambda mid: v.le(marginal_at(mid), target))
         above = b.add(row, v.i(1))
         ra, rb = rows_at(row, w), rows_at(above, w)
         t = _invert_linear_lanes(v, ra, rb, v.sub(target, marginal_at(row)))
         s = v.sub(v.f(1.0), t)
         target_x = v.mul(v.fmin(v.fmax(u0, v.f(0.0)), one_minus_epsilon), v.add(v.mul(s, ra), v.mul(t, rb)))
 
-        def column_below(mid, mask):
+        def column_below(mid):
             return v.le(v.add(v.mul(s, rows_at(row, mid)), v.mul(t, rows_at(above, mid))), target_x)
 
         column = v.bisect(v.i(0), w, live, column_below)

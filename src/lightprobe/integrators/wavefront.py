@@ -418,9 +418,10 @@ def _env_sample_stage(env, compensate, m, material, frame, state, env_u, wdir, t
 @jit_parallel
 def _env_sample_lanes_stage(env, compensate, strategy, n_bsdf, m, material, frame, state, env_u, wdir, tpdf, uv):
     """:func:`_env_sample_stage` 8 environment slots at a time (emitters/envmap_lanes.py), for the bilinear
-    density: under MIS a camera sample's environment slots are its last m - n_bsdf, under ``env`` all m."""
+    density: under MIS a camera sample's environment slots are its last m - n_bsdf, under ``env`` all m, and the
+    other strategies have none (the lanes compute every slot they are given, so they are given none)."""
     first = n_bsdf if strategy == MIS else 0
-    count = m - first
+    count = m - first if strategy == MIS or strategy == ENV else 0
     for block in prange((material.shape[0] * count + LANES - 1) // LANES):
         env_sample_block(
             env_u,
