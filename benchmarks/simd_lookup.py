@@ -8,11 +8,11 @@ is an ``@intrinsic`` that builds the whole lookup for 8 slots as vector IR (deci
 ``lightprobe.emitters.envmap.env_lookup`` does (same formula; where LLVM fuses a multiply-add in one and not the
 other they differ by an ulp).  Each line gives core-nanoseconds per lookup (best of 5 runs of 8 M lookups on every
 core) both ways, and, when Mitsuba 3 imports, its ``Texture2f.eval`` on the same image (float32 lanes) for scale.
-Measured on the peer map: random coordinates 21.8 against 19.9 scalar, coherent 8.1 against 13.7 (Mitsuba 4.9
-and 2.4; decisions.md 43).  The first version read texels with ``llvm.masked.gather`` and took 9.3-9.4 against
-19.7-20.1 on random coordinates, 6.7-6.8 against 12.8-13.2 on coherent ones (decisions.md 41); in the render the
-two read the same speed.  Uses the peer kit's map when it is found (``LIGHTPROBE_PEERS``), else a procedural
-1024 x 512 sky.
+Measured on the peer map, three runs: random coordinates 21.7-24.0 against 19.8-24.3 scalar, coherent 8.1-8.6
+against 13.7-14.0 (Mitsuba 4.9-5.3 and 2.4; decisions.md 43).  The first version read texels with
+``llvm.masked.gather`` and took 9.3-9.4 against 19.7-20.1 on random coordinates, 6.7-6.8 against 12.8-13.2 on
+coherent ones (decisions.md 41); in the render the two read the same speed.  Uses the peer kit's map when it is
+found (``LIGHTPROBE_PEERS``), else a procedural 1024 x 512 sky.
 """
 
 from __future__ import annotations
