@@ -4,9 +4,9 @@ of the bilinear density.
 Numba compiles the renderer's kernels one slot at a time: its vectoriser gives up on any loop that reads a table
 (docs/decisions.md 35), so each lookup's texel reads and each sample's bisections run in scalar code.  Here each is
 a Numba ``@intrinsic`` that emits the whole operation for 8 slots as vector IR: the arithmetic in 8 float64 lanes,
-the table reads as 8 loads whose addresses come from the lanes, the writes as masked scatters.  Isolated, a lookup
-took 9.4 against 20 core-ns for random coordinates on the peer map (decisions.md 41, ``benchmarks/simd_lookup.py``);
-in the peer render the environment's stages take 5.7 s against 8.3-8.9 (decisions.md 42, 43).
+the table reads as 8 loads whose addresses come from the lanes, the writes as masked scatters.  In the peer render
+the environment's stages take 5.7 s against 8.3-8.9 one slot at a time (decisions.md 41-43; the lookup alone:
+``benchmarks/simd_lookup.py``).
 
 Every lane computes what the scalar code computes, operation for operation and in its order, with the kernels'
 fast-math flags (``_numba.FASTMATH``): :func:`radiance_block` is :func:`lightprobe.emitters.envmap.env_lookup` for a
