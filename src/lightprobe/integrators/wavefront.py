@@ -66,7 +66,8 @@ from ..geometry.intersect import MESH, MISS, closest_analytic, may_hit_mesh, occ
 from ..geometry.raytracer import RayTracer
 from ..geometry.scene import Scene
 from ..sampling.mis import mis_weight
-from ..sampling.rng import SAMPLERS, sample_state, uniform, uniform_2d
+from ..sampling.rng import SAMPLERS, SOBOL, sample_state, uniform, uniform_2d
+from ..sampling.sobol_lanes import SOBOL_Y, slot_numbers_block
 from . import adaptive
 from .schedule import pass_pixels
 from .techniques import (
@@ -374,19 +375,31 @@ def _shade_setup(
         ts, tt, ns, wo = load_shading_frame(frame, wo_local, k)
         mk, mp = s.material_kind[material[k]], s.material_params[material[k]]
         rs = sample_state(sampler, seed, pixels[k // spp_pass], sample_start + k % spp_pass)
+        sobol = sampler == SOBOL
+        if sobol:
+            # the slots' Sobol' numbers 8 at a time (sampling/sobol_lanes.py), into wloc until directions replace
+            # them: the same bits as uniform_2d and uniform below
+            for first in range(0, m, LANES):
+                slot_numbers_block(wloc, SOBOL_Y, rs[2], rs[3], strategy == MIS, n_bsdf, m, base + first, first)
         for j in range(m):
             r = base + j
             technique = strategy
             if strategy == MIS:
                 technique = BRDF if j < n_bsdf else ENV
-            rj, slot = technique_slot(rs, strategy, n_bsdf, n_env, j)
-            u0, u1 = uniform_2d(rj, 2 + 3 * slot)
+            if sobol:
+                u0, u1, u2 = wloc[r, 0], wloc[r, 1], wloc[r, 2]
+            else:
+                rj, slot = technique_slot(rs, strategy, n_bsdf, n_env, j)
+                u0, u1 = uniform_2d(rj, 2 + 3 * slot)
+                u2 = -1.0  # drawn below where a technique takes it
             if technique == ENV:
                 env_u[r, 0] = u0
                 env_u[r, 1] = u1
                 state[r] = SLOT_ENV
                 continue
-            st, wi, pdf, w = sample_direction(technique, mk, mp, wo, u0, u1, uniform(rj, 4 + 3 * slot))
+            if not sobol:
+                u2 = uniform(rj, 4 + 3 * slot)
+            st, wi, pdf, w = sample_direction(technique, mk, mp, wo, u0, u1, u2)
             if st == SLOT_NONE:
                 continue
             if st == SLOT_BSDF:
