@@ -194,3 +194,54 @@ def test_strategies_without_environment_samples_give_the_lanes_nothing():
     case["state"][:] = 2  # even slots marked as environment samples are not the lanes' under BRDF
     lanes = _sample(wavefront._env_sample_lanes_stage, case, BRDF, 4)
     assert np.all(lanes["wdir"] == -7.0) and np.all(lanes["state"] == 2)
+
+
+def test_guide_tables_bracket_each_buckets_crossing():
+    """Entry g of a guide is the largest index whose running sum is at most g / G of the total; -1 for a row
+    without weight (the compensated density has many)."""
+    from lightprobe.emitters.envmap_bilinear import GUIDE_BUCKETS
+
+    k = _sampling_case(n=1)["env"]
+    for sums, guide in ((k.conditional_cdf, k.row_guide), (k.comp_conditional_cdf, k.comp_row_guide)):
+        assert guide.shape == (sums.shape[0], GUIDE_BUCKETS + 1) and guide.dtype == np.int32
+        for j in range(sums.shape[0]):
+            total = sums[j, -1]
+            if not total > 0.0:
+                assert np.all(guide[j] == -1)
+                continue
+            thresholds = np.arange(GUIDE_BUCKETS + 1) / GUIDE_BUCKETS * total
+            expected = np.searchsorted(sums[j, :-1], thresholds, side="right") - 1
+            assert np.array_equal(guide[j], expected)
+    assert np.any(np.all(k.comp_row_guide == -1, axis=1))  # rows of weight 0 were covered
+    thresholds = np.arange(GUIDE_BUCKETS + 1) / GUIDE_BUCKETS * k.marginal_cdf[-1]
+    assert np.array_equal(k.marginal_guide, np.searchsorted(k.marginal_cdf[:-1], thresholds, side="right") - 1)
+
+
+@pytest.mark.parametrize("corrupt", ["zeros", "last", "shuffled", "swapped"])
+def test_a_wrong_guide_changes_no_sample(corrupt):
+    """The lanes check each guide bracket with the search's own compares and search [0, top] where it fails, so
+    even wrong guides give the scalar stage's samples (only slower)."""
+    case = _sampling_case(m=5, n_bsdf=2, n=701, seed=11)
+    k = case["env"]
+    rng = np.random.default_rng(12)
+    guides = {}
+    for name in ("marginal_guide", "row_guide", "comp_marginal_guide", "comp_row_guide"):
+        g = getattr(k, name)
+        if corrupt == "zeros":
+            g = np.zeros_like(g)
+        elif corrupt == "last":
+            g = np.full_like(g, (k.marginal_cdf.shape[0] if "marginal" in name else k.conditional_cdf.shape[1]) - 2)
+        elif corrupt == "shuffled":
+            g = np.ascontiguousarray(rng.permutation(g.ravel()).reshape(g.shape))
+        else:  # the plain density's guides for the compensated one's and back
+            other = name.replace("comp_", "") if name.startswith("comp_") else "comp_" + name
+            g = getattr(k, other)
+        guides[name] = g
+    case["env"] = k._replace(**guides)
+    scalar = _sample(wavefront._env_sample_stage, case)
+    from lightprobe.integrators.techniques import MIS
+
+    lanes = _sample(wavefront._env_sample_lanes_stage, case, MIS, 2)
+    assert np.array_equal(lanes["state"], scalar["state"])
+    assert np.array_equal(lanes["wdir"], scalar["wdir"])
+    assert np.array_equal(lanes["tpdf"], scalar["tpdf"])

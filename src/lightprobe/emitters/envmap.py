@@ -102,6 +102,11 @@ class EnvKernel(NamedTuple):
     comp_offset: float  # luminance subtracted by the compensated density
     row_angles: np.ndarray  # (NY, 2) cos, sin of the node rows' theta (envmap_bilinear.angle_tables)
     column_angles: np.ndarray  # (W, 2) cos, sin of the columns' phi
+    # guide tables of the two bilinear densities' searches (envmap_bilinear.BilinearDensity), int32
+    marginal_guide: np.ndarray  # (G + 1,)
+    row_guide: np.ndarray  # (NY, G + 1)
+    comp_marginal_guide: np.ndarray
+    comp_row_guide: np.ndarray
 
 
 # --- kernels ------------------------------------------------------------------------------------------------------
@@ -455,11 +460,18 @@ class EnvironmentMap:
             )
             comp_offset = self.compensated_distribution.offset
             row_angles, column_angles = angle_tables(sines.shape[0], w)
+            guides = (
+                self.distribution.marginal_guide,
+                self.distribution.row_guide,
+                self.compensated_distribution.marginal_guide,
+                self.compensated_distribution.row_guide,
+            )
         else:
             self._build_piecewise_constant(lum, pdf_weights, pdf_resolution)
             tables = (*self.distribution.kernel_arrays(), *self.compensated_distribution.kernel_arrays())
             sines, comp_offset = np.zeros(2), 0.0
             row_angles, column_angles = np.zeros((2, 2)), np.zeros((1, 2))
+            guides = (np.full(2, -1, np.int32), np.full((2, 2), -1, np.int32)) * 2
         self._kernel = EnvKernel(
             image if scale == 1.0 else image * np.float32(scale),  # no copy of a large map when unscaled
             np.ascontiguousarray(self.to_world.T),
@@ -473,6 +485,7 @@ class EnvironmentMap:
             float(comp_offset),
             row_angles,
             column_angles,
+            *guides,
         )
 
     def _build_piecewise_constant(self, lum, pdf_weights, pdf_resolution):

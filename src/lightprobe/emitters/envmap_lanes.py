@@ -38,9 +38,16 @@ LANES = 8
 _F32, _F64, _I8, _I32, _I64 = ir.FloatType(), ir.DoubleType(), ir.IntType(8), ir.IntType(32), ir.IntType(64)
 _VF64, _VI64, _VF32 = ir.VectorType(_F64, LANES), ir.VectorType(_I64, LANES), ir.VectorType(_F32, LANES)
 _VI8, _MASK = ir.VectorType(_I8, LANES), ir.VectorType(ir.IntType(1), LANES)
+_VI32 = ir.VectorType(_I32, LANES)
 _FLAGS = ("contract", "arcp", "afn")  # the scalar kernels' fast-math flags (_numba.FASTMATH)
 #: (vector type, intrinsic suffix, alignment in bytes) of each element type stored here
-_ELEMENTS = {_F32: (_VF32, "v8f32", 4), _F64: (_VF64, "v8f64", 8), _I8: (_VI8, "v8i8", 1), _I64: (_VI64, "v8i64", 8)}
+_ELEMENTS = {
+    _F32: (_VF32, "v8f32", 4),
+    _F64: (_VF64, "v8f64", 8),
+    _I8: (_VI8, "v8i8", 1),
+    _I32: (_VI32, "v8i32", 4),
+    _I64: (_VI64, "v8i64", 8),
+}
 _TWO_PI = 2.0 * math.pi
 _TWO_PI_SQUARED = 2.0 * math.pi * math.pi  # folded as the scalar code's 2.0 * math.pi * math.pi * sin_theta is
 SLOT_NONE, SLOT_ENV = 0, 2  # integrators.techniques' slot states
@@ -98,6 +105,9 @@ class _Lanes:
 
     def imin(self, a, c):
         return self.b.select(self.b.icmp_signed("<", c, a), c, a)
+
+    def imax(self, a, c):
+        return self.b.select(self.b.icmp_signed(">", c, a), c, a)
 
     def lt(self, a, c):
         return self.b.fcmp_ordered("<", a, c)
@@ -266,8 +276,16 @@ def _small_cos_sin_lanes(v: _Lanes, d):
     return c, s
 
 
+def _bucket(v: _Lanes, u, buckets):
+    """The guide bucket of a number in [0, 1): a dead lane's NaN or stale value included (clamped first, so that
+    its index stays inside the table)."""
+    bucket = v.b.fptosi(v.mul(v.clamp(u, 0.0, 1.0 - 2.0**-53), v.to_f(buckets)), _VI64)
+    return v.imin(bucket, v.b.sub(buckets, v.i(1)))
+
+
 _SAMPLE_ARGS = (
     "env_u state material compensate m frame luminance sines plain_rows plain_marginal comp_rows comp_marginal "
+    "plain_row_guide plain_marginal_guide comp_row_guide comp_marginal_guide "
     "comp_offset row_angles column_angles to_world wdir tpdf uv first count start"
 ).split()
 
@@ -285,6 +303,10 @@ _SAMPLE_DTYPES = {
     "plain_marginal": (types.float64, 1),
     "comp_rows": (types.float64, 2),
     "comp_marginal": (types.float64, 1),
+    "plain_row_guide": (types.int32, 2),
+    "plain_marginal_guide": (types.int32, 1),
+    "comp_row_guide": (types.int32, 2),
+    "comp_marginal_guide": (types.int32, 1),
     "row_angles": (types.float64, 2),
     "column_angles": (types.float64, 2),
     "to_world": (types.float64, 2),
@@ -309,6 +331,10 @@ def env_sample_block(
     plain_marginal,
     comp_rows,
     comp_marginal,
+    plain_row_guide,
+    plain_marginal_guide,
+    comp_row_guide,
+    comp_marginal_guide,
     comp_offset,
     row_angles,
     column_angles,
@@ -329,7 +355,8 @@ def env_sample_block(
     the scalar code's operations in its order; the density (plain or compensated) is the slot's material's."""
     signature_args = (
         env_u, state, material, compensate, m, frame, luminance, sines, plain_rows, plain_marginal, comp_rows,
-        comp_marginal, comp_offset, row_angles, column_angles, to_world, wdir, tpdf, uv, first, count, start,
+        comp_marginal, plain_row_guide, plain_marginal_guide, comp_row_guide, comp_marginal_guide, comp_offset,
+        row_angles, column_angles, to_world, wdir, tpdf, uv, first, count, start,
     )  # fmt: skip
     for name, t in zip(_SAMPLE_ARGS, signature_args, strict=True):
         if name in _SAMPLE_DTYPES:
@@ -392,21 +419,52 @@ def env_sample_block(
         def rows_at(row, column):
             return v.gather(_F64, b.add(rows_base, b.mul(b.add(b.mul(row, n1), column), v.i(8))))
 
-        # envmap_bilinear.bilinear_sample
+        def guide_at(base, index):
+            return b.sext(v.gather(_I32, b.add(base, b.mul(index, v.i(4)))), _VI64)
+
+        def searched(lo, hi, top, below):
+            """The bisection of [0, top] for the largest index that is ``below`` (envmap_bilinear's searches),
+            started from the guide's bracket [lo, hi] where the bracket holds by the search's own compares (below
+            at lo or lo = 0, not below at hi or hi = top): then it finds the same index.  Elsewhere -- a guide
+            rounded the other way, both rows of a blend without weight -- from [0, top]."""
+            lo_ok = b.or_(b.icmp_signed("==", lo, v.i(0)), below(v.imax(lo, v.i(0))))
+            hi_ok = b.or_(b.icmp_signed("==", hi, top), b.not_(below(v.imin(v.imax(hi, v.i(0)), top))))
+            ok = b.and_(b.and_(b.icmp_signed("<", lo, hi), b.icmp_signed(">=", lo, v.i(0))), b.and_(lo_ok, hi_ok))
+            return v.bisect(b.select(ok, lo, v.i(0)), b.select(ok, hi, top), live, below)
+
+        # envmap_bilinear.bilinear_sample, its two searches started from the guide tables' buckets (decisions.md 45)
         total = marginal_at(b.sub(ny, v.i(1)))
         one_minus_epsilon = v.f(1.0 - 2.0**-53)
-        target = v.mul(v.fmin(v.fmax(u1, v.f(0.0)), one_minus_epsilon), total)
-        row = v.bisect(v.i(0), b.sub(ny, v.i(1)), live, lambda mid: v.le(marginal_at(mid), target))
+        u1c = v.fmin(v.fmax(u1, v.f(0.0)), one_minus_epsilon)
+        target = v.mul(u1c, total)
+        buckets = b.sub(shape("plain_marginal_guide", 0), v.i(1))
+        top = b.sub(ny, v.i(1))
+        marginal_guide = pick("comp_marginal_guide", "plain_marginal_guide")
+        bucket = _bucket(v, u1, buckets)
+        lo = guide_at(marginal_guide, bucket)
+        hi = v.imin(b.add(guide_at(marginal_guide, b.add(bucket, v.i(1))), v.i(1)), top)
+        row = searched(lo, hi, top, lambda mid: v.le(marginal_at(mid), target))
         above = b.add(row, v.i(1))
         ra, rb = rows_at(row, w), rows_at(above, w)
         t = _invert_linear_lanes(v, ra, rb, v.sub(target, marginal_at(row)))
         s = v.sub(v.f(1.0), t)
-        target_x = v.mul(v.fmin(v.fmax(u0, v.f(0.0)), one_minus_epsilon), v.add(v.mul(s, ra), v.mul(t, rb)))
+        u0c = v.fmin(v.fmax(u0, v.f(0.0)), one_minus_epsilon)
+        target_x = v.mul(u0c, v.add(v.mul(s, ra), v.mul(t, rb)))
 
         def column_below(mid):
             return v.le(v.add(v.mul(s, rows_at(row, mid)), v.mul(t, rows_at(above, mid))), target_x)
 
-        column = v.bisect(v.i(0), w, live, column_below)
+        # the blend of rows k and k + 1 crosses u0 of its total between the crossings of the two rows (its running
+        # sums are a convex combination of theirs, normalised): the lower of the rows' bucket starts and the higher
+        # of their bucket ends; a row without weight (-1) leaves the bracket to the other
+        row_guide = pick("comp_row_guide", "plain_row_guide")
+        guide_width = shape("plain_row_guide", 1)
+        bucket = _bucket(v, u0, b.sub(guide_width, v.i(1)))
+        starts = [guide_at(row_guide, b.add(b.mul(r, guide_width), bucket)) for r in (row, above)]
+        starts = [b.select(b.icmp_signed("<", g, v.i(0)), w, g) for g in starts]
+        ends = [guide_at(row_guide, b.add(b.mul(r, guide_width), b.add(bucket, v.i(1)))) for r in (row, above)]
+        hi = v.imin(b.add(v.imax(ends[0], ends[1]), v.i(1)), w)
+        column = searched(v.imin(starts[0], starts[1]), hi, w, column_below)
         h, width = shape("luminance", 0), shape("luminance", 1)
 
         def node_weight(j, i):  # envmap_bilinear.node_weight
@@ -514,6 +572,7 @@ def samples_apply(k) -> bool:
 
     tables = (k.luminance, k.node_sines, k.conditional_cdf, k.marginal_cdf, k.comp_conditional_cdf)
     tables += (k.comp_marginal_cdf, k.row_angles, k.column_angles, k.to_world)
+    guides = (k.marginal_guide, k.row_guide, k.comp_marginal_guide, k.comp_row_guide)
     return (
         k.mode == BILINEAR_PDF
         and k.row_angles.shape[0] >= SMALL_ANGLE_ROWS
@@ -521,5 +580,8 @@ def samples_apply(k) -> bool:
         and k.luminance.dtype == np.float32
         and all(t.flags.c_contiguous for t in tables)
         and all(t.dtype == np.float64 for t in tables[1:])
+        and all(g.dtype == np.int32 and g.flags.c_contiguous for g in guides)
+        and k.row_guide.shape[1] == k.comp_row_guide.shape[1] == k.marginal_guide.shape[0]
+        and k.marginal_guide.shape[0] == k.comp_marginal_guide.shape[0]
         and compiles()
     )
