@@ -245,3 +245,40 @@ def test_a_wrong_guide_changes_no_sample(corrupt):
     assert np.array_equal(lanes["state"], scalar["state"])
     assert np.array_equal(lanes["wdir"], scalar["wdir"])
     assert np.array_equal(lanes["tpdf"], scalar["tpdf"])
+
+
+@pytest.mark.parametrize(
+    ("strategy_name", "m", "n_bsdf"), [("mis", 8, 4), ("mis", 5, 2), ("brdf", 3, 3), ("env", 4, 0)]
+)
+@pytest.mark.parametrize("mis", [True, False])
+def test_coordinates_and_densities_in_lanes_are_the_scalar_stages(strategy_name, m, n_bsdf, mis):
+    """wavefront._env_coords_stage's lat-long coordinates and MIS densities, bit for bit (atan2 and acos are the
+    same C functions), for every slot the strategy's numbering gives the lanes that is neither dead nor an
+    environment sample; every other slot untouched."""
+    from lightprobe.integrators.techniques import STRATEGIES
+
+    strategy = STRATEGIES[strategy_name]
+    case = _sampling_case(m=m, n_bsdf=n_bsdf, n=1003, seed=9)
+    rng = np.random.default_rng(10)
+    slots = case["state"].shape[0]
+    j = np.arange(slots) % m
+    ours = j < (n_bsdf if strategy_name == "mis" else (0 if strategy_name == "env" else m))
+    state = np.where(ours, rng.choice([0, 1, 1, 1, 3], slots), 2).astype(np.int8)  # dead, BSDF, hemisphere
+    directions = rng.normal(size=(slots, 3))
+    directions /= np.linalg.norm(directions, axis=1)[:, None]
+    poles = np.flatnonzero(ours)[:3]  # the poles and u = 0 exactly, in slots of the lanes' numbering
+    directions[poles] = np.array([[0.0, 1.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]])[: poles.size]
+    state[poles] = 1
+    c = case
+    uv_s, epdf_s = np.full((slots, 2), -7.0), np.full(slots, -7.0)
+    wavefront._env_coords_stage(c["env"], c["compensate"], m, c["material"], mis, state, directions, uv_s, epdf_s)
+    uv_l, epdf_l = np.full((slots, 2), -7.0), np.full(slots, -7.0)
+    wavefront._env_coords_lanes_stage(
+        c["env"], c["compensate"], strategy, n_bsdf, m, c["material"], mis, state, directions, uv_l, epdf_l
+    )
+    assert np.array_equal(uv_l, uv_s)
+    assert np.array_equal(epdf_l, epdf_s)
+    assert np.all(uv_l[(state == 0) | (state == 2)] == -7.0)
+    assert np.count_nonzero(epdf_l != -7.0) == (np.count_nonzero(state == 1) if mis else 0)
+    if mis and strategy_name != "env":
+        assert np.count_nonzero(epdf_l > 0) > 100  # densities, not zeros, were compared

@@ -50,7 +50,7 @@ _ELEMENTS = {
 }
 _TWO_PI = 2.0 * math.pi
 _TWO_PI_SQUARED = 2.0 * math.pi * math.pi  # folded as the scalar code's 2.0 * math.pi * math.pi * sin_theta is
-SLOT_NONE, SLOT_ENV = 0, 2  # integrators.techniques' slot states
+SLOT_NONE, SLOT_BSDF, SLOT_ENV = 0, 1, 2  # integrators.techniques' slot states
 
 
 def _intrinsic(builder, name: str, ret: ir.Type, *params: ir.Type):
@@ -167,6 +167,16 @@ class _Lanes:
     def any(self, mask):
         reduce = _intrinsic(self.b, f"llvm.vector.reduce.or.v{LANES}i1", ir.IntType(1), _MASK)
         return self.b.call(reduce, [mask])
+
+    def libm(self, name, *vectors):
+        """The C library's ``name`` (doubles -> double) on every lane, one call each: the scalar kernels call the
+        same functions (Numba lowers math.atan2 and math.acos to them), so the lanes get the same bits."""
+        function = cgutils.insert_pure_function(self.b.module, ir.FunctionType(_F64, [_F64] * len(vectors)), name=name)
+        out = ir.Constant(_VF64, None)
+        for lane in range(LANES):
+            arguments = [self.b.extract_element(x, _I32(lane)) for x in vectors]
+            out = self.b.insert_element(out, self.b.call(function, arguments), _I32(lane))
+        return out
 
     def bisect(self, lo, hi, mask, below):
         """Per lane of ``mask``, envmap_bilinear's bisection: while hi - lo > 1, mid = (lo + hi) >> 1 becomes lo
@@ -522,6 +532,146 @@ def env_sample_block(
     return types.void(*signature_args), codegen
 
 
+# --- a direction's lat-long coordinates and the bilinear density there ------------------------------------------
+_COORDS_ARGS = (
+    "state material compensate m mis wdir to_env luminance sines plain_marginal comp_marginal comp_offset uv epdf "
+    "first count start"
+).split()
+_COORDS_DTYPES = {
+    "state": (types.int8, 1),
+    "material": (types.int64, 1),
+    "compensate": (types.boolean, 1),
+    "wdir": (types.float64, 2),
+    "to_env": (types.float64, 2),
+    "luminance": (types.float32, 2),
+    "sines": (types.float64, 1),
+    "plain_marginal": (types.float64, 1),
+    "comp_marginal": (types.float64, 1),
+    "uv": (types.float64, 2),
+    "epdf": (types.float64, 1),
+}
+_INV_PI = 1.0 / math.pi  # sampling.kernels.INV_PI
+_INV_2PI = 1.0 / (2.0 * math.pi)  # sampling.kernels.INV_2PI
+
+
+@intrinsic
+def env_coords_block(
+    typingctx, state, material, compensate, m, mis, wdir, to_env, luminance, sines, plain_marginal, comp_marginal,
+    comp_offset, uv, epdf, first, count, start,
+):  # fmt: skip
+    """wavefront._env_coords_stage for the slots ``start .. start + 7`` of a pass that are not environment samples,
+    numbered over its camera samples as :func:`env_sample_block` numbers its own (slot ``first + q % count`` of
+    camera sample ``q // count``): each live one gets the lat-long (u, v) of its direction (envmap.env_coords)
+    and, under MIS, each BSDF sample the bilinear density there (envmap._pdf_at with ``pdf="bilinear"``).  atan2
+    and acos are the C library's, called per lane, so that the bits are the scalar stage's."""
+    signature_args = (
+        state, material, compensate, m, mis, wdir, to_env, luminance, sines, plain_marginal, comp_marginal,
+        comp_offset, uv, epdf, first, count, start,
+    )  # fmt: skip
+    for name, t in zip(_COORDS_ARGS, signature_args, strict=True):
+        if name in _COORDS_DTYPES:
+            dtype, ndim = _COORDS_DTYPES[name]
+            if not (isinstance(t, types.Array) and t.dtype == dtype and t.ndim == ndim and t.layout == "C"):
+                return None
+        elif name == "mis":
+            if not isinstance(t, types.Boolean):
+                return None
+        elif not isinstance(t, types.Float if name == "comp_offset" else types.Integer):
+            return None
+
+    def codegen(context, builder, signature, args):
+        a = dict(zip(_COORDS_ARGS, args, strict=True))
+        arrays = {
+            name: context.make_array(t)(context, builder, a[name])
+            for name, t in zip(_COORDS_ARGS, signature.args, strict=True)
+            if isinstance(t, types.Array)
+        }
+        v, b = _Lanes(builder), builder
+
+        def shape(name, axis):
+            ndim = signature.args[_COORDS_ARGS.index(name)].ndim
+            return v.splat(cgutils.unpack_tuple(b, arrays[name].shape, ndim)[axis], _VI64)
+
+        def integer(name):
+            return v.splat(context.cast(b, a[name], signature.args[_COORDS_ARGS.index(name)], types.int64), _VI64)
+
+        m_v, first_v, count_v = integer("m"), integer("first"), integer("count")
+        q = b.add(integer("start"), ir.Constant(_VI64, list(range(LANES))))
+        n_q = b.mul(shape("material", 0), count_v)
+        inside = b.icmp_signed("<", q, n_q)
+        q = v.imin(q, b.sub(n_q, v.i(1)))  # lanes past the end read the last slot and write nothing
+        k = b.fptosi(v.div(v.add(v.to_f(q), v.f(0.5)), v.to_f(count_v)), _VI64)  # q // count (env_sample_block)
+        read = b.add(b.add(b.mul(k, m_v), first_v), b.sub(q, b.mul(k, count_v)))
+        states = v.gather(_I8, v.address(arrays["state"], read, 1))
+        wanted = b.and_(inside, b.icmp_signed("!=", states, ir.Constant(_VI8, [SLOT_NONE] * LANES)))
+        wanted = b.and_(wanted, b.icmp_signed("!=", states, ir.Constant(_VI8, [SLOT_ENV] * LANES)))
+        # envmap.env_coords: the direction in the environment's frame, then mappings.direction_to_latlong
+        world = [v.load_f64(arrays["wdir"], b.add(b.mul(read, v.i(3)), v.i(i))) for i in range(3)]
+        local = []
+        for i in range(3):
+            row = [v.splat(b.load(b.gep(arrays["to_env"].data, [_I64(3 * i + j)])), _VF64) for j in range(3)]
+            local.append(v.add(v.add(v.mul(row[0], world[0]), v.mul(row[1], world[1])), v.mul(row[2], world[2])))
+        ex, ey, ez = local
+        u = v.mul(v.libm("atan2", ex, v.neg(ez)), v.f(_INV_2PI))
+        u = b.select(v.lt(u, v.f(0.0)), v.add(u, v.f(1.0)), u)
+        u = b.select(v.ge(u, v.f(1.0)), v.f(0.0), u)
+        lat = v.fmin(v.f(1.0), v.fmax(v.f(-1.0), ey))
+        vv = v.mul(v.libm("acos", lat), v.f(_INV_PI))
+        at = v.address(arrays["uv"], read, 16)
+        v.store(_F64, u, at, wanted)
+        v.store(_F64, vv, b.add(at, v.i(8)), wanted)
+        # envmap._pdf_at for the bilinear density, at BSDF samples under MIS
+        mis_v = v.splat(context.cast(b, a["mis"], signature.args[_COORDS_ARGS.index("mis")], types.boolean), _MASK)
+        bsdf = b.icmp_signed("==", states, ir.Constant(_VI8, [SLOT_BSDF] * LANES))
+        with_pdf = b.and_(b.and_(wanted, bsdf), mis_v)
+        kind = v.gather(_I64, v.address(arrays["material"], k, 8))
+        compensated = b.icmp_signed(
+            "!=", v.gather(_I8, v.address(arrays["compensate"], kind, 1)), ir.Constant(_VI8, [0] * LANES)
+        )
+        offset = b.select(compensated, v.splat(a["comp_offset"], _VF64), v.f(0.0))
+        comp_base = v.splat(b.ptrtoint(arrays["comp_marginal"].data, _I64), _VI64)
+        plain_base = v.splat(b.ptrtoint(arrays["plain_marginal"].data, _I64), _VI64)
+        marginal_base = b.select(compensated, comp_base, plain_base)
+        sin_theta = v.sqrt(v.fmax(v.f(0.0), v.mul(v.sub(v.f(1.0), ey), v.add(v.f(1.0), ey))))
+        h, width = shape("luminance", 0), shape("luminance", 1)
+        x = v.sub(u, v.div(v.f(0.5), v.to_f(width)))  # envmap._bilinear_x
+        x = b.select(v.lt(x, v.f(0.0)), v.add(x, v.f(1.0)), x)
+        # envmap_bilinear.bilinear_pdf; a coordinate outside [0, 1] (a NaN from a dead slot) has density 0, and is
+        # clamped before it becomes an index
+        ny = shape("sines", 0)
+        inside_square = b.and_(
+            b.and_(v.ge(x, v.f(0.0)), v.le(x, v.f(1.0))), b.and_(v.ge(vv, v.f(0.0)), v.le(vv, v.f(1.0)))
+        )
+
+        def cell(n, coordinate):  # envmap_bilinear._cell
+            f = v.mul(v.fmin(v.fmax(v.clamp(coordinate, 0.0, 1.0), v.f(0.0)), v.f(1.0)), v.to_f(n))
+            i = v.imin(b.fptosi(f, _VI64), b.sub(n, v.i(1)))
+            return i, v.sub(f, v.to_f(i))
+
+        row, t = cell(b.sub(ny, v.i(1)), vv)
+        column, tx = cell(width, x)
+
+        def node_weight(j, i):  # envmap_bilinear.node_weight
+            jj = v.imin(j, b.sub(h, v.i(1)))
+            ii = b.select(b.icmp_signed("<", i, width), i, b.sub(i, width))
+            value = v.sub(v.load_f32(arrays["luminance"], b.add(b.mul(jj, width), ii)), offset)
+            return b.select(v.gt(value, v.f(0.0)), v.mul(value, v.load_f64(arrays["sines"], j)), v.f(0.0))
+
+        s = v.sub(v.f(1.0), t)
+        above, right = b.add(row, v.i(1)), b.add(column, v.i(1))
+        c0 = v.add(v.mul(s, node_weight(row, column)), v.mul(t, node_weight(above, column)))
+        c1 = v.add(v.mul(s, node_weight(row, right)), v.mul(t, node_weight(above, right)))
+        total = v.gather(_F64, b.add(marginal_base, b.mul(b.sub(ny, v.i(1)), v.i(8))))
+        scale = v.to_f(b.mul(width, b.sub(ny, v.i(1))))
+        p = v.div(v.mul(v.add(v.mul(v.sub(v.f(1.0), tx), c0), v.mul(tx, c1)), scale), total)
+        p = b.select(inside_square, p, v.f(0.0))
+        pdf = b.select(v.le(sin_theta, v.f(0.0)), v.f(0.0), v.div(p, v.mul(v.f(_TWO_PI_SQUARED), sin_theta)))
+        v.store(_F64, pdf, v.address(arrays["epdf"], read, 8), with_pdf)
+        return context.get_dummy_value()
+
+    return types.void(*signature_args), codegen
+
+
 # --- where the lanes apply ----------------------------------------------------------------------------------
 @jit_parallel
 def _probe(radiance, image, uv, state):
@@ -560,6 +710,21 @@ def applies(image: np.ndarray, lookup_is_bilinear: bool) -> bool:
         and image.shape[0] >= 2
         and image.shape[2] == 3
         and image.flags.c_contiguous
+        and compiles()
+    )
+
+
+def coords_apply(k) -> bool:
+    """Whether :func:`env_coords_block` fits environment kernel ``k``: the bilinear density, its tables
+    C-contiguous float64 beside the float32 luminance, on a Numba that compiles the lanes."""
+    from .envmap import BILINEAR_PDF
+
+    tables = (k.node_sines, k.marginal_cdf, k.comp_marginal_cdf, k.to_env)
+    return (
+        k.mode == BILINEAR_PDF
+        and k.luminance.dtype == np.float32
+        and k.luminance.flags.c_contiguous
+        and all(t.flags.c_contiguous and t.dtype == np.float64 for t in tables)
         and compiles()
     )
 

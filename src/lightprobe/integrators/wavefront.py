@@ -53,8 +53,9 @@ from ..emitters.envmap import (
     env_sample_coords,
     env_sample_full,
 )
-from ..emitters.envmap_lanes import LANES, env_sample_block, radiance_block
+from ..emitters.envmap_lanes import LANES, env_coords_block, env_sample_block, radiance_block
 from ..emitters.envmap_lanes import applies as lanes_apply
+from ..emitters.envmap_lanes import coords_apply as coords_in_lanes
 from ..emitters.envmap_lanes import samples_apply as samples_in_lanes
 from ..emitters.selection import SELECTORS, build_selector
 from ..errors import ParameterError
@@ -558,6 +559,34 @@ def _env_coords_stage(env, compensate, m, material, mis, state, wdir, uv, epdf):
         uv[r, 1] = v
         if mis and st == SLOT_BSDF:
             epdf[r] = env_pdf_at(env, compensate[material[r // m]], u, v, cos_theta)
+
+
+@jit_parallel
+def _env_coords_lanes_stage(env, compensate, strategy, n_bsdf, m, material, mis, state, wdir, uv, epdf):
+    """:func:`_env_coords_stage` 8 slots at a time (emitters/envmap_lanes.py), for the bilinear density: the slots
+    that are not environment samples -- under MIS a camera sample's first n_bsdf, under ``env`` none, else all m --
+    numbered over the pass's camera samples, so that the lanes hold no environment samples (decisions.md 46)."""
+    count = n_bsdf if strategy == MIS else (0 if strategy == ENV else m)
+    for block in prange((material.shape[0] * count + LANES - 1) // LANES):
+        env_coords_block(
+            state,
+            material,
+            compensate,
+            m,
+            mis,
+            wdir,
+            env.to_env,
+            env.luminance,
+            env.node_sines,
+            env.marginal_cdf,
+            env.comp_marginal_cdf,
+            env.comp_offset,
+            uv,
+            epdf,
+            0,
+            count,
+            block * LANES,
+        )
 
 
 # The radiance lookups run 8 slots at a time in vector IR (emitters/envmap_lanes.py): half the time of the scalar
@@ -1116,7 +1145,8 @@ def _environment_stages(scene: Scene, settings: RenderSettings) -> tuple:
     else:
         sample_stage = _env_sample_stage
     in_lanes = k is not None and lanes_apply(k.image, k.lookup == BILINEAR)
-    return sample_stage, _env_coords_stage, _env_radiance_stage if in_lanes else _env_radiance_scalar_stage
+    coords_stage = _env_coords_lanes_stage if k is not None and coords_in_lanes(k) else _env_coords_stage
+    return sample_stage, coords_stage, _env_radiance_stage if in_lanes else _env_radiance_scalar_stage
 
 
 def kernels_cached(scene: Scene | None = None, settings: RenderSettings | None = None) -> bool:
