@@ -48,7 +48,7 @@ def sphere_hit(ox, oy, oz, dx, dy, dz, cx, cy, cz, r, tmax):
     return INF
 
 
-@jit
+@jit_inline
 def rect_hit(ox, oy, oz, dx, dy, dz, rects, i, tmax):
     """Distance to rectangle i of ``rects`` (R, 12: origin, edge u, edge v, normal), INF if missed before tmax."""
     nx, ny, nz = rects[i, 9], rects[i, 10], rects[i, 11]
@@ -67,7 +67,7 @@ def rect_hit(ox, oy, oz, dx, dy, dz, rects, i, tmax):
     return t
 
 
-@jit
+@jit_inline
 def _slab(o, d, lo, hi, t0, t1):
     """One axis of the slab test: the interval (t0, t1) clipped to the slab [lo, hi] (inflated a little)."""
     pad = 1e-6 * (abs(lo) + abs(hi) + 1.0)
@@ -83,7 +83,7 @@ def _slab(o, d, lo, hi, t0, t1):
     return max(t0, a), min(t1, b)
 
 
-@jit
+@jit_inline
 def box_hit(ox, oy, oz, dx, dy, dz, bounds, g, tmax):
     """Does the segment (0, tmax) cross box g of ``bounds`` (G, 2, 3)?  (Slab test, with a small inflation for
     safety.)  Reads scalars: slicing the box out as an array view costs a reference-count update on the shared
