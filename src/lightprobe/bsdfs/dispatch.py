@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._numba import jit, jit_parallel, prange
+from .._numba import jit, jit_inline, jit_parallel, prange
 from .conductor import GGX_CONDUCTOR, ggx_conductor_eval, ggx_conductor_pdf, ggx_conductor_sample
 from .lambert import LAMBERT, lambert_eval, lambert_pdf, lambert_sample
 from .phong import PHONG, phong_eval, phong_pdf, phong_sample
@@ -17,7 +17,7 @@ from .plastic import PLASTIC, plastic_eval, plastic_pdf, plastic_sample
 __all__ = ["bsdf_eval", "bsdf_pdf", "bsdf_sample", "eval_batch", "pdf_batch", "sample_batch"]
 
 
-@jit
+@jit_inline
 def bsdf_eval(kind, p, wo, wi):
     if kind == LAMBERT:
         return lambert_eval(p, wo, wi)
@@ -30,7 +30,7 @@ def bsdf_eval(kind, p, wo, wi):
     return 0.0, 0.0, 0.0
 
 
-@jit
+@jit_inline
 def bsdf_pdf(kind, p, wo, wi):
     if kind == LAMBERT:
         return lambert_pdf(p, wo, wi)
@@ -43,7 +43,7 @@ def bsdf_pdf(kind, p, wo, wi):
     return 0.0
 
 
-@jit
+@jit_inline
 def bsdf_sample(kind, p, wo, u0, u1, u2):
     """Returns (wi, pdf, weight = f cos / pdf)."""
     if kind == LAMBERT:
