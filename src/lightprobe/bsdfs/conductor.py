@@ -31,7 +31,7 @@ import math
 
 import numpy as np
 
-from .._numba import jit
+from .._numba import jit, jit_inline
 from ..errors import ParameterError
 from .base import BSDF, rgb_param
 from .fresnel import fresnel_conductor
@@ -58,7 +58,7 @@ def _half_vector(wo, wi):
     return hx / n, hy / n, hz / n, True
 
 
-@jit
+@jit_inline
 def _fresnel_rgb(p, cos_theta):
     if p[_FRESNEL] == 0.0:
         return p[_R], p[_R + 1], p[_R + 2]
@@ -82,7 +82,7 @@ def ggx_reflection_pdf(alpha, wo, wi):
     return ggx_g1(alpha, wo[0], wo[1], wo[2], hx, hy, hz) * ggx_d(alpha, hx, hy, hz) / (4.0 * wo[2])
 
 
-@jit
+@jit_inline
 def ggx_conductor_eval(p, wo, wi):
     if wo[2] <= 0.0 or wi[2] <= 0.0:
         return 0.0, 0.0, 0.0
@@ -96,12 +96,12 @@ def ggx_conductor_eval(p, wo, wi):
     return f[0] * k, f[1] * k, f[2] * k
 
 
-@jit
+@jit_inline
 def ggx_conductor_pdf(p, wo, wi):
     return ggx_reflection_pdf(p[_ALPHA], wo, wi)
 
 
-@jit
+@jit_inline
 def ggx_conductor_sample(p, wo, u0, u1, u2):
     zero = (0.0, 0.0, 0.0)
     if wo[2] <= 0.0:

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._numba import jit, jit_inline, jit_parallel, prange
+from .._numba import jit_inline, jit_parallel, prange
 from .conductor import GGX_CONDUCTOR, ggx_conductor_eval, ggx_conductor_pdf, ggx_conductor_sample
 from .lambert import LAMBERT, lambert_eval, lambert_pdf, lambert_sample
 from .phong import PHONG, phong_eval, phong_pdf, phong_sample

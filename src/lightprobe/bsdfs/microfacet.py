@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 
-from .._numba import jit
+from .._numba import jit, jit_inline
 
 __all__ = ["ggx_d", "ggx_g1", "ggx_sample_visible_normal"]
 
@@ -40,7 +40,7 @@ def ggx_g1(alpha, vx, vy, vz, mx, my, mz):
     return 2.0 / (1.0 + math.sqrt(1.0 + alpha * alpha * tan2))
 
 
-@jit
+@jit_inline
 def ggx_sample_visible_normal(alpha, vx, vy, vz, u1, u2):
     """A microfacet normal visible from v (v.z > 0), distributed as D_v (Heitz 2018, listing 1)."""
     # stretch the view direction to the hemisphere configuration

@@ -31,7 +31,7 @@ import math
 
 import numpy as np
 
-from .._numba import jit, jit_parallel, prange
+from .._numba import jit, jit_inline, jit_parallel, prange
 from ..errors import ParameterError
 from ..sampling.kernels import INV_PI, cosine_hemisphere_pdf, square_to_cosine_hemisphere
 from .base import BSDF, rgb_param
@@ -55,7 +55,7 @@ def _transmittance(p, mu):
     return (1.0 - t) * p[_TABLE + i] + t * p[_TABLE + i + 1]
 
 
-@jit
+@jit_inline
 def _specular(p, wo, wi):
     hx, hy, hz, ok = _half_vector(wo, wi)
     if not ok:
@@ -66,7 +66,7 @@ def _specular(p, wo, wi):
     return f * ggx_d(a, hx, hy, hz) * g / (4.0 * wi[2] * wo[2])
 
 
-@jit
+@jit_inline
 def plastic_eval(p, wo, wi):
     if wo[2] <= 0.0 or wi[2] <= 0.0:
         return 0.0, 0.0, 0.0
@@ -82,7 +82,7 @@ def _specular_probability(p, wo):
     return (1.0 - t) * ws / ((1.0 - t) * ws + t * (1.0 - ws))
 
 
-@jit
+@jit_inline
 def plastic_pdf(p, wo, wi):
     if wo[2] <= 0.0:
         return 0.0
@@ -90,7 +90,7 @@ def plastic_pdf(p, wo, wi):
     return ps * ggx_reflection_pdf(p[_ALPHA], wo, wi) + (1.0 - ps) * cosine_hemisphere_pdf(wi[0], wi[1], wi[2])
 
 
-@jit
+@jit_inline
 def plastic_sample(p, wo, u0, u1, u2):
     zero = (0.0, 0.0, 0.0)
     if wo[2] <= 0.0:

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._numba import jit
+from .._numba import jit_inline
 from ..errors import SceneError
 
 __all__ = ["Camera", "camera_ray"]
@@ -100,7 +100,7 @@ class Camera:
         return np.broadcast_to(self.origin, d.shape).copy(), d
 
 
-@jit
+@jit_inline
 def camera_ray(cam, pixel, xi1, xi2):
     """Unit direction of the ray through flat pixel index ``pixel`` (row-major) at offsets (xi1, xi2)."""
     w = int(cam[14])

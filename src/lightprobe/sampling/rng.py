@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._numba import jit, jit_parallel, prange
+from .._numba import jit, jit_inline, jit_parallel, prange
 
 __all__ = [
     "SAMPLERS",
@@ -211,7 +211,7 @@ def uniform(state, dim):
     return random_uniform(key, dim)
 
 
-@jit
+@jit_inline
 def uniform_2d(state, dim):
     """Dimensions ``dim`` and ``dim + 1`` of a sample, where ``dim`` begins a 2D pair of the layout (0, or 2 + 3j):
     the numbers two :func:`uniform` calls give, with the pair's hash and index shuffle computed once."""
