@@ -73,6 +73,10 @@ def test_coordinates_outside_the_domain_give_finite_radiance():
     radiance = np.zeros((4, 3))
     _in_lanes(radiance, k.image, uv, state)  # an index from a NaN would read anywhere: must not crash
     assert np.all(np.isfinite(radiance))
+    # a NaN is clamped to u = -1/2, v = 0: the texels at u = 1/2 (periodic), not memory before the image
+    expected = np.zeros((1, 3))
+    _one_at_a_time(k, np.array([[0.5, 0.0]]), np.ones(1, np.int8), expected)
+    np.testing.assert_allclose(radiance[0], expected[0], rtol=1e-12)
 
 
 def test_which_maps_the_lanes_take():

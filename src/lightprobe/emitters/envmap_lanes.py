@@ -153,6 +153,57 @@ class _Lanes:
         )
         self.b.call(function, [values, self.b.inttoptr(addresses, _pointers(element)), _I32(align), mask])
 
+    def load_run(self, element, pointer, mask, fields, fill):
+        """Lanes 0-7 of ``fields`` interleaved values from ``pointer`` on (8 rows of a (N, fields) array, or of a
+        vector when fields is 1), by one masked load: rows whose lane is off are not read and get ``fill``.
+        Returns one vector per field."""
+        b = self.b
+        _, suffix, align = _ELEMENTS[element]
+        width = fields * LANES
+        wide = ir.VectorType(element, width)
+        wide_mask = self._widen(mask, fields)
+        constant = float(fill) if element in (_F32, _F64) else int(fill)
+        function = _intrinsic(
+            b, f"llvm.masked.load.v{width}{suffix[2:]}.p0", wide, wide.as_pointer(), _I32, wide_mask.type, wide
+        )
+        values = b.call(function, [b.bitcast(pointer, wide.as_pointer()), _I32(align), wide_mask,
+                                   ir.Constant(wide, [constant] * width)])  # fmt: skip
+        if fields == 1:
+            return values
+        indices = ir.VectorType(_I32, LANES)
+        return tuple(
+            b.shuffle_vector(values, values, ir.Constant(indices, [fields * lane + f for lane in range(LANES)]))
+            for f in range(fields)
+        )
+
+    def store_run(self, vectors, pointer, mask):
+        """The inverse of :meth:`load_run` for float64 fields: row i gets lane i of each vector where ``mask``."""
+        b = self.b
+        fields = len(vectors)
+        width = fields * LANES
+        wide = ir.VectorType(_F64, width)
+        parts = list(vectors)
+        while len(parts) > 1:  # concatenate the fields (an odd one out padded with undefined lanes)
+            if len(parts) % 2:
+                parts.append(ir.Constant(parts[0].type, None))
+            n = parts[0].type.count
+            join = ir.Constant(ir.VectorType(_I32, 2 * n), list(range(2 * n)))
+            parts = [b.shuffle_vector(parts[i], parts[i + 1], join) for i in range(0, len(parts), 2)]
+        order = [f * LANES + lane for lane in range(LANES) for f in range(fields)]  # then interleave them
+        values = b.shuffle_vector(parts[0], parts[0], ir.Constant(ir.VectorType(_I32, width), order))
+        wide_mask = self._widen(mask, fields)
+        function = _intrinsic(
+            b, f"llvm.masked.store.v{width}f64.p0", ir.VoidType(), wide, wide.as_pointer(), _I32, wide_mask.type
+        )
+        b.call(function, [values, b.bitcast(pointer, wide.as_pointer()), _I32(8), wide_mask])
+
+    def _widen(self, mask, fields):
+        """Each lane's mask bit repeated ``fields`` times, in row order."""
+        if fields == 1:
+            return mask
+        order = [lane for lane in range(LANES) for _ in range(fields)]
+        return self.b.shuffle_vector(mask, mask, ir.Constant(ir.VectorType(_I32, fields * LANES), order))
+
     def clamp(self, x, lo, hi):
         """x clipped to [lo, hi], a NaN to lo (both compares are false for it)."""
         x = self.b.select(self.ge(x, self.f(lo)), x, self.f(lo))
@@ -229,14 +280,18 @@ def radiance_block(typingctx, radiance, image, uv, state, start):
         v, b = _Lanes(builder), builder
         start_v = context.cast(b, args[4], signature.args[4], types.int64)
         _, inside, read = v.slots(start_v, cgutils.unpack_tuple(b, state_a.shape, 1)[0])
-        states = v.gather(_I8, v.address(state_a, read, 1))
+        # the block's 8 slots are consecutive: its states, coordinates and radiances are contiguous runs, read and
+        # written by masked vector loads and stores (a lane past the end reads and writes nothing)
+        first = v.b.extract_element(read, _I32(0))
+        states = v.load_run(_I8, b.gep(state_a.data, [first]), inside, 1, 0)
         live = b.and_(inside, b.icmp_signed("!=", states, ir.Constant(_VI8, [SLOT_NONE] * LANES)))
-        u = v.load_f64(uv_a, b.mul(read, v.i(2)))
-        vv = v.load_f64(uv_a, b.add(b.mul(read, v.i(2)), v.i(1)))
+        u, vv = v.load_run(_F64, b.gep(uv_a.data, [b.mul(first, _I64(2))]), inside, 2, 0.5)
         # mappings.bilinear_latlong_weights: columns at u = (i + 0.5) / W, periodic; rows at v = j / (H - 1), clamped
         h, w, _ = cgutils.unpack_tuple(b, image_a.shape, 3)
         wv, hv = v.splat(w, _VI64), v.splat(h, _VI64)
-        fx = v.sub(v.mul(v.clamp(u, -1.0, 2.0), v.to_f(wv)), v.f(0.5))
+        # u clamped to [-1/2, 3/2] (a NaN to -1/2) so that one wrap below brings every column into [0, W); with
+        # [-1, 2] a NaN's column was -1, a read before the image (caught by CI as a NaN radiance, once)
+        fx = v.sub(v.mul(v.clamp(u, -0.5, 1.5), v.to_f(wv)), v.f(0.5))
         x0f = b.call(_intrinsic(b, "llvm.floor.v8f64", _VF64, _VF64), [fx])
         tx = v.sub(fx, x0f)
         x0 = b.fptosi(x0f, _VI64)
@@ -250,13 +305,14 @@ def radiance_block(typingctx, radiance, image, uv, state, start):
         y1 = b.add(y0, v.i(1))
         corners = [b.mul(b.add(b.mul(y, wv), x), v.i(3)) for y in (y0, y1) for x in (x0, x1)]
         one_tx, one_ty = v.sub(v.f(1.0), tx), v.sub(v.f(1.0), ty)
-        out = v.address(radiance_a, read, 24)
+        channels = []
         for c in range(3):
             t00, t01, t10, t11 = (v.load_f32(image_a, b.add(corner, v.i(c))) for corner in corners)
             # mappings._bilerp: (1 - ty) ((1 - tx) t00 + tx t01) + ty ((1 - tx) t10 + tx t11)
             top = v.add(v.mul(one_tx, t00), v.mul(tx, t01))
             bottom = v.add(v.mul(one_tx, t10), v.mul(tx, t11))
-            v.store(_F64, v.add(v.mul(one_ty, top), v.mul(ty, bottom)), b.add(out, v.i(8 * c)), live)
+            channels.append(v.add(v.mul(one_ty, top), v.mul(ty, bottom)))
+        v.store_run(channels, b.gep(radiance_a.data, [b.mul(first, _I64(3))]), live)
         return context.get_dummy_value()
 
     return types.void(radiance, image, uv, state, start), codegen
