@@ -1,24 +1,26 @@
-"""The environment map's work for eight shading slots at a time, as vector LLVM IR: radiance lookups and samples
-of the bilinear density.
+"""The environment map's work for eight shading slots at a time, as vector LLVM IR: radiance lookups, samples of
+the bilinear density, and directions' lat-long coordinates with the density there.
 
 Numba compiles the renderer's kernels one slot at a time: its vectoriser gives up on any loop that reads a table
 (docs/decisions.md 35), so each lookup's texel reads and each sample's bisections run in scalar code.  Here each is
 a Numba ``@intrinsic`` that emits the whole operation for 8 slots as vector IR: the arithmetic in 8 float64 lanes,
-the table reads as 8 loads whose addresses come from the lanes, the writes as masked scatters.  In the peer render
-the environment's stages take 5.7 s against 8.3-8.9 one slot at a time (decisions.md 41-43; the lookup alone:
-``benchmarks/simd_lookup.py``).
+the table reads as 8 loads whose addresses come from the lanes, the writes as masked scatters (or, where a block's
+slots are consecutive, masked vector stores).  In the peer render the environment's stages take 4.8 s against
+8.3-8.9 one slot at a time (decisions.md 41-47; the lookup alone: ``benchmarks/simd_lookup.py``).
 
 Every lane computes what the scalar code computes, operation for operation and in its order, with the kernels'
 fast-math flags (``_numba.FASTMATH``): :func:`radiance_block` is :func:`lightprobe.emitters.envmap.env_lookup` for a
-bilinear lat-long map, :func:`env_sample_block` is ``wavefront._env_sample_stage`` for the bilinear density.  On
-the machine measured the renders are the same bits; where LLVM fuses a multiply-add in one and not the other they
-may differ by an ulp (the tests allow for it).
+bilinear lat-long map, :func:`env_sample_block` is ``wavefront._env_sample_stage`` for the bilinear density (its
+searches started from guide tables whose brackets it checks first, so that they find the same indices),
+:func:`env_coords_block` is ``wavefront._env_coords_stage`` (atan2 and acos from the C library, per lane).  On the
+machine measured the renders are the same bits; where LLVM fuses a multiply-add in one and not the other they may
+differ by an ulp (the tests allow for it).
 
 Lanes of dead slots and lanes past a pass's last slot write nothing, and every slot of a pass goes through the
-lanes whatever the pass size, so the image does not depend on how slots fall into blocks.  So that no load needs a
-mask, a lane past the end reads the last slot, and a coordinate outside the lookup's domain (a NaN, or far outside
-[0, 1]: a dead slot's stale value) is clamped before it becomes an index, since a vector lane cannot take the
-scalar code's slow path and an index from a NaN would address any memory.
+lanes whatever the pass size, so the image does not depend on how slots fall into blocks.  A lane past the end
+reads the last slot (or, in a masked vector load, nothing), and a coordinate outside the lookup's domain (a NaN,
+or far outside [0, 1]: a dead slot's stale value) is clamped before it becomes an index, since a vector lane cannot
+take the scalar code's slow path and an index from a NaN would address any memory.
 """
 
 from __future__ import annotations
