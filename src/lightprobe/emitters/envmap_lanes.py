@@ -320,6 +320,93 @@ def radiance_block(typingctx, radiance, image, uv, state, start):
     return types.void(radiance, image, uv, state, start), codegen
 
 
+# --- what the sampling and coordinates lanes share -----------------------------------------------------------------
+def _arguments_fit(names, values, dtypes, booleans=(), floats=()) -> bool:
+    """Whether an intrinsic's argument types are the ones it is written for: arrays of ``dtypes`` (dtype, ndim),
+    C-contiguous, the names in ``booleans`` and ``floats`` scalars of that kind, every other one an integer."""
+    for name, t in zip(names, values, strict=True):
+        if name in dtypes:
+            dtype, ndim = dtypes[name]
+            if not (isinstance(t, types.Array) and t.dtype == dtype and t.ndim == ndim and t.layout == "C"):
+                return False
+        elif not isinstance(t, types.Boolean if name in booleans else types.Float if name in floats else types.Integer):
+            return False
+    return True
+
+
+class _Arguments:
+    """An intrinsic's arguments by name inside its codegen: the arrays, their shapes and integers as int64 lanes."""
+
+    def __init__(self, names, context, builder, signature, args):
+        self.names, self.context, self.b, self.signature = names, context, builder, signature
+        self.values = dict(zip(names, args, strict=True))
+        self.arrays = {
+            name: context.make_array(t)(context, builder, self.values[name])
+            for name, t in zip(names, signature.args, strict=True)
+            if isinstance(t, types.Array)
+        }
+        self.v = _Lanes(builder)
+
+    def scalar(self, name, to):
+        return self.context.cast(self.b, self.values[name], self.signature.args[self.names.index(name)], to)
+
+    def integer(self, name):
+        return self.v.splat(self.scalar(name, types.int64), _VI64)
+
+    def shape(self, name, axis):
+        ndim = self.signature.args[self.names.index(name)].ndim
+        return self.v.splat(cgutils.unpack_tuple(self.b, self.arrays[name].shape, ndim)[axis], _VI64)
+
+
+def _numbered_slots(a: _Arguments):
+    """(camera sample k, slot, inside) of lanes ``start .. start + 7`` when a pass's slots are numbered over its
+    camera samples: lane q is slot ``first + q % count`` of camera sample ``q // count``, so that every lane holds a
+    slot of the kind a stage serves.  Lanes past the end read the last such slot (and write nothing), so that every
+    load has a valid address and needs no mask."""
+    v, b = a.v, a.b
+    m_v, first_v, count_v = a.integer("m"), a.integer("first"), a.integer("count")
+    q = b.add(a.integer("start"), ir.Constant(_VI64, list(range(LANES))))
+    n_q = b.mul(a.shape("material", 0), count_v)
+    inside = b.icmp_signed("<", q, n_q)
+    q = v.imin(q, b.sub(n_q, v.i(1)))
+    # q // count without an integer division (none in vector form): (q + 1/2) / count is at least 1/(2 count) away
+    # from an integer, far above the rounding of a double
+    k = b.fptosi(v.div(v.add(v.to_f(q), v.f(0.5)), v.to_f(count_v)), _VI64)
+    return k, b.add(b.add(b.mul(k, m_v), first_v), b.sub(q, b.mul(k, count_v))), inside
+
+
+def _compensation(a: _Arguments, k):
+    """Per lane, whether camera sample k's material takes the compensated density, and the luminance offset."""
+    v, b = a.v, a.b
+    kind = v.gather(_I64, v.address(a.arrays["material"], k, 8))
+    compensated = b.icmp_signed(
+        "!=", v.gather(_I8, v.address(a.arrays["compensate"], kind, 1)), ir.Constant(_VI8, [0] * LANES)
+    )
+    return compensated, b.select(compensated, v.splat(a.values["comp_offset"], _VF64), v.f(0.0))
+
+
+def _pick(a: _Arguments, compensated, name_comp, name_plain):
+    """Per lane, the compensated or the plain table's base address."""
+    v, b = a.v, a.b
+    comp_base = v.splat(b.ptrtoint(a.arrays[name_comp].data, _I64), _VI64)
+    plain_base = v.splat(b.ptrtoint(a.arrays[name_plain].data, _I64), _VI64)
+    return b.select(compensated, comp_base, plain_base)
+
+
+def _node_weight(a: _Arguments, offset):
+    """envmap_bilinear.node_weight of the lanes' density (``offset`` subtracted from the luminance)."""
+    v, b = a.v, a.b
+    h, width = a.shape("luminance", 0), a.shape("luminance", 1)
+
+    def weight(j, i):
+        jj = v.imin(j, b.sub(h, v.i(1)))
+        ii = b.select(b.icmp_signed("<", i, width), i, b.sub(i, width))
+        value = v.sub(v.load_f32(a.arrays["luminance"], b.add(b.mul(jj, width), ii)), offset)
+        return b.select(v.gt(value, v.f(0.0)), v.mul(value, v.load_f64(a.arrays["sines"], j)), v.f(0.0))
+
+    return weight
+
+
 # --- environment samples from the bilinear density ----------------------------------------------------------------
 def _invert_linear_lanes(v: _Lanes, a, c, m):
     """envmap_bilinear._invert_linear: t in [0, 1] with a t + (c - a) t^2 / 2 = m."""
@@ -426,58 +513,23 @@ def env_sample_block(
         comp_marginal, plain_row_guide, plain_marginal_guide, comp_row_guide, comp_marginal_guide, comp_offset,
         row_angles, column_angles, to_world, wdir, tpdf, uv, first, count, start,
     )  # fmt: skip
-    for name, t in zip(_SAMPLE_ARGS, signature_args, strict=True):
-        if name in _SAMPLE_DTYPES:
-            dtype, ndim = _SAMPLE_DTYPES[name]
-            if not (isinstance(t, types.Array) and t.dtype == dtype and t.ndim == ndim and t.layout == "C"):
-                return None
-        elif not isinstance(t, types.Float if name == "comp_offset" else types.Integer):
-            return None
+    if not _arguments_fit(_SAMPLE_ARGS, signature_args, _SAMPLE_DTYPES, floats=("comp_offset",)):
+        return None
 
     def codegen(context, builder, signature, args):
-        a = dict(zip(_SAMPLE_ARGS, args, strict=True))
-        arrays = {
-            name: context.make_array(t)(context, builder, a[name])
-            for name, t in zip(_SAMPLE_ARGS, signature.args, strict=True)
-            if isinstance(t, types.Array)
-        }
-        v = _Lanes(builder)
-        b = builder
-
-        def shape(name, axis):
-            ndim = signature.args[_SAMPLE_ARGS.index(name)].ndim
-            return v.splat(cgutils.unpack_tuple(b, arrays[name].shape, ndim)[axis], _VI64)
-
-        def integer(name):
-            return v.splat(context.cast(b, a[name], signature.args[_SAMPLE_ARGS.index(name)], types.int64), _VI64)
-
-        m_v, first_v, count_v = integer("m"), integer("first"), integer("count")
-        q = b.add(integer("start"), ir.Constant(_VI64, list(range(LANES))))
-        n_q = b.mul(shape("material", 0), count_v)
-        inside = b.icmp_signed("<", q, n_q)
-        # lanes past the end read the last slot (and write nothing), so that every load has a valid address and
-        # needs no mask: the loads' indices below all stay inside their tables
-        q = v.imin(q, b.sub(n_q, v.i(1)))
-        # q // count without an integer division (none in vector form): (q + 1/2) / count is at least 1/(2 count)
-        # away from an integer, far above the rounding of a double
-        k = b.fptosi(v.div(v.add(v.to_f(q), v.f(0.5)), v.to_f(count_v)), _VI64)
-        slots = b.add(b.add(b.mul(k, m_v), first_v), b.sub(q, b.mul(k, count_v)))
+        a = _Arguments(_SAMPLE_ARGS, context, builder, signature, args)
+        v, b, arrays, shape = a.v, builder, a.arrays, a.shape
+        k, slots, inside = _numbered_slots(a)
         states = v.gather(_I8, v.address(arrays["state"], slots, 1))
         live = b.and_(inside, b.icmp_signed("==", states, ir.Constant(_VI8, [SLOT_ENV] * LANES)))
-        kind = v.gather(_I64, v.address(arrays["material"], k, 8))
-        compensated = b.icmp_signed(
-            "!=", v.gather(_I8, v.address(arrays["compensate"], kind, 1)), ir.Constant(_VI8, [0] * LANES)
-        )
+        compensated, offset = _compensation(a, k)
         u0 = v.load_f64(arrays["env_u"], b.mul(slots, v.i(2)))
         u1 = v.load_f64(arrays["env_u"], b.add(b.mul(slots, v.i(2)), v.i(1)))
 
-        def pick(name_comp, name_plain):  # per lane, the compensated or the plain table's base address
-            comp_base = v.splat(b.ptrtoint(arrays[name_comp].data, _I64), _VI64)
-            plain_base = v.splat(b.ptrtoint(arrays[name_plain].data, _I64), _VI64)
-            return b.select(compensated, comp_base, plain_base)
+        def pick(name_comp, name_plain):
+            return _pick(a, compensated, name_comp, name_plain)
 
         rows_base, marginal_base = pick("comp_rows", "plain_rows"), pick("comp_marginal", "plain_marginal")
-        offset = b.select(compensated, v.splat(a["comp_offset"], _VF64), v.f(0.0))
         ny, n1 = shape("plain_rows", 0), shape("plain_rows", 1)
         w = b.sub(n1, v.i(1))
 
@@ -533,14 +585,8 @@ def env_sample_block(
         ends = [guide_at(row_guide, b.add(b.mul(r, guide_width), b.add(bucket, v.i(1)))) for r in (row, above)]
         hi = v.imin(b.add(v.imax(ends[0], ends[1]), v.i(1)), w)
         column = searched(v.imin(starts[0], starts[1]), hi, w, column_below)
-        h, width = shape("luminance", 0), shape("luminance", 1)
-
-        def node_weight(j, i):  # envmap_bilinear.node_weight
-            jj = v.imin(j, b.sub(h, v.i(1)))
-            ii = b.select(b.icmp_signed("<", i, width), i, b.sub(i, width))
-            x = v.sub(v.load_f32(arrays["luminance"], b.add(b.mul(jj, width), ii)), offset)
-            return b.select(v.gt(x, v.f(0.0)), v.mul(x, v.load_f64(arrays["sines"], j)), v.f(0.0))
-
+        width = shape("luminance", 1)
+        node_weight = _node_weight(a, offset)
         right = b.add(column, v.i(1))
         c0 = v.add(v.mul(s, node_weight(row, column)), v.mul(t, node_weight(above, column)))
         c1 = v.add(v.mul(s, node_weight(row, right)), v.mul(t, node_weight(above, right)))
@@ -626,40 +672,13 @@ def env_coords_block(
         state, material, compensate, m, mis, wdir, to_env, luminance, sines, plain_marginal, comp_marginal,
         comp_offset, uv, epdf, first, count, start,
     )  # fmt: skip
-    for name, t in zip(_COORDS_ARGS, signature_args, strict=True):
-        if name in _COORDS_DTYPES:
-            dtype, ndim = _COORDS_DTYPES[name]
-            if not (isinstance(t, types.Array) and t.dtype == dtype and t.ndim == ndim and t.layout == "C"):
-                return None
-        elif name == "mis":
-            if not isinstance(t, types.Boolean):
-                return None
-        elif not isinstance(t, types.Float if name == "comp_offset" else types.Integer):
-            return None
+    if not _arguments_fit(_COORDS_ARGS, signature_args, _COORDS_DTYPES, booleans=("mis",), floats=("comp_offset",)):
+        return None
 
     def codegen(context, builder, signature, args):
-        a = dict(zip(_COORDS_ARGS, args, strict=True))
-        arrays = {
-            name: context.make_array(t)(context, builder, a[name])
-            for name, t in zip(_COORDS_ARGS, signature.args, strict=True)
-            if isinstance(t, types.Array)
-        }
-        v, b = _Lanes(builder), builder
-
-        def shape(name, axis):
-            ndim = signature.args[_COORDS_ARGS.index(name)].ndim
-            return v.splat(cgutils.unpack_tuple(b, arrays[name].shape, ndim)[axis], _VI64)
-
-        def integer(name):
-            return v.splat(context.cast(b, a[name], signature.args[_COORDS_ARGS.index(name)], types.int64), _VI64)
-
-        m_v, first_v, count_v = integer("m"), integer("first"), integer("count")
-        q = b.add(integer("start"), ir.Constant(_VI64, list(range(LANES))))
-        n_q = b.mul(shape("material", 0), count_v)
-        inside = b.icmp_signed("<", q, n_q)
-        q = v.imin(q, b.sub(n_q, v.i(1)))  # lanes past the end read the last slot and write nothing
-        k = b.fptosi(v.div(v.add(v.to_f(q), v.f(0.5)), v.to_f(count_v)), _VI64)  # q // count (env_sample_block)
-        read = b.add(b.add(b.mul(k, m_v), first_v), b.sub(q, b.mul(k, count_v)))
+        a = _Arguments(_COORDS_ARGS, context, builder, signature, args)
+        v, b, arrays, shape = a.v, builder, a.arrays, a.shape
+        k, read, inside = _numbered_slots(a)
         states = v.gather(_I8, v.address(arrays["state"], read, 1))
         wanted = b.and_(inside, b.icmp_signed("!=", states, ir.Constant(_VI8, [SLOT_NONE] * LANES)))
         wanted = b.and_(wanted, b.icmp_signed("!=", states, ir.Constant(_VI8, [SLOT_ENV] * LANES)))
@@ -679,19 +698,13 @@ def env_coords_block(
         v.store(_F64, u, at, wanted)
         v.store(_F64, vv, b.add(at, v.i(8)), wanted)
         # envmap._pdf_at for the bilinear density, at BSDF samples under MIS
-        mis_v = v.splat(context.cast(b, a["mis"], signature.args[_COORDS_ARGS.index("mis")], types.boolean), _MASK)
+        mis_v = v.splat(a.scalar("mis", types.boolean), _MASK)
         bsdf = b.icmp_signed("==", states, ir.Constant(_VI8, [SLOT_BSDF] * LANES))
         with_pdf = b.and_(b.and_(wanted, bsdf), mis_v)
-        kind = v.gather(_I64, v.address(arrays["material"], k, 8))
-        compensated = b.icmp_signed(
-            "!=", v.gather(_I8, v.address(arrays["compensate"], kind, 1)), ir.Constant(_VI8, [0] * LANES)
-        )
-        offset = b.select(compensated, v.splat(a["comp_offset"], _VF64), v.f(0.0))
-        comp_base = v.splat(b.ptrtoint(arrays["comp_marginal"].data, _I64), _VI64)
-        plain_base = v.splat(b.ptrtoint(arrays["plain_marginal"].data, _I64), _VI64)
-        marginal_base = b.select(compensated, comp_base, plain_base)
+        compensated, offset = _compensation(a, k)
+        marginal_base = _pick(a, compensated, "comp_marginal", "plain_marginal")
         sin_theta = v.sqrt(v.fmax(v.f(0.0), v.mul(v.sub(v.f(1.0), ey), v.add(v.f(1.0), ey))))
-        h, width = shape("luminance", 0), shape("luminance", 1)
+        width = shape("luminance", 1)
         x = v.sub(u, v.div(v.f(0.5), v.to_f(width)))  # envmap._bilinear_x
         x = b.select(v.lt(x, v.f(0.0)), v.add(x, v.f(1.0)), x)
         # envmap_bilinear.bilinear_pdf; a coordinate outside [0, 1] (a NaN from a dead slot) has density 0, and is
@@ -709,12 +722,7 @@ def env_coords_block(
         row, t = cell(b.sub(ny, v.i(1)), vv)
         column, tx = cell(width, x)
 
-        def node_weight(j, i):  # envmap_bilinear.node_weight
-            jj = v.imin(j, b.sub(h, v.i(1)))
-            ii = b.select(b.icmp_signed("<", i, width), i, b.sub(i, width))
-            value = v.sub(v.load_f32(arrays["luminance"], b.add(b.mul(jj, width), ii)), offset)
-            return b.select(v.gt(value, v.f(0.0)), v.mul(value, v.load_f64(arrays["sines"], j)), v.f(0.0))
-
+        node_weight = _node_weight(a, offset)
         s = v.sub(v.f(1.0), t)
         above, right = b.add(row, v.i(1)), b.add(column, v.i(1))
         c0 = v.add(v.mul(s, node_weight(row, column)), v.mul(t, node_weight(above, column)))
