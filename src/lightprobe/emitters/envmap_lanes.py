@@ -445,19 +445,26 @@ _SAMPLE_ARGS = (
 ).split()
 
 
-#: dtype and dimensions of each array argument of env_sample_block (every one C-contiguous)
-_SAMPLE_DTYPES = {
-    "env_u": (types.float64, 2),
+#: dtype and dimensions of the array arguments both env_sample_block and env_coords_block take, the ones
+#: _numbered_slots, _compensation and _node_weight read (every array C-contiguous)
+_SHARED_DTYPES = {
     "state": (types.int8, 1),
     "material": (types.int64, 1),
     "compensate": (types.boolean, 1),
-    "frame": (types.float64, 2),
     "luminance": (types.float32, 2),
     "sines": (types.float64, 1),
-    "plain_rows": (types.float64, 2),
     "plain_marginal": (types.float64, 1),
-    "comp_rows": (types.float64, 2),
     "comp_marginal": (types.float64, 1),
+    "wdir": (types.float64, 2),
+    "uv": (types.float64, 2),
+}
+#: ... and those of env_sample_block's other array arguments
+_SAMPLE_DTYPES = {
+    **_SHARED_DTYPES,
+    "env_u": (types.float64, 2),
+    "frame": (types.float64, 2),
+    "plain_rows": (types.float64, 2),
+    "comp_rows": (types.float64, 2),
     "plain_row_guide": (types.int32, 2),
     "plain_marginal_guide": (types.int32, 1),
     "comp_row_guide": (types.int32, 2),
@@ -465,9 +472,7 @@ _SAMPLE_DTYPES = {
     "row_angles": (types.float64, 2),
     "column_angles": (types.float64, 2),
     "to_world": (types.float64, 2),
-    "wdir": (types.float64, 2),
     "tpdf": (types.float64, 1),
-    "uv": (types.float64, 2),
 }
 
 
@@ -641,19 +646,7 @@ _COORDS_ARGS = (
     "state material compensate m mis wdir to_env luminance sines plain_marginal comp_marginal comp_offset uv epdf "
     "first count start"
 ).split()
-_COORDS_DTYPES = {
-    "state": (types.int8, 1),
-    "material": (types.int64, 1),
-    "compensate": (types.boolean, 1),
-    "wdir": (types.float64, 2),
-    "to_env": (types.float64, 2),
-    "luminance": (types.float32, 2),
-    "sines": (types.float64, 1),
-    "plain_marginal": (types.float64, 1),
-    "comp_marginal": (types.float64, 1),
-    "uv": (types.float64, 2),
-    "epdf": (types.float64, 1),
-}
+_COORDS_DTYPES = {**_SHARED_DTYPES, "to_env": (types.float64, 2), "epdf": (types.float64, 1)}
 _INV_PI = 1.0 / math.pi  # sampling.kernels.INV_PI
 _INV_2PI = 1.0 / (2.0 * math.pi)  # sampling.kernels.INV_2PI
 
