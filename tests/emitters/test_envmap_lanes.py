@@ -256,9 +256,9 @@ def test_a_wrong_guide_changes_no_sample(corrupt):
 )
 @pytest.mark.parametrize("mis", [True, False])
 def test_coordinates_and_densities_in_lanes_are_the_scalar_stages(strategy_name, m, n_bsdf, mis):
-    """wavefront._env_coords_stage's lat-long coordinates and MIS densities, within the lanes' atan2 and acos's 2 ulp
-    (the scalar stage calls the C library), for every slot the strategy's numbering gives the lanes that is neither dead nor an
-    environment sample; every other slot untouched."""
+    """wavefront._env_coords_stage's lat-long coordinates and MIS densities, within the lanes' atan2 and acos's 2
+    ulp (the scalar stage calls the C library), for every slot the strategy's numbering gives the lanes that is
+    neither dead nor an environment sample; every other slot untouched."""
     from lightprobe.integrators.techniques import STRATEGIES
 
     strategy = STRATEGIES[strategy_name]

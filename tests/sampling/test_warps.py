@@ -164,3 +164,33 @@ def test_bad_arguments():
         warps.square_to_uniform_cone(np.zeros((1, 2)), 1.0)
     with pytest.raises(ValueError, match=r"\(N, 2\)"):
         warps.square_to_uniform_sphere(np.zeros((3, 3)))
+
+
+def test_sincos_turns_is_sin_and_cos_of_a_full_turn_within_2e_16():
+    """The warps' azimuths: (sin 2 pi t, cos 2 pi t) against long-double references, on random turns, every
+    1/4096 of a turn (octant and quadrant boundaries included) and turns outside [0, 1)."""
+    import numba
+
+    from lightprobe.sampling.kernels import sincos_turns
+
+    if np.finfo(np.longdouble).eps > 1e-18:
+        pytest.skip("the references need an extended-precision long double")
+
+    @numba.njit
+    def evaluate(t):
+        out = np.empty((t.size, 2))
+        for i in range(t.size):
+            out[i, 0], out[i, 1] = sincos_turns(t[i])
+        return out
+
+    rng = np.random.default_rng(12)
+    t = np.concatenate([rng.random(100_000), np.arange(4097) / 4096, [-0.3, -0.125, 1.7, 2.625, 1.0 - 2.0**-53]])
+    pi = np.longdouble("3.14159265358979323846264338327950288")
+    angle = 2 * pi * t.astype(np.longdouble)
+    out = evaluate(t)
+    assert np.abs(out[:, 0] - np.sin(angle)).max() <= 2e-16
+    assert np.abs(out[:, 1] - np.cos(angle)).max() <= 2e-16
+    quarter = np.arange(8) / 4  # exact at the quarter turns, signs included
+    exact = evaluate(quarter)
+    assert np.array_equal(exact[:, 0], [0, 1, 0, -1, 0, 1, 0, -1])
+    assert np.array_equal(exact[:, 1], [1, 0, -1, 0, 1, 0, -1, 0])

@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 
 from .._numba import jit, jit_inline
+from ..sampling.kernels import sincos_turns
 
 __all__ = ["ggx_d", "ggx_g1", "ggx_sample_visible_normal"]
 
@@ -59,9 +60,9 @@ def ggx_sample_visible_normal(alpha, vx, vy, vz, u1, u2):
     t2z = hx * t1y - hy * t1x
     # uniform point on the disc, warped to the projected visible hemisphere
     r = math.sqrt(u1)
-    phi = 2.0 * math.pi * u2
-    p1 = r * math.cos(phi)
-    p2 = r * math.sin(phi)
+    sin_phi, cos_phi = sincos_turns(u2)
+    p1 = r * cos_phi
+    p2 = r * sin_phi
     s = 0.5 * (1.0 + hz)
     p2 = (1.0 - s) * math.sqrt(max(0.0, 1.0 - p1 * p1)) + s * p2
     p3 = math.sqrt(max(0.0, 1.0 - p1 * p1 - p2 * p2))

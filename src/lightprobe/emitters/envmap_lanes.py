@@ -12,9 +12,10 @@ Every lane computes what the scalar code computes, operation for operation and i
 fast-math flags (``_numba.FASTMATH``): :func:`radiance_block` is :func:`lightprobe.emitters.envmap.env_lookup` for a
 bilinear lat-long map, :func:`env_sample_block` is ``wavefront._env_sample_stage`` for the bilinear density (its
 searches started from guide tables whose brackets it checks first, so that they find the same indices),
-:func:`env_coords_block` is ``wavefront._env_coords_stage`` (atan2 and acos from the C library, per lane).  On the
-machine measured the renders are the same bits; where LLVM fuses a multiply-add in one and not the other they may
-differ by an ulp (the tests allow for it).
+:func:`env_coords_block` is ``wavefront._env_coords_stage`` (its atan2 and acos as Cephes' polynomials in the
+lanes, within 2 ulp of the C library's the scalar stage calls).  On the machine measured the renders are the same
+bits in float32; where LLVM fuses a multiply-add in one and not the other they may differ by an ulp (the tests
+allow for it).
 
 Lanes of dead slots and lanes past a pass's last slot write nothing, and every slot of a pass goes through the
 lanes whatever the pass size, so the image does not depend on how slots fall into blocks.  A lane past the end
@@ -220,16 +221,6 @@ class _Lanes:
     def any(self, mask):
         reduce = _intrinsic(self.b, f"llvm.vector.reduce.or.v{LANES}i1", ir.IntType(1), _MASK)
         return self.b.call(reduce, [mask])
-
-    def libm(self, name, *vectors):
-        """The C library's ``name`` (doubles -> double) on every lane, one call each: the scalar kernels call the
-        same functions (Numba lowers math.atan2 and math.acos to them), so the lanes get the same bits."""
-        function = cgutils.insert_pure_function(self.b.module, ir.FunctionType(_F64, [_F64] * len(vectors)), name=name)
-        out = ir.Constant(_VF64, None)
-        for lane in range(LANES):
-            arguments = [self.b.extract_element(x, _I32(lane)) for x in vectors]
-            out = self.b.insert_element(out, self.b.call(function, arguments), _I32(lane))
-        return out
 
     def bisect(self, lo, hi, mask, below):
         """Per lane of ``mask``, envmap_bilinear's bisection: while hi - lo > 1, mid = (lo + hi) >> 1 becomes lo
@@ -443,8 +434,8 @@ def _atan2_lanes(v: _Lanes, y, x):
     """atan2(y, x) in the lanes, within 2 ulp of the C library's (a test checks 4e-16 rad on directions, poles
     included): |y| / |x| or its inverse, whichever is in [0, 1], through Cephes' atan -- its rational function
     up to 0.66, pi/4 + atan((t - 1) / (t + 1)) above -- then the octant's reflections, by the signs' bits as the C
-    library's (atan2(0, -0.0) is pi).
-    One call of libm's atan2 per lane cost two thirds of the coordinates stage (decisions.md 48)."""
+    library's (atan2(0, -0.0) is pi).  In place of a call of libm's atan2 and acos per lane, which were half of
+    the coordinates stage's time (decisions.md 48)."""
     b = v.b
     ay, ax = v.fmax(y, v.neg(y)), v.fmax(x, v.neg(x))
     hi, lo = v.fmax(ay, ax), v.fmin(ay, ax)
@@ -705,7 +696,7 @@ def env_coords_block(
     numbered over its camera samples as :func:`env_sample_block` numbers its own (slot ``first + q % count`` of
     camera sample ``q // count``): each live one gets the lat-long (u, v) of its direction (envmap.env_coords)
     and, under MIS, each BSDF sample the bilinear density there (envmap._pdf_at with ``pdf="bilinear"``).  atan2
-    and acos are the C library's, called per lane, so that the bits are the scalar stage's."""
+    and acos are :func:`_atan2_lanes` and :func:`_acos_lanes`, within 2 ulp of the scalar stage's C library."""
     signature_args = (
         state, material, compensate, m, mis, wdir, to_env, luminance, sines, plain_marginal, comp_marginal,
         comp_offset, uv, epdf, first, count, start,
