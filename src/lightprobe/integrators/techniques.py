@@ -21,8 +21,9 @@ STRATEGIES = {"uniform": 0, "cosine": 1, "brdf": 2, "env": 3, "mis": 4}
 UNIFORM, COSINE, BRDF, ENV, MIS = range(5)
 # slot states: empty, a BSDF sample, a light (environment) sample, a hemisphere sample
 SLOT_NONE, SLOT_BSDF, SLOT_ENV, SLOT_HEMI = 0, 1, 2, 3
-# flags of a shading sample's shadow ray: no ray, unblocked, to be tested against meshes, blocked
-NONE, VISIBLE, TEST_MESH, BLOCKED = 0, 1, 2, 3
+# flags of a shading sample's shadow ray: no ray, unblocked, to be tested against meshes, blocked, to be tested
+# against the analytic shapes (and then the meshes' boxes)
+NONE, VISIBLE, TEST_MESH, BLOCKED, TEST_ANALYTIC = 0, 1, 2, 3, 4
 
 
 @jit_inline

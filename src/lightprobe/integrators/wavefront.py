@@ -55,6 +55,7 @@ from ..emitters.envmap import (
 )
 from ..emitters.envmap_lanes import LANES, env_coords_block, env_sample_block, radiance_block
 from ..emitters.envmap_lanes import applies as lanes_apply
+from ..emitters.envmap_lanes import compiles as lanes_compile
 from ..emitters.envmap_lanes import coords_apply as coords_in_lanes
 from ..emitters.envmap_lanes import samples_apply as samples_in_lanes
 from ..emitters.selection import SELECTORS, build_selector
@@ -66,6 +67,7 @@ from ..geometry.frame import to_local, to_world
 from ..geometry.intersect import MESH, MISS, closest_analytic, may_hit_mesh, occluded_analytic, ray_offset
 from ..geometry.raytracer import RayTracer
 from ..geometry.scene import Scene
+from ..geometry.shadow_lanes import shadow_block
 from ..sampling.mis import mis_weight
 from ..sampling.rng import SAMPLERS, SOBOL, sample_state, uniform, uniform_2d
 from ..sampling.sobol_lanes import SOBOL_Y, slot_numbers_block
@@ -81,6 +83,7 @@ from .techniques import (
     SLOT_ENV,
     SLOT_NONE,
     STRATEGIES,
+    TEST_ANALYTIC,
     TEST_MESH,
     VISIBLE,
     load_shading_frame,
@@ -630,8 +633,8 @@ def _shade_finish(
     contrib,
     flags,
 ):
-    """Contributions (BSDF value, cosine, MIS weight) and shadow rays, tested against analytic shapes here; those
-    that may reach a mesh are flagged TEST_MESH for :func:`_mesh_shadow_stage`."""
+    """Contributions (BSDF value, cosine, MIS weight); each nonzero one's shadow ray is flagged TEST_ANALYTIC for
+    :func:`_analytic_shadow_stage`."""
     m = n_bsdf + n_env
     inv_m = 1.0 / m
     for k in prange(point.shape[0]):
@@ -672,13 +675,34 @@ def _shade_finish(
                 cr, cg, cb = f[0] * lr * scale, f[1] * lg * scale, f[2] * lb * scale
             if cr == 0.0 and cg == 0.0 and cb == 0.0:
                 continue
-            qx, qy, qz = ray_offset(
-                point[k, 0], point[k, 1], point[k, 2], gnormal[k, 0], gnormal[k, 1], gnormal[k, 2], wx, wy, wz
-            )
-            if occluded_analytic(s, qx, qy, qz, wx, wy, wz, np.inf):
-                flags[r] = BLOCKED
-                continue
             contrib[r, 0], contrib[r, 1], contrib[r, 2] = cr, cg, cb
+            flags[r] = TEST_ANALYTIC
+
+
+# The analytic shapes' shadow tests run 8 slots at a time in vector IR (geometry/shadow_lanes.py): inside the finish
+# stage, one ray at a time with early exits, they were half of its time (decisions.md 49).
+@jit_parallel
+def _analytic_shadow_stage(s, m, point, gnormal, wdir, flags):
+    """Shadow rays of the slots flagged TEST_ANALYTIC against the spheres and rectangles (BLOCKED), then the
+    meshes' bounding boxes (TEST_MESH, for :func:`_mesh_shadow_stage`, or VISIBLE), 8 slots at a time."""
+    for block in prange((flags.shape[0] + LANES - 1) // LANES):
+        shadow_block(flags, point, gnormal, wdir, s.spheres, s.rects, s.mesh_bounds, m, block * LANES)
+
+
+@jit_parallel
+def _analytic_shadow_scalar_stage(s, m, point, gnormal, wdir, flags):
+    """:func:`_analytic_shadow_stage` one slot at a time: where the vector intrinsics do not compile."""
+    for r in prange(flags.shape[0]):
+        if flags[r] != TEST_ANALYTIC:
+            continue
+        k = r // m
+        wx, wy, wz = wdir[r, 0], wdir[r, 1], wdir[r, 2]
+        qx, qy, qz = ray_offset(
+            point[k, 0], point[k, 1], point[k, 2], gnormal[k, 0], gnormal[k, 1], gnormal[k, 2], wx, wy, wz
+        )
+        if occluded_analytic(s, qx, qy, qz, wx, wy, wz, np.inf):
+            flags[r] = BLOCKED
+        else:
             flags[r] = TEST_MESH if may_hit_mesh(s, qx, qy, qz, wx, wy, wz, np.inf) else VISIBLE
 
 
@@ -947,7 +971,7 @@ def render(
     }
     largest_pass = max(1, band * spp_pass)
     strategy = STRATEGIES[settings.strategy]
-    stages = (_shade_setup, *_environment_stages(scene, settings), _shade_finish)
+    stages = (_shade_setup, *_environment_stages(scene, settings), _shade_finish, _analytic_shadow_stage_for())
     if tracer.mesh_scene:
         stages += (_mesh_shadow_stage,)
     worklists = WORKLISTS
@@ -1149,6 +1173,11 @@ def _environment_stages(scene: Scene, settings: RenderSettings) -> tuple:
     return sample_stage, coords_stage, _env_radiance_stage if in_lanes else _env_radiance_scalar_stage
 
 
+def _analytic_shadow_stage_for():
+    """The analytic shadow stage in lanes where this Numba's LLVM builds the intrinsics, else the scalar one."""
+    return _analytic_shadow_stage if lanes_compile() else _analytic_shadow_scalar_stage
+
+
 def kernels_cached(scene: Scene | None = None, settings: RenderSettings | None = None) -> bool:
     """Whether the kernels a render of ``scene`` with ``settings`` takes (by default the demo's: an environment-lit
     scene with a mesh) are in the on-disk cache; else the first render compiles them, ~20-45 s."""
@@ -1165,7 +1194,12 @@ def kernels_cached(scene: Scene | None = None, settings: RenderSettings | None =
 
         shading = area_stages(meshes)
     else:
-        shading = (_shade_setup, *_environment_stages(scene, settings_for(scene, settings)), _shade_finish)
+        shading = (
+            _shade_setup,
+            *_environment_stages(scene, settings_for(scene, settings)),
+            _shade_finish,
+            _analytic_shadow_stage_for(),
+        )
         shading += (_mesh_shadow_stage,) if meshes else ()
     return is_cached(_camera_pass, *shading, _accumulate)
 

@@ -1,0 +1,205 @@
+"""Shadow rays against the analytic shapes, eight shading slots at a time, as vector LLVM IR.
+
+``wavefront._shade_finish`` used to test each shadow ray against every sphere and rectangle (``occluded_analytic``)
+and the meshes' bounding boxes (``may_hit_mesh``) one slot at a time, with early exits: 1.2 s of the peer scene's
+12-s render at 64 spp, half of that stage (docs/decisions.md 49).  :func:`shadow_block` runs the same tests for 8
+consecutive slots in 8 float64 lanes: the ray's origin (``intersect.ray_offset``), every sphere
+(``intersect.sphere_hit``), every rectangle (``intersect.rect_hit``) and every box (``intersect.box_hit``) for the
+unbounded ray, each without its early exits (a lane's answer does not depend on them: a slab interval once empty
+stays empty), in the scalar code's operations and order.  A lane whose test is decided by a last-bit difference of
+a fused multiply-add could differ from the scalar code's; the tests compare the two on random rays.
+
+Lanes hold the slots whose flag is ``TEST_ANALYTIC`` (the finish stage's contributions, not yet tested); each
+becomes ``BLOCKED``, ``TEST_MESH`` (for ``wavefront._mesh_shadow_stage``) or ``VISIBLE``.  Other slots and lanes
+past the pass's end are not written.
+"""
+
+from __future__ import annotations
+
+from llvmlite import ir
+from numba import types
+from numba.core import cgutils
+from numba.extending import intrinsic
+
+from ..emitters.envmap_lanes import _F64, _I8, _I32, _I64, _VF64, _VI8, LANES, _Lanes
+from .intersect import OFFSET_SCALE
+
+__all__ = ["LANES", "shadow_block"]
+
+# integrators.techniques' shadow flags
+VISIBLE, TEST_MESH, BLOCKED, TEST_ANALYTIC = 1, 2, 3, 4
+_INF = float("inf")
+
+
+def _loop(v: _Lanes, count, carried, body):
+    """``for i in range(count): carried = body(i, carried)`` as an IR loop (``count`` an i64 scalar, ``carried`` a
+    value threaded through the iterations); returns the last ``carried``."""
+    b = v.b
+    entry = b.block
+    head = b.append_basic_block("shapes")
+    done = b.append_basic_block("shapes.done")
+    b.cbranch(b.icmp_signed(">", count, _I64(0)), head, done)
+    b.position_at_end(head)
+    i = b.phi(_I64)
+    value = b.phi(carried.type)
+    i.add_incoming(_I64(0), entry)
+    value.add_incoming(carried, entry)
+    new_value = body(i, value)
+    following = b.add(i, _I64(1))
+    latch = b.block
+    i.add_incoming(following, latch)
+    value.add_incoming(new_value, latch)
+    b.cbranch(b.icmp_signed("<", following, count), head, done)
+    b.position_at_end(done)
+    result = b.phi(carried.type)
+    result.add_incoming(carried, entry)
+    result.add_incoming(new_value, latch)
+    return result
+
+
+def _row(v: _Lanes, array, i, width, fields):
+    """Elements ``fields`` of row i of a C-contiguous float64 (N, width) array, each splatted to the lanes."""
+    base = v.b.mul(i, _I64(width))
+    return [v.splat(v.b.load(v.b.gep(array.data, [v.b.add(base, _I64(f))])), _VF64) for f in fields]
+
+
+def _sphere_hit(v: _Lanes, o, d, centre, radius):
+    """intersect.sphere_hit(..., tmax=inf) < inf."""
+    b = v.b
+    fx, fy, fz = (v.sub(o[i], centre[i]) for i in range(3))
+    bq = v.neg(v.add(v.add(v.mul(fx, d[0]), v.mul(fy, d[1])), v.mul(fz, d[2])))
+    qx, qy, qz = (v.add(f, v.mul(bq, d[i])) for i, f in enumerate((fx, fy, fz)))
+    r2 = v.mul(radius, radius)
+    disc = v.sub(r2, v.add(v.add(v.mul(qx, qx), v.mul(qy, qy)), v.mul(qz, qz)))
+    c = v.sub(v.add(v.add(v.mul(fx, fx), v.mul(fy, fy)), v.mul(fz, fz)), r2)
+    s = v.sqrt(v.fmax(disc, v.f(0.0)))
+    q = b.select(v.ge(bq, v.f(0.0)), v.add(bq, s), v.sub(bq, s))
+    t0 = b.select(b.fcmp_unordered("!=", q, v.f(0.0)), v.div(c, q), v.f(_INF))
+    t1 = q
+    swap = v.gt(t0, t1)
+    near, far = b.select(swap, t1, t0), b.select(swap, t0, t1)
+
+    def within(t):
+        return b.and_(v.gt(t, v.f(0.0)), v.lt(t, v.f(_INF)))
+
+    return b.and_(v.ge(disc, v.f(0.0)), b.or_(within(near), within(far)))
+
+
+def _rect_hit(v: _Lanes, o, d, row):
+    """intersect.rect_hit(..., tmax=inf) < inf for a row (origin, edge u, edge v, normal) of splatted values."""
+    b = v.b
+    origin, eu, ev, normal = row[0:3], row[3:6], row[6:9], row[9:12]
+
+    def dot(x, y):
+        return v.add(v.add(v.mul(x[0], y[0]), v.mul(x[1], y[1])), v.mul(x[2], y[2]))
+
+    denom = dot(d, normal)
+    t = v.div(dot([v.sub(origin[i], o[i]) for i in range(3)], normal), denom)
+    valid = b.and_(b.fcmp_unordered("!=", denom, v.f(0.0)), b.and_(v.gt(t, v.f(0.0)), v.lt(t, v.f(_INF))))
+    p = [v.sub(v.add(o[i], v.mul(t, d[i])), origin[i]) for i in range(3)]
+    a = v.div(dot(p, eu), dot(eu, eu))
+    c = v.div(dot(p, ev), dot(ev, ev))
+    outside = b.or_(b.or_(v.lt(a, v.f(0.0)), v.gt(a, v.f(1.0))), b.or_(v.lt(c, v.f(0.0)), v.gt(c, v.f(1.0))))
+    return b.and_(valid, b.not_(outside))
+
+
+def _box_hit(v: _Lanes, o, d, lows, highs):
+    """intersect.box_hit(..., tmax=inf) for a box's splatted corners: the three slabs without the early exits."""
+    b = v.b
+    t0, t1 = v.f(0.0), v.f(_INF)
+    for axis in range(3):
+        lo, hi = lows[axis], highs[axis]
+        pad = v.mul(v.f(1e-6), v.add(v.add(_fabs(v, lo), _fabs(v, hi)), v.f(1.0)))
+        lo_pad, hi_pad = v.sub(lo, pad), v.add(hi, pad)
+        zero = b.fcmp_ordered("==", d[axis], v.f(0.0))
+        outside = b.or_(v.lt(o[axis], lo_pad), v.gt(o[axis], hi_pad))
+        inv = v.div(v.f(1.0), d[axis])
+        a = v.mul(v.sub(lo_pad, o[axis]), inv)
+        c = v.mul(v.sub(hi_pad, o[axis]), inv)
+        swap = v.gt(a, c)
+        a, c = b.select(swap, c, a), b.select(swap, a, c)
+        n0, n1 = v.fmax(t0, a), v.fmin(t1, c)
+        t0 = b.select(zero, b.select(outside, v.f(1.0), t0), n0)
+        t1 = b.select(zero, b.select(outside, v.f(0.0), t1), n1)
+    return v.le(t0, t1)
+
+
+def _fabs(v: _Lanes, x):
+    return v.b.call(_intrinsic_fabs(v.b), [x])
+
+
+def _intrinsic_fabs(builder):
+    return cgutils.get_or_insert_function(builder.module, ir.FunctionType(_VF64, [_VF64]), "llvm.fabs.v8f64")
+
+
+@intrinsic
+def shadow_block(typingctx, flags, point, gnormal, wdir, spheres, rects, bounds, m, start):
+    """For the slots ``start .. start + 7`` of a pass flagged TEST_ANALYTIC: the shadow ray from camera sample
+    ``slot // m``'s point along the slot's direction, offset as ``ray_offset`` does, against every sphere and
+    rectangle (BLOCKED if one is hit) and then every mesh box (TEST_MESH if one is crossed, else VISIBLE).
+    flags (N,) int8; point, gnormal (K, 3), wdir (N, 3), spheres (S, 4), rects (R, 12) float64; bounds (G, 2, 3)
+    float64; all C-contiguous."""
+    f64 = types.float64
+
+    def c_array(t, dtype, ndim):
+        return isinstance(t, types.Array) and t.dtype == dtype and t.ndim == ndim and t.layout == "C"
+
+    if not (
+        c_array(flags, types.int8, 1)
+        and all(c_array(t, f64, 2) for t in (point, gnormal, wdir, spheres, rects))
+        and c_array(bounds, f64, 3)
+        and isinstance(m, types.Integer)
+        and isinstance(start, types.Integer)
+    ):
+        return None
+
+    def codegen(context, builder, signature, args):
+        flags_a, point_a, normal_a, wdir_a, spheres_a, rects_a, bounds_a = (
+            context.make_array(t)(context, builder, value)
+            for t, value in zip(signature.args[:7], args[:7], strict=True)
+        )
+        v, b = _Lanes(builder), builder
+        m_v = v.splat(context.cast(b, args[7], signature.args[7], types.int64), ir.VectorType(_I64, LANES))
+        start_v = context.cast(b, args[8], signature.args[8], types.int64)
+        _, inside, read = v.slots(start_v, cgutils.unpack_tuple(b, flags_a.shape, 1)[0])
+        first = b.extract_element(read, _I32(0))
+        states = v.load_run(_I8, b.gep(flags_a.data, [first]), inside, 1, 0)
+        live = b.and_(inside, b.icmp_signed("==", states, ir.Constant(_VI8, [TEST_ANALYTIC] * LANES)))
+        d = list(v.load_run(_F64, b.gep(wdir_a.data, [b.mul(first, _I64(3))]), inside, 3, 0.0))
+        # the camera sample k = slot // m, by a float division that cannot round across an integer
+        k = b.fptosi(v.div(v.add(v.to_f(read), v.f(0.5)), v.to_f(m_v)), ir.VectorType(_I64, LANES))
+        p = [v.load_f64(point_a, b.add(b.mul(k, v.i(3)), v.i(i))) for i in range(3)]
+        n = [v.load_f64(normal_a, b.add(b.mul(k, v.i(3)), v.i(i))) for i in range(3)]
+        # intersect.ray_offset
+        largest = v.fmax(v.fmax(_fabs(v, p[0]), _fabs(v, p[1])), _fabs(v, p[2]))
+        eps = v.mul(v.f(OFFSET_SCALE), v.add(v.f(1.0), largest))
+        facing = v.add(v.add(v.mul(d[0], n[0]), v.mul(d[1], n[1])), v.mul(d[2], n[2]))
+        eps = b.select(v.lt(facing, v.f(0.0)), v.neg(eps), eps)
+        o = [v.add(p[i], v.mul(eps, n[i])) for i in range(3)]
+
+        none = ir.Constant(ir.VectorType(ir.IntType(1), LANES), [0] * LANES)
+        counts = [cgutils.unpack_tuple(b, a.shape, nd)[0] for a, nd in ((spheres_a, 2), (rects_a, 2), (bounds_a, 3))]
+
+        def sphere(i, blocked):
+            row = _row(v, spheres_a, i, 4, range(4))
+            return b.or_(blocked, _sphere_hit(v, o, d, row[0:3], row[3]))
+
+        def rect(i, blocked):
+            return b.or_(blocked, _rect_hit(v, o, d, _row(v, rects_a, i, 12, range(12))))
+
+        def box(i, crossed):
+            corners = _row(v, bounds_a, i, 6, range(6))
+            return b.or_(crossed, _box_hit(v, o, d, corners[0:3], corners[3:6]))
+
+        blocked = _loop(v, counts[0], none, sphere)
+        blocked = _loop(v, counts[1], blocked, rect)
+        crossed = _loop(v, counts[2], none, box)
+        result = b.select(
+            blocked,
+            ir.Constant(_VI8, [BLOCKED] * LANES),
+            b.select(crossed, ir.Constant(_VI8, [TEST_MESH] * LANES), ir.Constant(_VI8, [VISIBLE] * LANES)),
+        )
+        v.store(_I8, result, v.address(flags_a, read, 1), live)
+        return context.get_dummy_value()
+
+    return types.void(flags, point, gnormal, wdir, spheres, rects, bounds, m, start), codegen
