@@ -21,7 +21,7 @@ from numba import types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
-from ..emitters.envmap_lanes import _F64, _I8, _I32, _I64, _VF64, _VI8, LANES, _Lanes
+from ..emitters.envmap_lanes import _F64, _I8, _I32, _I64, _VF64, _VI8, LANES, _intrinsic, _Lanes
 from .intersect import OFFSET_SCALE
 
 __all__ = ["LANES", "shadow_block"]
@@ -125,11 +125,7 @@ def _box_hit(v: _Lanes, o, d, lows, highs):
 
 
 def _fabs(v: _Lanes, x):
-    return v.b.call(_intrinsic_fabs(v.b), [x])
-
-
-def _intrinsic_fabs(builder):
-    return cgutils.get_or_insert_function(builder.module, ir.FunctionType(_VF64, [_VF64]), "llvm.fabs.v8f64")
+    return v.b.call(_intrinsic(v.b, "llvm.fabs.v8f64", _VF64, _VF64), [x])
 
 
 @intrinsic

@@ -63,8 +63,8 @@ def phi_of(x, y):
     return f
 
 
-# sin x and cos x on [-pi/4, pi/4] by their Taylor series, x^15 and x^16 the last terms: the first omitted ones are
-# below 5e-17 of the result there (pi/4)^17 / 17! and (pi/4)^18 / 18!)
+# sin x and cos x on [-pi/4, pi/4] by their Taylor series, x^15 and x^16 the last terms: the first omitted ones,
+# (pi/4)^17 / 17! and (pi/4)^18 / 18!, are below 5e-17 there
 _SIN_TERMS = tuple((-1.0) ** k / math.factorial(2 * k + 1) for k in range(8))
 _COS_TERMS = tuple((-1.0) ** k / math.factorial(2 * k) for k in range(9))
 
