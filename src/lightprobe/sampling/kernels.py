@@ -70,6 +70,15 @@ _COS_TERMS = tuple((-1.0) ** k / math.factorial(2 * k) for k in range(9))
 
 
 @jit_inline
+def _series_tail(terms, x2):
+    """terms[1] + terms[2] x2 + ... + terms[-1] x2^(n-2), by Horner's rule from the last term."""
+    acc = terms[len(terms) - 1]
+    for i in range(len(terms) - 2, 0, -1):
+        acc = acc * x2 + terms[i]
+    return acc
+
+
+@jit_inline
 def sincos_turns(t):
     """(sin 2 pi t, cos 2 pi t) for a finite t in turns: the nearest quarter turn q / 4 is taken out exactly, the
     rest x = 2 pi (t - q / 4) in [-pi/4, pi/4] goes through the Taylor polynomials, and q mod 4 picks the signs and
@@ -78,23 +87,8 @@ def sincos_turns(t):
     q = math.floor(4.0 * t + 0.5)
     x = TWO_PI * (t - 0.25 * q)
     x2 = x * x
-    s = _SIN_TERMS[7]
-    s = s * x2 + _SIN_TERMS[6]
-    s = s * x2 + _SIN_TERMS[5]
-    s = s * x2 + _SIN_TERMS[4]
-    s = s * x2 + _SIN_TERMS[3]
-    s = s * x2 + _SIN_TERMS[2]
-    s = s * x2 + _SIN_TERMS[1]
-    s = x + x * (s * x2)
-    c = _COS_TERMS[8]
-    c = c * x2 + _COS_TERMS[7]
-    c = c * x2 + _COS_TERMS[6]
-    c = c * x2 + _COS_TERMS[5]
-    c = c * x2 + _COS_TERMS[4]
-    c = c * x2 + _COS_TERMS[3]
-    c = c * x2 + _COS_TERMS[2]
-    c = c * x2 + _COS_TERMS[1]
-    c = 1.0 + c * x2
+    s = x + x * (_series_tail(_SIN_TERMS, x2) * x2)
+    c = 1.0 + _series_tail(_COS_TERMS, x2) * x2
     # quarter turn q: (sin, cos) = (s, c), (c, -s), (-s, -c), (-c, s) for q mod 4 = 0, 1, 2, 3, without branches
     # (q is random: a branch on it mispredicts)
     quadrant = int(q)
