@@ -100,6 +100,9 @@ class _Lanes:
     def sqrt(self, a):
         return self.b.call(_intrinsic(self.b, "llvm.sqrt.v8f64", _VF64, _VF64), [a], fastmath=_FLAGS)
 
+    def fabs(self, a):
+        return self.b.call(_intrinsic(self.b, "llvm.fabs.v8f64", _VF64, _VF64), [a])
+
     def fmax(self, a, c):
         return self.b.select(self.b.fcmp_ordered(">", c, a), c, a)
 
@@ -437,7 +440,7 @@ def _atan2_lanes(v: _Lanes, y, x):
     library's (atan2(0, -0.0) is pi).  In place of a call of libm's atan2 and acos per lane, which were half of
     the coordinates stage's time (decisions.md 48)."""
     b = v.b
-    ay, ax = v.fmax(y, v.neg(y)), v.fmax(x, v.neg(x))
+    ay, ax = v.fabs(y), v.fabs(x)
     hi, lo = v.fmax(ay, ax), v.fmin(ay, ax)
     positive = v.gt(hi, v.f(0.0))
     t = b.select(positive, v.div(lo, b.select(positive, hi, v.f(1.0))), v.f(0.0))

@@ -21,7 +21,7 @@ from numba import types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
-from ..emitters.envmap_lanes import _F64, _I8, _I32, _I64, _VF64, _VI8, LANES, _intrinsic, _Lanes
+from ..emitters.envmap_lanes import _F64, _I8, _I32, _I64, _VF64, _VI8, LANES, _Lanes
 from .intersect import OFFSET_SCALE
 
 __all__ = ["LANES", "shadow_block"]
@@ -63,15 +63,20 @@ def _row(v: _Lanes, array, i, width, fields):
     return [v.splat(v.b.load(v.b.gep(array.data, [v.b.add(base, _I64(f))])), _VF64) for f in fields]
 
 
+def _dot(v: _Lanes, x, y):
+    """x . y of 3-vectors of lanes, summed as the scalar code writes it: (x0 y0 + x1 y1) + x2 y2."""
+    return v.add(v.add(v.mul(x[0], y[0]), v.mul(x[1], y[1])), v.mul(x[2], y[2]))
+
+
 def _sphere_hit(v: _Lanes, o, d, centre, radius):
     """intersect.sphere_hit(..., tmax=inf) < inf."""
     b = v.b
-    fx, fy, fz = (v.sub(o[i], centre[i]) for i in range(3))
-    bq = v.neg(v.add(v.add(v.mul(fx, d[0]), v.mul(fy, d[1])), v.mul(fz, d[2])))
-    qx, qy, qz = (v.add(f, v.mul(bq, d[i])) for i, f in enumerate((fx, fy, fz)))
+    f = [v.sub(o[i], centre[i]) for i in range(3)]
+    bq = v.neg(_dot(v, f, d))
+    foot = [v.add(f[i], v.mul(bq, d[i])) for i in range(3)]  # the line's nearest point to the centre, from it
     r2 = v.mul(radius, radius)
-    disc = v.sub(r2, v.add(v.add(v.mul(qx, qx), v.mul(qy, qy)), v.mul(qz, qz)))
-    c = v.sub(v.add(v.add(v.mul(fx, fx), v.mul(fy, fy)), v.mul(fz, fz)), r2)
+    disc = v.sub(r2, _dot(v, foot, foot))
+    c = v.sub(_dot(v, f, f), r2)
     s = v.sqrt(v.fmax(disc, v.f(0.0)))
     q = b.select(v.ge(bq, v.f(0.0)), v.add(bq, s), v.sub(bq, s))
     t0 = b.select(b.fcmp_unordered("!=", q, v.f(0.0)), v.div(c, q), v.f(_INF))
@@ -89,16 +94,12 @@ def _rect_hit(v: _Lanes, o, d, row):
     """intersect.rect_hit(..., tmax=inf) < inf for a row (origin, edge u, edge v, normal) of splatted values."""
     b = v.b
     origin, eu, ev, normal = row[0:3], row[3:6], row[6:9], row[9:12]
-
-    def dot(x, y):
-        return v.add(v.add(v.mul(x[0], y[0]), v.mul(x[1], y[1])), v.mul(x[2], y[2]))
-
-    denom = dot(d, normal)
-    t = v.div(dot([v.sub(origin[i], o[i]) for i in range(3)], normal), denom)
+    denom = _dot(v, d, normal)
+    t = v.div(_dot(v, [v.sub(origin[i], o[i]) for i in range(3)], normal), denom)
     valid = b.and_(b.fcmp_unordered("!=", denom, v.f(0.0)), b.and_(v.gt(t, v.f(0.0)), v.lt(t, v.f(_INF))))
     p = [v.sub(v.add(o[i], v.mul(t, d[i])), origin[i]) for i in range(3)]
-    a = v.div(dot(p, eu), dot(eu, eu))
-    c = v.div(dot(p, ev), dot(ev, ev))
+    a = v.div(_dot(v, p, eu), _dot(v, eu, eu))
+    c = v.div(_dot(v, p, ev), _dot(v, ev, ev))
     outside = b.or_(b.or_(v.lt(a, v.f(0.0)), v.gt(a, v.f(1.0))), b.or_(v.lt(c, v.f(0.0)), v.gt(c, v.f(1.0))))
     return b.and_(valid, b.not_(outside))
 
@@ -109,7 +110,7 @@ def _box_hit(v: _Lanes, o, d, lows, highs):
     t0, t1 = v.f(0.0), v.f(_INF)
     for axis in range(3):
         lo, hi = lows[axis], highs[axis]
-        pad = v.mul(v.f(1e-6), v.add(v.add(_fabs(v, lo), _fabs(v, hi)), v.f(1.0)))
+        pad = v.mul(v.f(1e-6), v.add(v.add(v.fabs(lo), v.fabs(hi)), v.f(1.0)))
         lo_pad, hi_pad = v.sub(lo, pad), v.add(hi, pad)
         zero = b.fcmp_ordered("==", d[axis], v.f(0.0))
         outside = b.or_(v.lt(o[axis], lo_pad), v.gt(o[axis], hi_pad))
@@ -122,10 +123,6 @@ def _box_hit(v: _Lanes, o, d, lows, highs):
         t0 = b.select(zero, b.select(outside, v.f(1.0), t0), n0)
         t1 = b.select(zero, b.select(outside, v.f(0.0), t1), n1)
     return v.le(t0, t1)
-
-
-def _fabs(v: _Lanes, x):
-    return v.b.call(_intrinsic(v.b, "llvm.fabs.v8f64", _VF64, _VF64), [x])
 
 
 @intrinsic
@@ -167,9 +164,9 @@ def shadow_block(typingctx, flags, point, gnormal, wdir, spheres, rects, bounds,
         p = [v.load_f64(point_a, b.add(b.mul(k, v.i(3)), v.i(i))) for i in range(3)]
         n = [v.load_f64(normal_a, b.add(b.mul(k, v.i(3)), v.i(i))) for i in range(3)]
         # intersect.ray_offset
-        largest = v.fmax(v.fmax(_fabs(v, p[0]), _fabs(v, p[1])), _fabs(v, p[2]))
+        largest = v.fmax(v.fmax(v.fabs(p[0]), v.fabs(p[1])), v.fabs(p[2]))
         eps = v.mul(v.f(OFFSET_SCALE), v.add(v.f(1.0), largest))
-        facing = v.add(v.add(v.mul(d[0], n[0]), v.mul(d[1], n[1])), v.mul(d[2], n[2]))
+        facing = _dot(v, d, n)
         eps = b.select(v.lt(facing, v.f(0.0)), v.neg(eps), eps)
         o = [v.add(p[i], v.mul(eps, n[i])) for i in range(3)]
 
