@@ -33,28 +33,36 @@ _INF = float("inf")
 
 def _loop(v: _Lanes, count, carried, body):
     """``for i in range(count): carried = body(i, carried)`` as an IR loop (``count`` an i64 scalar, ``carried`` a
-    value threaded through the iterations); returns the last ``carried``."""
+    value, or a tuple of values, threaded through the iterations); returns the last ``carried``."""
     b = v.b
+    single = not isinstance(carried, tuple)
+    values = (carried,) if single else carried
     entry = b.block
     head = b.append_basic_block("shapes")
     done = b.append_basic_block("shapes.done")
     b.cbranch(b.icmp_signed(">", count, _I64(0)), head, done)
     b.position_at_end(head)
     i = b.phi(_I64)
-    value = b.phi(carried.type)
+    phis = [b.phi(x.type) for x in values]
     i.add_incoming(_I64(0), entry)
-    value.add_incoming(carried, entry)
-    new_value = body(i, value)
+    for phi, x in zip(phis, values, strict=True):
+        phi.add_incoming(x, entry)
+    new_values = body(i, phis[0] if single else tuple(phis))
+    new_values = (new_values,) if single else new_values
     following = b.add(i, _I64(1))
     latch = b.block
     i.add_incoming(following, latch)
-    value.add_incoming(new_value, latch)
+    for phi, x in zip(phis, new_values, strict=True):
+        phi.add_incoming(x, latch)
     b.cbranch(b.icmp_signed("<", following, count), head, done)
     b.position_at_end(done)
-    result = b.phi(carried.type)
-    result.add_incoming(carried, entry)
-    result.add_incoming(new_value, latch)
-    return result
+    results = []
+    for x, y in zip(values, new_values, strict=True):
+        result = b.phi(x.type)
+        result.add_incoming(x, entry)
+        result.add_incoming(y, latch)
+        results.append(result)
+    return results[0] if single else tuple(results)
 
 
 def _row(v: _Lanes, array, i, width, fields):
@@ -68,8 +76,8 @@ def _dot(v: _Lanes, x, y):
     return v.add(v.add(v.mul(x[0], y[0]), v.mul(x[1], y[1])), v.mul(x[2], y[2]))
 
 
-def _sphere_hit(v: _Lanes, o, d, centre, radius):
-    """intersect.sphere_hit(..., tmax=inf) < inf."""
+def _sphere_t(v: _Lanes, o, d, centre, radius, tmax):
+    """intersect.sphere_hit(..., tmax): the nearest t in (0, tmax), else inf."""
     b = v.b
     f = [v.sub(o[i], centre[i]) for i in range(3)]
     bq = v.neg(_dot(v, f, d))
@@ -85,23 +93,24 @@ def _sphere_hit(v: _Lanes, o, d, centre, radius):
     near, far = b.select(swap, t1, t0), b.select(swap, t0, t1)
 
     def within(t):
-        return b.and_(v.gt(t, v.f(0.0)), v.lt(t, v.f(_INF)))
+        return b.and_(v.gt(t, v.f(0.0)), v.lt(t, tmax))
 
-    return b.and_(v.ge(disc, v.f(0.0)), b.or_(within(near), within(far)))
+    t = b.select(within(near), near, b.select(within(far), far, v.f(_INF)))
+    return b.select(v.ge(disc, v.f(0.0)), t, v.f(_INF))
 
 
-def _rect_hit(v: _Lanes, o, d, row):
-    """intersect.rect_hit(..., tmax=inf) < inf for a row (origin, edge u, edge v, normal) of splatted values."""
+def _rect_t(v: _Lanes, o, d, row, tmax):
+    """intersect.rect_hit(..., tmax) for a row (origin, edge u, edge v, normal) of splatted values: t, else inf."""
     b = v.b
     origin, eu, ev, normal = row[0:3], row[3:6], row[6:9], row[9:12]
     denom = _dot(v, d, normal)
     t = v.div(_dot(v, [v.sub(origin[i], o[i]) for i in range(3)], normal), denom)
-    valid = b.and_(b.fcmp_unordered("!=", denom, v.f(0.0)), b.and_(v.gt(t, v.f(0.0)), v.lt(t, v.f(_INF))))
+    valid = b.and_(b.fcmp_unordered("!=", denom, v.f(0.0)), b.and_(v.gt(t, v.f(0.0)), v.lt(t, tmax)))
     p = [v.sub(v.add(o[i], v.mul(t, d[i])), origin[i]) for i in range(3)]
     a = v.div(_dot(v, p, eu), _dot(v, eu, eu))
     c = v.div(_dot(v, p, ev), _dot(v, ev, ev))
     outside = b.or_(b.or_(v.lt(a, v.f(0.0)), v.gt(a, v.f(1.0))), b.or_(v.lt(c, v.f(0.0)), v.gt(c, v.f(1.0))))
-    return b.and_(valid, b.not_(outside))
+    return b.select(b.and_(valid, b.not_(outside)), t, v.f(_INF))
 
 
 def _box_hit(v: _Lanes, o, d, lows, highs):
@@ -175,10 +184,10 @@ def shadow_block(typingctx, flags, point, gnormal, wdir, spheres, rects, bounds,
 
         def sphere(i, blocked):
             row = _row(v, spheres_a, i, 4, range(4))
-            return b.or_(blocked, _sphere_hit(v, o, d, row[0:3], row[3]))
+            return b.or_(blocked, v.lt(_sphere_t(v, o, d, row[0:3], row[3], v.f(_INF)), v.f(_INF)))
 
         def rect(i, blocked):
-            return b.or_(blocked, _rect_hit(v, o, d, _row(v, rects_a, i, 12, range(12))))
+            return b.or_(blocked, v.lt(_rect_t(v, o, d, _row(v, rects_a, i, 12, range(12)), v.f(_INF)), v.f(_INF)))
 
         def box(i, crossed):
             corners = _row(v, bounds_a, i, 6, range(6))

@@ -39,7 +39,7 @@ import numba
 import numpy as np
 
 from .._memory import fresh_array
-from .._numba import jit_parallel, prange
+from .._numba import jit_inline, jit_parallel, prange
 from ..bsdfs.dispatch import bsdf_eval, bsdf_pdf
 from ..bsdfs.lambert import LAMBERT
 from ..bsdfs.phong import PHONG
@@ -61,6 +61,7 @@ from ..emitters.envmap_lanes import samples_apply as samples_in_lanes
 from ..emitters.selection import SELECTORS, build_selector
 from ..errors import ParameterError
 from ..geometry.camera import camera_ray
+from ..geometry.camera_lanes import nearest_block
 from ..geometry.embree import FAR as MESH_FAR
 from ..geometry.embree import closest_mesh_hit, mesh_occluded
 from ..geometry.frame import to_local, to_world
@@ -275,6 +276,36 @@ class RenderResult:
 
 
 # --- kernels ------------------------------------------------------------------------------------------------------
+@jit_inline
+def _camera_ray_into(cam, sampler, seed, pixels, spp_pass, sample_start, dirs, k):
+    """Camera sample k's ray direction, into dirs[k] (box filter with jitter)."""
+    pixel = pixels[k // spp_pass]
+    rs = sample_state(sampler, seed, pixel, sample_start + k % spp_pass)
+    u0, u1 = uniform_2d(rs, 0)
+    dirs[k, 0], dirs[k, 1], dirs[k, 2] = camera_ray(cam, pixel, u0, u1)
+
+
+@jit_inline
+def _mesh_hit_into(s, cam, mesh_scene, scratch, ray_counts, dirs, t, kind, index, prim, b1, b2, k):
+    """Camera sample k's nearest mesh hit through Embree, where its ray may reach a mesh's bounds before its
+    analytic hit t[k]; the mesh hit replaces that one when nearer."""
+    prim[k] = 0
+    b1[k] = 0.0
+    b2[k] = 0.0
+    ox, oy, oz = cam[0], cam[1], cam[2]
+    dx, dy, dz = dirs[k, 0], dirs[k, 1], dirs[k, 2]
+    if mesh_scene != 0 and may_hit_mesh(s, ox, oy, oz, dx, dy, dz, t[k]):
+        ray_counts[numba.get_thread_id(), 0] += 1
+        far = t[k] if t[k] < np.inf else MESH_FAR
+        mt, mesh, face, mb1, mb2 = closest_mesh_hit(mesh_scene, scratch, ox, oy, oz, dx, dy, dz, far)
+        if mesh >= 0:
+            t[k], kind[k], index[k], prim[k], b1[k], b2[k] = mt, MESH, mesh, face, mb1, mb2
+
+
+# The analytic nearest hits run 8 camera samples at a time in vector IR (geometry/camera_lanes.py): one ray at a time
+# they were half of this stage (decisions.md 49, 50).  Meshes in the same loop: camera rays are coherent, and here
+# they cost 0.27 s of the peer scene's 64-spp render against 0.42 s in a loop of their own (the opposite of shadow
+# rays, decisions.md 30).
 @jit_parallel
 def _camera_pass(
     s,
@@ -295,27 +326,45 @@ def _camera_pass(
     b1,
     b2,
 ):
-    """Camera rays and their nearest hits: analytic shapes, then meshes through Embree where a ray may reach a
-    mesh's bounds before its analytic hit."""
+    """Camera rays and their nearest hits: analytic shapes, 8 rays at a time, then meshes through Embree where a
+    ray may reach a mesh's bounds before its analytic hit."""
+    n = dirs.shape[0]
+    for block in prange((n + LANES - 1) // LANES):
+        start = block * LANES
+        stop = min(start + LANES, n)
+        for k in range(start, stop):
+            _camera_ray_into(cam, sampler, seed, pixels, spp_pass, sample_start, dirs, k)
+        nearest_block(dirs, t, kind, index, cam, s.spheres, s.rects, start)
+        for k in range(start, stop):
+            _mesh_hit_into(s, cam, mesh_scene, scratch, ray_counts, dirs, t, kind, index, prim, b1, b2, k)
+
+
+@jit_parallel
+def _camera_scalar_pass(
+    s,
+    cam,
+    sampler,
+    seed,
+    pixels,
+    spp_pass,
+    sample_start,
+    mesh_scene,
+    scratch,
+    ray_counts,
+    dirs,
+    t,
+    kind,
+    index,
+    prim,
+    b1,
+    b2,
+):
+    """:func:`_camera_pass` one ray at a time: where the vector intrinsics do not compile."""
     ox, oy, oz = cam[0], cam[1], cam[2]
     for k in prange(dirs.shape[0]):
-        pixel = pixels[k // spp_pass]
-        rs = sample_state(sampler, seed, pixel, sample_start + k % spp_pass)
-        u0, u1 = uniform_2d(rs, 0)
-        dx, dy, dz = camera_ray(cam, pixel, u0, u1)
-        dirs[k, 0], dirs[k, 1], dirs[k, 2] = dx, dy, dz
-        t[k], kind[k], index[k] = closest_analytic(s, ox, oy, oz, dx, dy, dz, np.inf)
-        prim[k] = 0
-        b1[k] = 0.0
-        b2[k] = 0.0
-        # meshes in the same loop: camera rays are coherent, and here they cost 0.27 s of the peer scene's 64-spp
-        # render against 0.42 s in a loop of their own (the opposite of shadow rays, decisions.md 30)
-        if mesh_scene != 0 and may_hit_mesh(s, ox, oy, oz, dx, dy, dz, t[k]):
-            ray_counts[numba.get_thread_id(), 0] += 1
-            far = t[k] if t[k] < np.inf else MESH_FAR
-            mt, mesh, face, mb1, mb2 = closest_mesh_hit(mesh_scene, scratch, ox, oy, oz, dx, dy, dz, far)
-            if mesh >= 0:
-                t[k], kind[k], index[k], prim[k], b1[k], b2[k] = mt, MESH, mesh, face, mb1, mb2
+        _camera_ray_into(cam, sampler, seed, pixels, spp_pass, sample_start, dirs, k)
+        t[k], kind[k], index[k] = closest_analytic(s, ox, oy, oz, dirs[k, 0], dirs[k, 1], dirs[k, 2], np.inf)
+        _mesh_hit_into(s, cam, mesh_scene, scratch, ray_counts, dirs, t, kind, index, prim, b1, b2, k)
 
 
 # Shading runs as five kernels rather than one: the environment lookups are cache misses (the map and its CDFs
@@ -971,6 +1020,7 @@ def render(
     }
     largest_pass = max(1, band * spp_pass)
     strategy = STRATEGIES[settings.strategy]
+    camera_pass = _camera_pass_for()
     stages = (_shade_setup, *_environment_stages(scene, settings), _shade_finish, _analytic_shadow_stage_for())
     if tracer.mesh_scene:
         stages += (_mesh_shadow_stage,)
@@ -1031,7 +1081,7 @@ def render(
         b = {k: v[: n * m] if v.shape[0] == largest_pass * m else v[:n] for k, v in buffers.items()}
         values = {**constants, **b, "spp_pass": spp_now, "sample_start": sample_start}
         values["pixels"] = pixels
-        _launch(_camera_pass, values)
+        _launch(camera_pass, values)
         for kernel in stages:
             if kernel in worklists:
                 values["todo"] = worklists[kernel](b)
@@ -1178,6 +1228,12 @@ def _analytic_shadow_stage_for():
     return _analytic_shadow_stage if lanes_compile() else _analytic_shadow_scalar_stage
 
 
+def _camera_pass_for():
+    """The camera pass with its analytic hits in lanes where this Numba's LLVM builds the intrinsics, else the
+    scalar one."""
+    return _camera_pass if lanes_compile() else _camera_scalar_pass
+
+
 def kernels_cached(scene: Scene | None = None, settings: RenderSettings | None = None) -> bool:
     """Whether the kernels a render of ``scene`` with ``settings`` takes (by default the demo's: an environment-lit
     scene with a mesh) are in the on-disk cache; else the first render compiles them, ~20-45 s."""
@@ -1201,7 +1257,7 @@ def kernels_cached(scene: Scene | None = None, settings: RenderSettings | None =
             _analytic_shadow_stage_for(),
         )
         shading += (_mesh_shadow_stage,) if meshes else ()
-    return is_cached(_camera_pass, *shading, _accumulate)
+    return is_cached(_camera_pass_for(), *shading, _accumulate)
 
 
 class _Stop(Exception):

@@ -1,0 +1,100 @@
+"""The camera rays' nearest analytic hits in lanes (geometry/camera_lanes.py) against the scalar pass, ray for ray."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lightprobe.bsdfs import Lambert
+from lightprobe.demo import blob_mesh
+from lightprobe.emitters.envmap import EnvironmentMap
+from lightprobe.geometry.camera import Camera
+from lightprobe.geometry.embree import new_scratch
+from lightprobe.geometry.intersect import MESH, MISS, RECT, SPHERE
+from lightprobe.geometry.raytracer import RayTracer
+from lightprobe.geometry.scene import Scene
+from lightprobe.geometry.shapes import Rectangle, Sphere
+from lightprobe.integrators import wavefront
+from lightprobe.integrators.wavefront import RenderSettings, render
+from lightprobe.sampling.rng import SAMPLERS
+
+
+def _scene(meshes=True, spheres=True, resolution=(97, 89)):
+    sc = Scene(Camera([0, 1, 5], [0, 0.5, 0], resolution=resolution), EnvironmentMap.from_array(np.ones((2, 4, 3))))
+    sc.add_material("m", Lambert(0.5))
+    if meshes:
+        sc.add(blob_mesh(2), "m", transform={"scale": 0.7, "translate": [0, 0.8, 0]})
+    if spheres:
+        sc.add(Sphere([-1.5, 0.5, 0], 0.5), "m")
+        sc.add(Sphere([-1.2, 0.7, 0.3], 0.4), "m")  # overlaps the first: the nearer of two hits must win
+        sc.add(Sphere([1.2, 0.6, 1.0], 0.6), "m")
+    sc.add(Rectangle.ground(size=6), "m")
+    sc.add(Rectangle([-2.0, 0.0, -2.0], [0.0, 2.0, 0.0], [0.0, 0.0, 1.5]), "m")  # a wall facing +x
+    sc.add(Rectangle([-1.0, 0.0, -2.5], [2.0, 0.0, 0.0], [0.0, 1.5, 0.0]), "m")  # a back wall behind the mesh
+    return sc
+
+
+def _hits(kernel, scene, cam, spp_pass=3, tracer=None):
+    """(t, kind, index, prim) of every camera sample of one pass over all pixels, ``spp_pass`` samples each."""
+    arrays = scene.compile()
+    width, height = scene.camera.resolution
+    pixels = np.arange(width * height, dtype=np.int64)
+    n = pixels.size * spp_pass  # 25 899 for 97 x 89 x 3: not a multiple of 8
+    out = {"dirs": np.zeros((n, 3)), "t": np.zeros(n), "b1": np.zeros(n), "b2": np.zeros(n)}
+    out.update({name: np.zeros(n, np.int64) for name in ("kind", "index", "prim")})
+    mesh_scene = tracer.mesh_scene if tracer is not None else 0
+    scratch = tracer.scratch if tracer is not None else new_scratch()
+    ray_counts = np.zeros((64, 2), np.int64)
+    kernel(arrays, cam, SAMPLERS["sobol"], 7, pixels, spp_pass, 0, mesh_scene, scratch, ray_counts, **out)
+    return out
+
+
+@pytest.mark.parametrize(
+    ("meshes", "spheres", "inside"), [(False, True, False), (False, False, False), (False, True, True)]
+)
+def test_lanes_find_every_nearest_hit_the_scalar_pass_finds(meshes, spheres, inside):
+    """The same distance, kind and index for every camera ray (a pass that is not a multiple of 8; overlapping
+    spheres; rectangles behind spheres; a scene without spheres, where the lanes' sphere loop runs zero times), and
+    from an origin inside a sphere, where the far root is the hit."""
+    scene = _scene(meshes, spheres)
+    cam = scene.camera.kernel_array()
+    if inside:
+        cam[0:3] = [-1.5, 0.6, 0.1]  # inside both overlapping spheres
+    scalar = _hits(wavefront._camera_scalar_pass, scene, cam)
+    lanes = _hits(wavefront._camera_pass, scene, cam)
+    for name in ("dirs", "t", "kind", "index"):
+        assert np.array_equal(lanes[name], scalar[name]), name
+    kinds = lanes["kind"]
+    assert np.all(np.isinf(lanes["t"][kinds == MISS])) and np.all(lanes["index"][kinds == MISS] == -1)
+    if inside:
+        assert np.all(kinds == SPHERE) and np.all(lanes["t"] < 0.8)  # each ray's way out, within a diameter
+        return
+    assert np.count_nonzero(kinds == RECT) > 2000 and np.count_nonzero(kinds == MISS) > 1000
+    if spheres:
+        assert np.count_nonzero(kinds == SPHERE) > 2000 and set(lanes["index"][kinds == SPHERE].tolist()) == {0, 1, 2}
+
+
+def test_lanes_and_the_scalar_pass_leave_the_same_mesh_hits():
+    """With a mesh, the lanes' analytic hits bound Embree's search as the scalar pass's do: same hits, same
+    faces and barycentrics."""
+    scene = _scene(meshes=True)
+    tracer = RayTracer(scene.compile())
+    try:
+        cam = scene.camera.kernel_array()
+        scalar = _hits(wavefront._camera_scalar_pass, scene, cam, tracer=tracer)
+        lanes = _hits(wavefront._camera_pass, scene, cam, tracer=tracer)
+    finally:
+        tracer.close()
+    for name in ("t", "kind", "index", "prim", "b1", "b2"):
+        assert np.array_equal(lanes[name], scalar[name]), name
+    assert np.count_nonzero(lanes["kind"] == MESH) > 1000
+
+
+def test_a_render_is_the_same_with_the_scalar_camera_pass(monkeypatch):
+    """The render picks the lanes where they compile; the scalar pass (the fallback) gives the same image bits."""
+    scene = _scene(resolution=(40, 30))
+    settings = RenderSettings(spp=4)
+    lanes = render(scene, settings)
+    monkeypatch.setattr(wavefront, "_camera_pass_for", lambda: wavefront._camera_scalar_pass)
+    scalar = render(scene, settings)
+    assert np.array_equal(lanes.image, scalar.image) and np.array_equal(lanes.variance, scalar.variance)
