@@ -342,13 +342,14 @@ def test_a_time_limit_sizes_the_last_round_to_end_at_it(monkeypatch):
         np.testing.assert_array_equal(getattr(limited, name), getattr(free, name))
 
 
-def test_the_default_pass_holds_at_most_2_21_shading_slots():
-    """2^19 camera samples per pass, fewer where they would take more than 2^21 slots (decisions.md 40); a
+def test_the_default_pass_holds_at_most_2_22_shading_slots():
+    """2^19 camera samples per pass, fewer where they would take more than 2^22 slots (decisions.md 40, 51); a
     pass_samples given is taken as it is."""
-    assert [wavefront.default_pass_samples(m) for m in (1, 4, 5, 8, 64)] == [1 << 19, 1 << 19, 419430, 1 << 18, 1 << 15]
+    passes = [wavefront.default_pass_samples(m) for m in (1, 8, 9, 16, 64)]
+    assert passes == [1 << 19, 1 << 19, 466033, 1 << 18, 1 << 16]
     scene = small_scene((64, 48))
     auto = render(scene, RenderSettings(spp=4096, strategy="brdf", n_bsdf=64, n_env=0, time_limit=1e-3))
-    assert auto.stats["spp_per_pass"] == (1 << 15) // (64 * 48)
+    assert auto.stats["spp_per_pass"] == (1 << 16) // (64 * 48)
     given = render(
         scene, RenderSettings(spp=4096, strategy="brdf", n_bsdf=64, n_env=0, time_limit=1e-3, pass_samples=1 << 19)
     )

@@ -242,12 +242,13 @@ _clock = time.perf_counter  # the render's clock (time limits, seconds); tests r
 _KINDS = {"integer": numbers.Integral, "number": numbers.Real, "string": str, "true or false": bool}
 
 
-# The default pass: 2^19 camera samples, and at most 2^21 shading slots.  Larger passes win up to about 2^21 slots
-# (launches and Python between kernels cost less per sample), and then stop winning: 8 slots per camera sample in
-# passes of 2^18 camera samples render the peer scene as fast as in 2^19, with 698 MB at the peak instead of 1.10 GB
-# (decisions.md 28, 40).
+# The default pass: 2^19 camera samples, and at most 2^22 shading slots.  Larger passes win up to about 2^21 slots
+# (launches and Python between kernels cost less per sample); since the stages got faster, 8 slots per camera sample
+# in passes of 2^19 camera samples (4.2 M slots, 1.1 GB at the peak) render the peer scene 3 % faster than in 2^18
+# (0.7 GB): fewer launches, each of which starts on tables and accumulators the stage before evicted from the caches
+# (decisions.md 28, 40, 51).
 PASS_CAMERA_SAMPLES = 1 << 19
-PASS_SLOTS = 1 << 21
+PASS_SLOTS = 1 << 22
 
 
 def default_pass_samples(shading_samples: int) -> int:
