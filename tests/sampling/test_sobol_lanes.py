@@ -6,7 +6,7 @@ from numba import njit
 
 from lightprobe.integrators.techniques import BRDF, MIS, technique_slot
 from lightprobe.sampling.rng import SAMPLERS, sample_state, uniform, uniform_2d
-from lightprobe.sampling.sobol_lanes import LANES, SOBOL_Y, slot_numbers_block
+from lightprobe.sampling.sobol_lanes import LANES, SOBOL_Y, camera_numbers_block, slot_numbers_block
 
 SOBOL = SAMPLERS["sobol"]
 
@@ -50,3 +50,37 @@ def test_slot_numbers_in_lanes_are_the_scalar_samplers(strategy, n_bsdf, m):
     assert np.array_equal(lanes, scalar)
     assert np.all(lanes[-1] == -7.0)
     assert np.all((lanes[:-1] >= 0.0) & (lanes[:-1] < 1.0))
+
+
+@njit
+def _camera_lanes(seed, pixels, spp_pass, sample_start, n):
+    dirs = np.full((n, 3), -7.0)
+    for start in range(0, n, LANES):
+        camera_numbers_block(dirs[: n - 1], SOBOL_Y, seed, pixels, spp_pass, sample_start, start)  # all but the last
+    return dirs
+
+
+@njit
+def _camera_scalar(seed, pixels, spp_pass, sample_start, n):
+    dirs = np.full((n, 3), -7.0)
+    for k in range(n - 1):
+        rs = sample_state(SOBOL, seed, pixels[k // spp_pass], sample_start + k % spp_pass)
+        dirs[k, 0], dirs[k, 1] = uniform_2d(rs, 0)
+        dirs[k, 2] = 0.0
+    return dirs
+
+
+@pytest.mark.parametrize(("spp_pass", "sample_start"), [(1, 0), (3, 5), (64, 1 << 20), (2, (1 << 32) - 1)])
+def test_camera_numbers_in_lanes_are_the_scalar_samplers(spp_pass, sample_start):
+    """The camera rays' positions in their pixels (dimensions 0 and 1) for every camera sample of a pass: pixel
+    k // spp_pass, sample index sample_start + k % spp_pass (across 2^32, where a fresh scramble starts), a pass
+    whose length is not a multiple of 8 (the row after it stays untouched)."""
+    rng = np.random.default_rng(spp_pass)
+    n = 2 * 1000 * spp_pass + 4  # 2 blocks' worth of pixels and a partial block
+    pixels = rng.integers(0, 1 << 20, n // spp_pass + 1)
+    seed = int(rng.integers(0, 1 << 31))
+    lanes = _camera_lanes(seed, pixels, spp_pass, sample_start, n)
+    scalar = _camera_scalar(seed, pixels, spp_pass, sample_start, n)
+    assert np.array_equal(lanes, scalar)
+    assert np.all(lanes[-1] == -7.0)
+    assert np.all((lanes[:-1, :2] >= 0.0) & (lanes[:-1, :2] < 1.0)) and len(np.unique(lanes[:-1, 0])) > n // 2

@@ -71,7 +71,7 @@ from ..geometry.scene import Scene
 from ..geometry.shadow_lanes import shadow_block
 from ..sampling.mis import mis_weight
 from ..sampling.rng import SAMPLERS, SOBOL, sample_state, uniform, uniform_2d
-from ..sampling.sobol_lanes import SOBOL_Y, slot_numbers_block
+from ..sampling.sobol_lanes import SOBOL_Y, camera_numbers_block, slot_numbers_block
 from . import adaptive
 from .schedule import pass_pixels
 from .techniques import (
@@ -333,8 +333,15 @@ def _camera_pass(
     for block in prange((n + LANES - 1) // LANES):
         start = block * LANES
         stop = min(start + LANES, n)
-        for k in range(start, stop):
-            _camera_ray_into(cam, sampler, seed, pixels, spp_pass, sample_start, dirs, k)
+        if sampler == SOBOL:
+            # the rays' positions in their pixels 8 at a time (sampling/sobol_lanes.py), into dirs until the
+            # directions replace them: the same bits as uniform_2d
+            camera_numbers_block(dirs, SOBOL_Y, seed, pixels, spp_pass, sample_start, start)
+            for k in range(start, stop):
+                dirs[k, 0], dirs[k, 1], dirs[k, 2] = camera_ray(cam, pixels[k // spp_pass], dirs[k, 0], dirs[k, 1])
+        else:
+            for k in range(start, stop):
+                _camera_ray_into(cam, sampler, seed, pixels, spp_pass, sample_start, dirs, k)
         nearest_block(dirs, t, kind, index, cam, s.spheres, s.rects, start)
         for k in range(start, stop):
             _mesh_hit_into(s, cam, mesh_scene, scratch, ray_counts, dirs, t, kind, index, prim, b1, b2, k)

@@ -17,9 +17,9 @@ from numba.core import cgutils
 from numba.extending import intrinsic
 
 from ..emitters.envmap_lanes import LANES, _Lanes
-from .rng import _DIM, _GOLDEN, _INV32, _LK1, _LK2, _LK3, _M1, _M2, _SOBOL_Y
+from .rng import _DIM, _GOLDEN, _INV32, _LK1, _LK2, _LK3, _M1, _M2, _PIXEL, _SOBOL_Y
 
-__all__ = ["LANES", "SOBOL_Y", "slot_numbers_block"]
+__all__ = ["LANES", "SOBOL_Y", "camera_numbers_block", "slot_numbers_block"]
 
 #: Sobol's second dimension as four byte tables (``rng._sobol_y_tables``), passed to the intrinsic
 SOBOL_Y = _SOBOL_Y
@@ -77,6 +77,30 @@ class _Integers:
         """float(x) * 2^-32 for a 32-bit value: exact."""
         return self.b.fmul(self.b.uitofp(x32, _VF64), ir.Constant(_VF64, [_INV32] * LANES))
 
+    def pair_hash(self, pkey, index, pair):
+        """rng._pair_scramble: the hash of (pixel key, Sobol' pair, index's high half) and the shuffled index."""
+        b = self.b
+        high = b.mul(b.lshr(index, self.c64(32)), self.c64(_GOLDEN))
+        h = self.mix(b.add(b.add(pkey, b.mul(b.add(pair, self.v.i(1)), self.c64(_DIM))), high))
+        return h, self.owen(b.trunc(index, _VI32), h)
+
+    def sobol_x(self, h, shuffled):
+        """rng._sobol_x."""
+        return self.to_unit(self.reverse32(self.laine_karras(shuffled, self.b.lshr(h, self.c64(32)))))
+
+    def sobol_2d(self, pkey, index, pair, table):
+        """Both coordinates of Sobol' pair ``pair`` for sample ``index`` (rng.uniform_2d): x as rng._sobol_x, y as
+        rng._sobol_y_scrambled (its four byte tables read from ``table``, :data:`SOBOL_Y`)."""
+        b, v = self.b, self.v
+        h, shuffled = self.pair_hash(pkey, index, pair)
+        wide = b.zext(shuffled, _VI64)
+        y = None
+        for q in range(4):
+            byte = b.and_(b.lshr(wide, v.i(8 * q)), v.i(255))
+            entry = v.gather(_I64, v.address(table, b.add(byte, v.i(256 * q)), 8))
+            y = entry if y is None else b.xor(y, entry)
+        return self.sobol_x(h, shuffled), self.to_unit(self.owen(b.trunc(y, _VI32), self.mix(h)))
+
 
 @intrinsic
 def slot_numbers_block(typingctx, out, sobol_y, pkey, sample, mis, n_bsdf, m, row, first_slot):
@@ -117,32 +141,59 @@ def slot_numbers_block(typingctx, out, sobol_y, pkey, sample, mis, n_bsdf, m, ro
         group_first = b.select(light, n_bsdf_v, v.i(0))
         group_size = b.select(mis, b.select(light, b.sub(m_v, n_bsdf_v), n_bsdf_v), m_v)
         index = b.add(b.mul(sample_v, group_size), b.sub(j, group_first))
-        high = b.mul(b.lshr(index, n.c64(32)), n.c64(_GOLDEN))
-        low32 = b.trunc(index, _VI32)
-
-        def pair_hash(pair):  # rng._pair_scramble's hash and shuffled index
-            h = n.mix(b.add(b.add(pkey_v, b.mul(b.add(pair, v.i(1)), n.c64(_DIM))), high))
-            return h, n.owen(low32, h)
-
-        def sobol_x(h, shuffled):  # rng._sobol_x
-            return n.to_unit(n.reverse32(n.laine_karras(shuffled, b.lshr(h, n.c64(32)))))
 
         # the 2D pair: dimensions 2 + 3 slot and 3 + 3 slot are Sobol' pair 1 + 2 slot (rng._pair_of)
-        h, shuffled = pair_hash(b.add(v.i(1), b.mul(v.i(2), group_first)))
-        u0 = sobol_x(h, shuffled)
-        wide = b.zext(shuffled, _VI64)  # rng._sobol_y: four byte tables
-        y = None
-        for q in range(4):
-            byte = b.and_(b.lshr(wide, v.i(8 * q)), v.i(255))
-            entry = v.gather(_I64, v.address(table_a, b.add(byte, v.i(256 * q)), 8))
-            y = entry if y is None else b.xor(y, entry)
-        u1 = n.to_unit(n.owen(b.trunc(y, _VI32), n.mix(h)))
+        u0, u1 = n.sobol_2d(pkey_v, index, b.add(v.i(1), b.mul(v.i(2), group_first)), table_a)
         # the 1D choice: dimension 4 + 3 slot is the first coordinate of Sobol' pair 2 + 2 slot
-        h2, shuffled2 = pair_hash(b.add(v.i(2), b.mul(v.i(2), group_first)))
-        u2 = sobol_x(h2, shuffled2)
+        h2, shuffled2 = n.pair_hash(pkey_v, index, b.add(v.i(2), b.mul(v.i(2), group_first)))
+        u2 = n.sobol_x(h2, shuffled2)
         # the 8 rows (u0, u1, u2) are 24 consecutive doubles: one masked vector store (a scatter per number measured
         # the same in the render, 3.0-3.1 s of setup)
         v.store_run([u0, u1, u2], b.gep(out_a.data, [b.mul(scalar(7), _I64(3))]), live)
+        return context.get_dummy_value()
+
+    return types.void(*signature_args), codegen
+
+
+@intrinsic
+def camera_numbers_block(typingctx, dirs, sobol_y, seed, pixels, spp_pass, sample_start, start):
+    """dirs[k, 0:2] = ``uniform_2d(sample_state(sobol, seed, pixels[k // spp_pass], sample_start + k % spp_pass),
+    0)`` -- the camera ray's position in its pixel -- for camera samples k = start .. start + 7 below len(dirs), and
+    dirs[k, 2] = 0 (the direction replaces the row).  dirs (N, 3) float64 C-contiguous, sobol_y (4, 256) uint64
+    (:data:`SOBOL_Y`), pixels (P,) int64, the rest integers."""
+    if not (
+        dirs == types.Array(types.float64, 2, "C")
+        and isinstance(sobol_y, types.Array)
+        and (sobol_y.dtype, sobol_y.ndim, sobol_y.layout) == (types.uint64, 2, "C")
+        and isinstance(pixels, types.Array)
+        and (pixels.dtype, pixels.ndim, pixels.layout) == (types.int64, 1, "C")
+        and all(isinstance(t, types.Integer) for t in (seed, spp_pass, sample_start, start))
+    ):
+        return None
+    signature_args = (dirs, sobol_y, seed, pixels, spp_pass, sample_start, start)
+
+    def codegen(context, builder, signature, args):
+        dirs_a, table_a, _, pixels_a = (
+            context.make_array(t)(context, builder, a) if isinstance(t, types.Array) else None
+            for t, a in zip(signature.args[:4], args[:4], strict=True)
+        )
+        v, b = _Lanes(builder), builder
+        n = _Integers(v)
+
+        def scalar(i):
+            return context.cast(b, args[i], signature.args[i], types.int64)
+
+        seed_v, spp_v, first_sample_v = (v.splat(scalar(i), _VI64) for i in (2, 4, 5))
+        _, inside, k = v.slots(scalar(6), cgutils.unpack_tuple(b, dirs_a.shape, 2)[0])
+        # k // spp_pass by a float division that cannot round across an integer ((k + 1/2) / spp_pass is at least
+        # 1 / (2 spp_pass) from one)
+        q = b.fptosi(v.div(v.add(v.to_f(k), v.f(0.5)), v.to_f(spp_v)), _VI64)
+        pixel = v.gather(_I64, v.address(pixels_a, q, 8))
+        sample = b.add(first_sample_v, b.sub(k, b.mul(q, spp_v)))
+        pkey = n.mix(b.add(b.mul(seed_v, n.c64(_GOLDEN)), b.mul(pixel, n.c64(_PIXEL))))  # rng.pixel_key
+        u0, u1 = n.sobol_2d(pkey, sample, v.i(0), table_a)  # dimensions 0 and 1: Sobol' pair 0
+        first = b.extract_element(k, _I32(0))
+        v.store_run([u0, u1, v.f(0.0)], b.gep(dirs_a.data, [b.mul(first, _I64(3))]), inside)
         return context.get_dummy_value()
 
     return types.void(*signature_args), codegen
