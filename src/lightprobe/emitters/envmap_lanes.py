@@ -369,6 +369,34 @@ def _numbered_slots(a: _Arguments):
     return k, b.add(b.add(b.mul(k, m_v), first_v), b.sub(q, b.mul(k, count_v))), inside
 
 
+# How far ahead the numbered stages prefetch (decisions.md 53): their slots are a camera sample's few slots of one
+# kind, read and written by 8 scalar accesses a block, a pattern the hardware prefetchers do not follow.
+PREFETCH_BLOCKS = 16
+_CACHE_LINE = 64
+
+
+def _prefetch_ahead(a: _Arguments, streams):
+    """Prefetch, for the camera samples of the first and the last lane ``PREFETCH_BLOCKS`` blocks ahead, the rows
+    of ``streams``: (array name, bytes per row, per "slot" or per camera sample "k", whether it is written).  A
+    camera sample's rows of one kind are consecutive (its slots first .. first + count - 1), so the first line and the
+    last of them cover the stream.  Prefetches never fault: the rows past the end are clamped for tidiness only."""
+    b = a.b
+    count, m, first, start = (a.scalar(name, types.int64) for name in ("count", "m", "first", "start"))
+    n_k = cgutils.unpack_tuple(b, a.arrays["material"].shape, 1)[0]
+    prefetch = _intrinsic(b, "llvm.prefetch.p0", ir.VoidType(), _I8.as_pointer(), _I32, _I32, _I32)
+    for lane in (0, LANES - 1):
+        k = b.sdiv(b.add(start, _I64(PREFETCH_BLOCKS * LANES + lane)), count)
+        k = b.select(b.icmp_signed("<", k, n_k), k, b.sub(n_k, _I64(1)))
+        for name, size, per, written in streams:
+            row = b.add(b.mul(k, m), first) if per == "slot" else k
+            rows = count if per == "slot" else _I64(1)
+            at = b.add(b.ptrtoint(a.arrays[name].data, _I64), b.mul(row, _I64(size)))
+            last = b.add(at, b.sub(b.mul(rows, _I64(size)), _I64(1)))
+            for address in (at, last) if size > 1 else (at,):
+                pointer = b.inttoptr(address, _I8.as_pointer())
+                b.call(prefetch, [pointer, _I32(1 if written else 0), _I32(3), _I32(1)])
+
+
 def _compensation(a: _Arguments, k):
     """Per lane, whether camera sample k's material takes the compensated density, and the luminance offset."""
     v, b = a.v, a.b
@@ -564,6 +592,10 @@ def env_sample_block(
         a = _Arguments(_SAMPLE_ARGS, context, builder, signature, args)
         v, b, arrays, shape = a.v, builder, a.arrays, a.shape
         k, slots, inside = _numbered_slots(a)
+        _prefetch_ahead(
+            a, (("env_u", 16, "slot", False), ("frame", 72, "k", False), ("wdir", 24, "slot", True),
+                ("uv", 16, "slot", True), ("tpdf", 8, "slot", True))
+        )  # fmt: skip
         states = v.gather(_I8, v.address(arrays["state"], slots, 1))
         live = b.and_(inside, b.icmp_signed("==", states, ir.Constant(_VI8, [SLOT_ENV] * LANES)))
         compensated, offset = _compensation(a, k)
@@ -711,6 +743,7 @@ def env_coords_block(
         a = _Arguments(_COORDS_ARGS, context, builder, signature, args)
         v, b, arrays, shape = a.v, builder, a.arrays, a.shape
         k, read, inside = _numbered_slots(a)
+        _prefetch_ahead(a, (("wdir", 24, "slot", False), ("uv", 16, "slot", True), ("epdf", 8, "slot", True)))
         states = v.gather(_I8, v.address(arrays["state"], read, 1))
         wanted = b.and_(inside, b.icmp_signed("!=", states, ir.Constant(_VI8, [SLOT_NONE] * LANES)))
         wanted = b.and_(wanted, b.icmp_signed("!=", states, ir.Constant(_VI8, [SLOT_ENV] * LANES)))
