@@ -300,6 +300,22 @@ def radiance_block(typingctx, radiance, image, uv, state, start):
         ty = v.sub(fy, v.to_f(y0))
         y1 = b.add(y0, v.i(1))
         corners = [b.mul(b.add(b.mul(y, wv), x), v.i(3)) for y in (y0, y1) for x in (x0, x1)]
+        # prefetched: the two texel rows at the slots PREFETCH_BLOCKS blocks ahead (their coordinates a contiguous run;
+        # the column without the half-texel shift, near enough for a prefetch, which never faults)
+        n_slots = cgutils.unpack_tuple(b, state_a.shape, 1)[0]
+        ahead = b.add(first, _I64(PREFETCH_BLOCKS * LANES))
+        ahead = b.select(b.icmp_signed("<", ahead, b.sub(n_slots, _I64(LANES))), ahead, first)
+        ua, va = v.load_run(_F64, b.gep(uv_a.data, [b.mul(ahead, _I64(2))]), inside, 2, 0.5)
+        xa = b.fptosi(v.mul(v.clamp(ua, 0.0, 1.0), v.to_f(wv)), _VI64)
+        xa = b.select(b.icmp_signed(">=", xa, wv), b.sub(xa, wv), xa)
+        ya = v.imin(b.fptosi(v.mul(v.clamp(va, 0.0, 1.0), v.to_f(b.sub(hv, v.i(1)))), _VI64), b.sub(hv, v.i(2)))
+        prefetch = _intrinsic(b, "llvm.prefetch.p0", ir.VoidType(), _I8.as_pointer(), _I32, _I32, _I32)
+        texel_base = b.ptrtoint(image_a.data, _I64)
+        for yy in (ya, b.add(ya, v.i(1))):
+            at = b.add(v.splat(texel_base, _VI64), b.mul(b.add(b.mul(yy, wv), xa), v.i(12)))
+            for lane in range(LANES):
+                pointer = b.inttoptr(b.extract_element(at, _I32(lane)), _I8.as_pointer())
+                b.call(prefetch, [pointer, _I32(0), _I32(3), _I32(1)])
         one_tx, one_ty = v.sub(v.f(1.0), tx), v.sub(v.f(1.0), ty)
         channels = []
         for c in range(3):
