@@ -34,7 +34,7 @@ def _scene(meshes=True, spheres=True, resolution=(97, 89)):
     return sc
 
 
-def _hits(kernel, scene, cam, spp_pass=3, tracer=None):
+def _hits(kernel, scene, cam, spp_pass=3, tracer=None, sampler="sobol"):
     """(t, kind, index, prim) of every camera sample of one pass over all pixels, ``spp_pass`` samples each."""
     arrays = scene.compile()
     width, height = scene.camera.resolution
@@ -45,23 +45,30 @@ def _hits(kernel, scene, cam, spp_pass=3, tracer=None):
     mesh_scene = tracer.mesh_scene if tracer is not None else 0
     scratch = tracer.scratch if tracer is not None else new_scratch()
     ray_counts = np.zeros((64, 2), np.int64)
-    kernel(arrays, cam, SAMPLERS["sobol"], 7, pixels, spp_pass, 0, mesh_scene, scratch, ray_counts, **out)
+    kernel(arrays, cam, SAMPLERS[sampler], 7, pixels, spp_pass, 0, mesh_scene, scratch, ray_counts, **out)
     return out
 
 
 @pytest.mark.parametrize(
-    ("meshes", "spheres", "inside"), [(False, True, False), (False, False, False), (False, True, True)]
+    ("meshes", "spheres", "inside", "sampler"),
+    [
+        (False, True, False, "sobol"),
+        (False, False, False, "sobol"),
+        (False, True, True, "sobol"),
+        (False, True, False, "independent"),
+    ],
 )
-def test_lanes_find_every_nearest_hit_the_scalar_pass_finds(meshes, spheres, inside):
-    """The same distance, kind and index for every camera ray (a pass that is not a multiple of 8; overlapping
-    spheres; rectangles behind spheres; a scene without spheres, where the lanes' sphere loop runs zero times), and
-    from an origin inside a sphere, where the far root is the hit."""
+def test_lanes_find_every_nearest_hit_the_scalar_pass_finds(meshes, spheres, inside, sampler):
+    """The same directions, distances, kinds and indices for every camera ray (a pass that is not a multiple of 8;
+    overlapping spheres; rectangles behind spheres; a scene without spheres, where the lanes' sphere loop runs zero
+    times), from an origin inside a sphere, where the far root is the hit, and with either sampler (the Sobol'
+    numbers come from lanes too)."""
     scene = _scene(meshes, spheres)
     cam = scene.camera.kernel_array()
     if inside:
         cam[0:3] = [-1.5, 0.6, 0.1]  # inside both overlapping spheres
-    scalar = _hits(wavefront._camera_scalar_pass, scene, cam)
-    lanes = _hits(wavefront._camera_pass, scene, cam)
+    scalar = _hits(wavefront._camera_scalar_pass, scene, cam, sampler=sampler)
+    lanes = _hits(wavefront._camera_pass, scene, cam, sampler=sampler)
     for name in ("dirs", "t", "kind", "index"):
         assert np.array_equal(lanes[name], scalar[name]), name
     kinds = lanes["kind"]
