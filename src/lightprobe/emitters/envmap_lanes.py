@@ -609,8 +609,9 @@ def env_sample_block(
         v, b, arrays, shape = a.v, builder, a.arrays, a.shape
         k, slots, inside = _numbered_slots(a)
         _prefetch_ahead(
-            a, (("env_u", 16, "slot", False), ("frame", 72, "k", False), ("wdir", 24, "slot", True),
-                ("uv", 16, "slot", True), ("tpdf", 8, "slot", True))
+            a, (("state", 1, "slot", False), ("material", 8, "k", False), ("env_u", 16, "slot", False),
+                ("frame", 72, "k", False), ("wdir", 24, "slot", True), ("uv", 16, "slot", True),
+                ("tpdf", 8, "slot", True))
         )  # fmt: skip
         states = v.gather(_I8, v.address(arrays["state"], slots, 1))
         live = b.and_(inside, b.icmp_signed("==", states, ir.Constant(_VI8, [SLOT_ENV] * LANES)))
@@ -759,7 +760,10 @@ def env_coords_block(
         a = _Arguments(_COORDS_ARGS, context, builder, signature, args)
         v, b, arrays, shape = a.v, builder, a.arrays, a.shape
         k, read, inside = _numbered_slots(a)
-        _prefetch_ahead(a, (("wdir", 24, "slot", False), ("uv", 16, "slot", True), ("epdf", 8, "slot", True)))
+        _prefetch_ahead(
+            a, (("state", 1, "slot", False), ("material", 8, "k", False), ("wdir", 24, "slot", False),
+                ("uv", 16, "slot", True), ("epdf", 8, "slot", True))
+        )  # fmt: skip
         states = v.gather(_I8, v.address(arrays["state"], read, 1))
         wanted = b.and_(inside, b.icmp_signed("!=", states, ir.Constant(_VI8, [SLOT_NONE] * LANES)))
         wanted = b.and_(wanted, b.icmp_signed("!=", states, ir.Constant(_VI8, [SLOT_ENV] * LANES)))
