@@ -225,6 +225,19 @@ class _Lanes:
         reduce = _intrinsic(self.b, f"llvm.vector.reduce.or.v{LANES}i1", ir.IntType(1), _MASK)
         return self.b.call(reduce, [mask])
 
+    def skip_unless(self, mask):
+        """Branch past the code that follows, up to :meth:`end_skip`, when no lane of ``mask`` is set (a block
+        whose slots are all dead -- a sky pixel's -- writes nothing, so it need not compute anything either)."""
+        work = self.b.append_basic_block("block.live")
+        done = self.b.append_basic_block("block.done")
+        self.b.cbranch(self.any(mask), work, done)
+        self.b.position_at_end(work)
+        return done
+
+    def end_skip(self, done):
+        self.b.branch(done)
+        self.b.position_at_end(done)
+
     def bisect(self, lo, hi, mask, below):
         """Per lane of ``mask``, envmap_bilinear's bisection: while hi - lo > 1, mid = (lo + hi) >> 1 becomes lo
         where ``below(mid)`` (the value at mid <= the target) and hi elsewhere.  Lanes stop one by one; the loop runs
@@ -285,21 +298,6 @@ def radiance_block(typingctx, radiance, image, uv, state, start):
         # mappings.bilinear_latlong_weights: columns at u = (i + 0.5) / W, periodic; rows at v = j / (H - 1), clamped
         h, w, _ = cgutils.unpack_tuple(b, image_a.shape, 3)
         wv, hv = v.splat(w, _VI64), v.splat(h, _VI64)
-        # u clamped to [-1/2, 3/2] (a NaN to -1/2) so that one wrap below brings every column into [0, W); with
-        # [-1, 2] a NaN's column was -1, a read before the image (caught by CI as a NaN radiance, once)
-        fx = v.sub(v.mul(v.clamp(u, -0.5, 1.5), v.to_f(wv)), v.f(0.5))
-        x0f = b.call(_intrinsic(b, "llvm.floor.v8f64", _VF64, _VF64), [fx])
-        tx = v.sub(fx, x0f)
-        x0 = b.fptosi(x0f, _VI64)
-        x0 = b.select(b.icmp_signed("<", x0, v.i(0)), b.add(x0, wv), x0)
-        x0 = b.select(b.icmp_signed(">=", x0, wv), b.sub(x0, wv), x0)
-        x1 = b.add(x0, v.i(1))
-        x1 = b.select(b.icmp_signed("<", x1, wv), x1, v.i(0))
-        fy = v.mul(v.clamp(vv, 0.0, 1.0), v.to_f(b.sub(hv, v.i(1))))
-        y0 = v.imin(b.fptosi(fy, _VI64), b.sub(hv, v.i(2)))
-        ty = v.sub(fy, v.to_f(y0))
-        y1 = b.add(y0, v.i(1))
-        corners = [b.mul(b.add(b.mul(y, wv), x), v.i(3)) for y in (y0, y1) for x in (x0, x1)]
         # prefetched: the two texel rows at the slots PREFETCH_BLOCKS blocks ahead (their coordinates a contiguous run;
         # the column without the half-texel shift, near enough for a prefetch, which never faults)
         n_slots = cgutils.unpack_tuple(b, state_a.shape, 1)[0]
@@ -316,6 +314,22 @@ def radiance_block(typingctx, radiance, image, uv, state, start):
             for lane in range(LANES):
                 pointer = b.inttoptr(b.extract_element(at, _I32(lane)), _I8.as_pointer())
                 b.call(prefetch, [pointer, _I32(0), _I32(3), _I32(1)])
+        skipped = v.skip_unless(live)
+        # u clamped to [-1/2, 3/2] (a NaN to -1/2) so that one wrap below brings every column into [0, W); with
+        # [-1, 2] a NaN's column was -1, a read before the image (caught by CI as a NaN radiance, once)
+        fx = v.sub(v.mul(v.clamp(u, -0.5, 1.5), v.to_f(wv)), v.f(0.5))
+        x0f = b.call(_intrinsic(b, "llvm.floor.v8f64", _VF64, _VF64), [fx])
+        tx = v.sub(fx, x0f)
+        x0 = b.fptosi(x0f, _VI64)
+        x0 = b.select(b.icmp_signed("<", x0, v.i(0)), b.add(x0, wv), x0)
+        x0 = b.select(b.icmp_signed(">=", x0, wv), b.sub(x0, wv), x0)
+        x1 = b.add(x0, v.i(1))
+        x1 = b.select(b.icmp_signed("<", x1, wv), x1, v.i(0))
+        fy = v.mul(v.clamp(vv, 0.0, 1.0), v.to_f(b.sub(hv, v.i(1))))
+        y0 = v.imin(b.fptosi(fy, _VI64), b.sub(hv, v.i(2)))
+        ty = v.sub(fy, v.to_f(y0))
+        y1 = b.add(y0, v.i(1))
+        corners = [b.mul(b.add(b.mul(y, wv), x), v.i(3)) for y in (y0, y1) for x in (x0, x1)]
         one_tx, one_ty = v.sub(v.f(1.0), tx), v.sub(v.f(1.0), ty)
         channels = []
         for c in range(3):
@@ -325,6 +339,7 @@ def radiance_block(typingctx, radiance, image, uv, state, start):
             bottom = v.add(v.mul(one_tx, t10), v.mul(tx, t11))
             channels.append(v.add(v.mul(one_ty, top), v.mul(ty, bottom)))
         v.store_run(channels, b.gep(radiance_a.data, [b.mul(first, _I64(3))]), live)
+        v.end_skip(skipped)
         return context.get_dummy_value()
 
     return types.void(radiance, image, uv, state, start), codegen
@@ -615,6 +630,7 @@ def env_sample_block(
         )  # fmt: skip
         states = v.gather(_I8, v.address(arrays["state"], slots, 1))
         live = b.and_(inside, b.icmp_signed("==", states, ir.Constant(_VI8, [SLOT_ENV] * LANES)))
+        skipped = v.skip_unless(live)
         compensated, offset = _compensation(a, k)
         u0 = v.load_f64(arrays["env_u"], b.mul(slots, v.i(2)))
         u1 = v.load_f64(arrays["env_u"], b.add(b.mul(slots, v.i(2)), v.i(1)))
@@ -724,6 +740,7 @@ def env_sample_block(
         v.store(_F64, pdf, v.address(arrays["tpdf"], slots, 8), kept)
         v.store(_F64, x, v.address(arrays["uv"], slots, 16), kept)
         v.store(_F64, y, b.add(v.address(arrays["uv"], slots, 16), v.i(8)), kept)
+        v.end_skip(skipped)
         return context.get_dummy_value()
 
     return types.void(*signature_args), codegen
@@ -767,6 +784,7 @@ def env_coords_block(
         states = v.gather(_I8, v.address(arrays["state"], read, 1))
         wanted = b.and_(inside, b.icmp_signed("!=", states, ir.Constant(_VI8, [SLOT_NONE] * LANES)))
         wanted = b.and_(wanted, b.icmp_signed("!=", states, ir.Constant(_VI8, [SLOT_ENV] * LANES)))
+        skipped = v.skip_unless(wanted)
         # envmap.env_coords: the direction in the environment's frame, then mappings.direction_to_latlong
         world = [v.load_f64(arrays["wdir"], b.add(b.mul(read, v.i(3)), v.i(i))) for i in range(3)]
         local = []
@@ -818,6 +836,7 @@ def env_coords_block(
         p = b.select(inside_square, p, v.f(0.0))
         pdf = b.select(v.le(sin_theta, v.f(0.0)), v.f(0.0), v.div(p, v.mul(v.f(_TWO_PI_SQUARED), sin_theta)))
         v.store(_F64, pdf, v.address(arrays["epdf"], read, 8), with_pdf)
+        v.end_skip(skipped)
         return context.get_dummy_value()
 
     return types.void(*signature_args), codegen

@@ -167,6 +167,7 @@ def shadow_block(typingctx, flags, point, gnormal, wdir, spheres, rects, bounds,
         first = b.extract_element(read, _I32(0))
         states = v.load_run(_I8, b.gep(flags_a.data, [first]), inside, 1, 0)
         live = b.and_(inside, b.icmp_signed("==", states, ir.Constant(_VI8, [TEST_ANALYTIC] * LANES)))
+        skipped = v.skip_unless(live)
         d = list(v.load_run(_F64, b.gep(wdir_a.data, [b.mul(first, _I64(3))]), inside, 3, 0.0))
         # the camera sample k = slot // m, by a float division that cannot round across an integer
         k = b.fptosi(v.div(v.add(v.to_f(read), v.f(0.5)), v.to_f(m_v)), ir.VectorType(_I64, LANES))
@@ -202,6 +203,7 @@ def shadow_block(typingctx, flags, point, gnormal, wdir, spheres, rects, bounds,
             b.select(crossed, ir.Constant(_VI8, [TEST_MESH] * LANES), ir.Constant(_VI8, [VISIBLE] * LANES)),
         )
         v.store(_I8, result, v.address(flags_a, read, 1), live)
+        v.end_skip(skipped)
         return context.get_dummy_value()
 
     return types.void(flags, point, gnormal, wdir, spheres, rects, bounds, m, start), codegen
