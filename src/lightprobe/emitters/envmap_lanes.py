@@ -17,11 +17,13 @@ lanes, within 2 ulp of the C library's the scalar stage calls).  On the machine 
 bits in float32; where LLVM fuses a multiply-add in one and not the other they may differ by an ulp (the tests
 allow for it).
 
-Lanes of dead slots and lanes past a pass's last slot write nothing, and every slot of a pass goes through the
-lanes whatever the pass size, so the image does not depend on how slots fall into blocks.  A lane past the end
-reads the last slot (or, in a masked vector load, nothing), and a coordinate outside the lookup's domain (a NaN,
-or far outside [0, 1]: a dead slot's stale value) is clamped before it becomes an index, since a vector lane cannot
-take the scalar code's slow path and an index from a NaN would address any memory.
+Lanes of dead slots and lanes past a pass's last slot write nothing (a block with no live lane branches past its
+work, decisions.md 54), and every slot of a pass goes through the lanes whatever the pass size, so the image does
+not depend on how slots fall into blocks.  Each block prefetches what the block 16 ahead will read and write
+(decisions.md 53).  A lane past the end reads the last slot (or, in a masked vector load, nothing), and a
+coordinate outside the lookup's domain (a NaN, or far outside [0, 1]: a dead slot's stale value) is clamped before
+it becomes an index, since a vector lane cannot take the scalar code's slow path and an index from a NaN would
+address any memory.
 """
 
 from __future__ import annotations
@@ -400,10 +402,10 @@ def _numbered_slots(a: _Arguments):
     return k, b.add(b.add(b.mul(k, m_v), first_v), b.sub(q, b.mul(k, count_v))), inside
 
 
-# How far ahead the numbered stages prefetch (decisions.md 53): their slots are a camera sample's few slots of one
-# kind, read and written by 8 scalar accesses a block, a pattern the hardware prefetchers do not follow.
+# How far ahead the numbered stages prefetch their slots' rows, and the radiance lanes their texels (decisions.md
+# 53): a numbered block holds a camera sample's few slots of one kind, read and written by 8 scalar accesses, a
+# pattern the hardware prefetchers do not follow; a lookup's texels are wherever its direction points.
 PREFETCH_BLOCKS = 16
-_CACHE_LINE = 64
 
 
 def _prefetch_ahead(a: _Arguments, streams):
