@@ -19,7 +19,7 @@ from numba.extending import intrinsic
 
 from ..emitters.envmap_lanes import _F64, _I32, _I64, _VF64, _VI64, LANES, _Lanes
 from .intersect import MISS, RECT, SPHERE
-from .shadow_lanes import _INF, _loop, _rect_t, _row, _sphere_t
+from .shadow_lanes import _INF, _arrays, _c_array, _loop, _rect_t, _row, _sphere_t
 
 __all__ = ["LANES", "nearest_block"]
 
@@ -31,25 +31,18 @@ def nearest_block(typingctx, dirs, t, kind, index, cam, spheres, rects, start):
     and inf where no sphere or rectangle is hit.  dirs (N, 3), t (N,), cam (>= 3,), spheres (S, 4), rects (R, 12)
     float64; kind, index (N,) int64; all C-contiguous."""
     f64, i64 = types.float64, types.int64
-
-    def c_array(a, dtype, ndim):
-        return isinstance(a, types.Array) and a.dtype == dtype and a.ndim == ndim and a.layout == "C"
-
     if not (
-        all(c_array(a, f64, 2) for a in (dirs, spheres, rects))
-        and c_array(t, f64, 1)
-        and c_array(cam, f64, 1)
-        and c_array(kind, i64, 1)
-        and c_array(index, i64, 1)
+        all(_c_array(a, f64, 2) for a in (dirs, spheres, rects))
+        and _c_array(t, f64, 1)
+        and _c_array(cam, f64, 1)
+        and _c_array(kind, i64, 1)
+        and _c_array(index, i64, 1)
         and isinstance(start, types.Integer)
     ):
         return None
 
     def codegen(context, builder, signature, args):
-        dirs_a, t_a, kind_a, index_a, cam_a, spheres_a, rects_a = (
-            context.make_array(a)(context, builder, value)
-            for a, value in zip(signature.args[:7], args[:7], strict=True)
-        )
+        dirs_a, t_a, kind_a, index_a, cam_a, spheres_a, rects_a = _arrays(context, builder, signature, args, 7)
         v, b = _Lanes(builder), builder
         start_v = context.cast(b, args[7], signature.args[7], types.int64)
         _, inside, read = v.slots(start_v, cgutils.unpack_tuple(b, t_a.shape, 1)[0])

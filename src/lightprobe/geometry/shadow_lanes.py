@@ -65,6 +65,18 @@ def _loop(v: _Lanes, count, carried, body):
     return results[0] if single else tuple(results)
 
 
+def _c_array(t, dtype, ndim) -> bool:
+    """Whether an intrinsic's argument type is a C-contiguous array of ``dtype`` and ``ndim``."""
+    return isinstance(t, types.Array) and t.dtype == dtype and t.ndim == ndim and t.layout == "C"
+
+
+def _arrays(context, builder, signature, args, n):
+    """The intrinsic's first ``n`` arguments (arrays) as Numba array structures."""
+    return [
+        context.make_array(t)(context, builder, value) for t, value in zip(signature.args[:n], args[:n], strict=True)
+    ]
+
+
 def _row(v: _Lanes, array, i, width, fields):
     """Elements ``fields`` of row i of a C-contiguous float64 (N, width) array, each splatted to the lanes."""
     base = v.b.mul(i, _I64(width))
@@ -142,24 +154,17 @@ def shadow_block(typingctx, flags, point, gnormal, wdir, spheres, rects, bounds,
     flags (N,) int8; point, gnormal (K, 3), wdir (N, 3), spheres (S, 4), rects (R, 12) float64; bounds (G, 2, 3)
     float64; all C-contiguous."""
     f64 = types.float64
-
-    def c_array(t, dtype, ndim):
-        return isinstance(t, types.Array) and t.dtype == dtype and t.ndim == ndim and t.layout == "C"
-
     if not (
-        c_array(flags, types.int8, 1)
-        and all(c_array(t, f64, 2) for t in (point, gnormal, wdir, spheres, rects))
-        and c_array(bounds, f64, 3)
+        _c_array(flags, types.int8, 1)
+        and all(_c_array(t, f64, 2) for t in (point, gnormal, wdir, spheres, rects))
+        and _c_array(bounds, f64, 3)
         and isinstance(m, types.Integer)
         and isinstance(start, types.Integer)
     ):
         return None
 
     def codegen(context, builder, signature, args):
-        flags_a, point_a, normal_a, wdir_a, spheres_a, rects_a, bounds_a = (
-            context.make_array(t)(context, builder, value)
-            for t, value in zip(signature.args[:7], args[:7], strict=True)
-        )
+        flags_a, point_a, normal_a, wdir_a, spheres_a, rects_a, bounds_a = _arrays(context, builder, signature, args, 7)
         v, b = _Lanes(builder), builder
         m_v = v.splat(context.cast(b, args[7], signature.args[7], types.int64), ir.VectorType(_I64, LANES))
         start_v = context.cast(b, args[8], signature.args[8], types.int64)
