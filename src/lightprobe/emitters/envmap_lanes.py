@@ -132,6 +132,11 @@ class _Lanes:
     def to_f(self, a):
         return self.b.sitofp(a, _VF64)
 
+    def quotient(self, a, c):
+        """a // c for non-negative int64 lanes below 2^52 and c > 0, without an integer division (none in vector
+        form): (a + 1/2) / c lies at least 1 / (2 c) from an integer, far above the rounding of a double."""
+        return self.b.fptosi(self.div(self.add(self.to_f(a), self.f(0.5)), self.to_f(c)), _VI64)
+
     def address(self, array, index, size):
         """Byte addresses of elements ``index`` (int64 lanes) of an array of ``size``-byte elements."""
         base = self.splat(self.b.ptrtoint(array.data, _I64), _VI64)
@@ -396,9 +401,7 @@ def _numbered_slots(a: _Arguments):
     n_q = b.mul(a.shape("material", 0), count_v)
     inside = b.icmp_signed("<", q, n_q)
     q = v.imin(q, b.sub(n_q, v.i(1)))
-    # q // count without an integer division (none in vector form): (q + 1/2) / count is at least 1/(2 count) away
-    # from an integer, far above the rounding of a double
-    k = b.fptosi(v.div(v.add(v.to_f(q), v.f(0.5)), v.to_f(count_v)), _VI64)
+    k = v.quotient(q, count_v)
     return k, b.add(b.add(b.mul(k, m_v), first_v), b.sub(q, b.mul(k, count_v))), inside
 
 

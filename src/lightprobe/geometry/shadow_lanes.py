@@ -174,8 +174,7 @@ def shadow_block(typingctx, flags, point, gnormal, wdir, spheres, rects, bounds,
         live = b.and_(inside, b.icmp_signed("==", states, ir.Constant(_VI8, [TEST_ANALYTIC] * LANES)))
         skipped = v.skip_unless(live)
         d = list(v.load_run(_F64, b.gep(wdir_a.data, [b.mul(first, _I64(3))]), inside, 3, 0.0))
-        # the camera sample k = slot // m, by a float division that cannot round across an integer
-        k = b.fptosi(v.div(v.add(v.to_f(read), v.f(0.5)), v.to_f(m_v)), ir.VectorType(_I64, LANES))
+        k = v.quotient(read, m_v)  # the camera sample of each slot
         p = [v.load_f64(point_a, b.add(b.mul(k, v.i(3)), v.i(i))) for i in range(3)]
         n = [v.load_f64(normal_a, b.add(b.mul(k, v.i(3)), v.i(i))) for i in range(3)]
         # intersect.ray_offset

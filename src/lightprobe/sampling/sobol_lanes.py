@@ -185,9 +185,7 @@ def camera_numbers_block(typingctx, dirs, sobol_y, seed, pixels, spp_pass, sampl
 
         seed_v, spp_v, first_sample_v = (v.splat(scalar(i), _VI64) for i in (2, 4, 5))
         _, inside, k = v.slots(scalar(6), cgutils.unpack_tuple(b, dirs_a.shape, 2)[0])
-        # k // spp_pass by a float division that cannot round across an integer ((k + 1/2) / spp_pass is at least
-        # 1 / (2 spp_pass) from one)
-        q = b.fptosi(v.div(v.add(v.to_f(k), v.f(0.5)), v.to_f(spp_v)), _VI64)
+        q = v.quotient(k, spp_v)  # the camera sample's pixel in the pass
         pixel = v.gather(_I64, v.address(pixels_a, q, 8))
         sample = b.add(first_sample_v, b.sub(k, b.mul(q, spp_v)))
         pkey = n.mix(b.add(b.mul(seed_v, n.c64(_GOLDEN)), b.mul(pixel, n.c64(_PIXEL))))  # rng.pixel_key
