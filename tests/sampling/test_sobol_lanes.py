@@ -76,7 +76,7 @@ def test_camera_numbers_in_lanes_are_the_scalar_samplers(spp_pass, sample_start)
     k // spp_pass, sample index sample_start + k % spp_pass (across 2^32, where a fresh scramble starts), a pass
     whose length is not a multiple of 8 (the row after it stays untouched)."""
     rng = np.random.default_rng(spp_pass)
-    n = 2 * 1000 * spp_pass + 4  # 2 blocks' worth of pixels and a partial block
+    n = 2 * 1000 * spp_pass + 4  # 250 spp_pass blocks of 8 and a partial one (the last row excluded)
     pixels = rng.integers(0, 1 << 20, n // spp_pass + 1)
     seed = int(rng.integers(0, 1 << 31))
     lanes = _camera_lanes(seed, pixels, spp_pass, sample_start, n)
