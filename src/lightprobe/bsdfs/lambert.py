@@ -10,7 +10,7 @@ Sampling is cosine-weighted (pdf cos(theta_i)/pi), so the sample weight is exact
 
 from __future__ import annotations
 
-from .._numba import jit
+from .._numba import jit_inline
 from ..sampling.kernels import INV_PI, cosine_hemisphere_pdf, square_to_cosine_hemisphere
 from .base import BSDF, rgb_param
 
@@ -19,21 +19,21 @@ __all__ = ["LAMBERT", "Lambert"]
 LAMBERT = 0
 
 
-@jit
+@jit_inline
 def lambert_eval(p, wo, wi):
     if wo[2] <= 0.0 or wi[2] <= 0.0:
         return 0.0, 0.0, 0.0
     return p[0] * INV_PI, p[1] * INV_PI, p[2] * INV_PI
 
 
-@jit
+@jit_inline
 def lambert_pdf(p, wo, wi):
     if wo[2] <= 0.0:
         return 0.0
     return cosine_hemisphere_pdf(wi[0], wi[1], wi[2])
 
 
-@jit
+@jit_inline
 def lambert_sample(p, wo, u0, u1, u2):
     """Returns (wi, pdf, weight) with weight = f cos / pdf = albedo."""
     if wo[2] <= 0.0:
