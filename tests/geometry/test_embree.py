@@ -5,7 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lightprobe.geometry.embree import FAR, EmbreeScene, intersect_batch, new_scratch, occluded_batch
+from lightprobe.geometry.embree import (
+    FAR,
+    EmbreeScene,
+    intersect_batch,
+    new_scratch,
+    occluded_batch,
+    occluded_packets_batch,
+    packets_native,
+)
 
 # two meshes: a unit right triangle in the plane z = 1 (mesh 0, faces 0-1: a square split in two) and a
 # triangle in z = 3 (mesh 1)
@@ -63,6 +71,38 @@ def test_segment_ends_are_respected(scene):
     assert mesh.tolist() == [-1, -1]
     # pointing away: nothing
     assert not occluded_batch(scene.handle, scratch, o, -d, np.full(2, FAR, np.float32)).any()
+
+
+needs_packets = pytest.mark.skipif(not packets_native(), reason="no native 8-ray packets on this CPU")
+
+
+@needs_packets
+def test_packets_answer_as_single_rays(scene):
+    """Shadow rays 8 per rtcOccluded8 call (the render's mesh shadow stage) block where rtcOccluded1 does, ray for
+    ray: random origins and directions, segments that end before, on and past the triangles, a partial last
+    packet (20 003 rays)."""
+    rng = np.random.default_rng(3)
+    n = 20_003
+    o = np.column_stack([rng.uniform(-1, 2, n), rng.uniform(-1, 2, n), rng.uniform(-1, 4, n)])
+    d = rng.normal(size=(n, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    far = np.where(rng.uniform(size=n) < 0.5, FAR, rng.uniform(0, 4, n)).astype(np.float32)
+    scratch = new_scratch()
+    single = occluded_batch(scene.handle, scratch, o, d, far)
+    packets = occluded_packets_batch(scene.handle, scratch, o, d, far)
+    assert 0.05 < single.mean() < 0.95  # both answers are common
+    np.testing.assert_array_equal(packets, single)
+
+
+@needs_packets
+def test_packets_of_every_fill_answer_their_own_rays(scene):
+    """Lanes past a partial packet's end are not traced and change nothing: 1 to 9 rays, alternately blocked."""
+    o, d = rays_up(np.array([[0.5, 0.25], [50.0, 0.0]] * 5)[:9])
+    for count in range(1, 10):
+        blocked = occluded_packets_batch(
+            scene.handle, new_scratch(), o[:count], d[:count], np.full(count, FAR, np.float32)
+        )
+        assert blocked.tolist() == [i % 2 == 0 for i in range(count)]
 
 
 def test_close_is_idempotent():

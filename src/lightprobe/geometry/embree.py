@@ -7,13 +7,20 @@ a kernel would make Numba refuse to cache it; a symbol name is resolved when the
 Embree inside the kernels drops the gather, float32 copy, thread pool and scatter that batches through ``embreex``
 needed (decisions.md 30 has the measurements).
 
-Ray structs live in ``scratch``, one 128-byte row per Numba thread (``numba.get_thread_id()``): Embree wants them
+Ray structs live in ``scratch``, one 640-byte row per Numba thread (``numba.get_thread_id()``): Embree wants them
 16-byte aligned (NumPy's allocations are), and rows a cache line apart keep the two threads from sharing lines.
 Layout of ``RTCRayHit`` in this build (instance arrays enabled: 96 bytes), in 32-bit words: origin 0-2, tnear 3,
 direction 4-6, time 7, tfar 8, mask 9, id 10, flags 11, geometric normal 12-14, u 15, v 16, primID 17, geomID 18,
 instID 19, instPrimID 20.  ``rtcOccluded1`` reads the first 12 words (``RTCRay``) and reports a blocked ray by
 setting tfar to -inf; ``rtcIntersect1`` leaves primID/geomID untouched on a miss, so they are set to -1 first.
 Inputs are rounded to float32 as Embree stores them; the scene is built robust (watertight), as ``embreex`` did.
+
+Shadow rays also go 8 at a time (``rtcOccluded8``, decisions.md 55) where the CPU has native 8-wide packets
+(:func:`packets_native`): the ``RTCRay8`` is structure-of-arrays, 12 rows of 8 words (origin x, y, z, tnear,
+direction x, y, z, time, tfar, mask, id, flags), 32-byte aligned, followed here by the packet's valid mask (8 words,
+-1 for a ray, 0 for a lane left empty).  It lives further along the thread's scratch row, at the first 64-byte
+boundary from word 32.  A lane's answer does not depend on the other lanes: the same image whatever the packets
+hold.
 """
 
 from __future__ import annotations
@@ -29,14 +36,30 @@ from numba import types
 from .._numba import jit_inline, jit_parallel, prange
 from ..errors import LightprobeError
 
-__all__ = ["EmbreeScene", "closest_mesh_hit", "intersect_batch", "mesh_occluded", "new_scratch", "occluded_batch"]
+__all__ = [
+    "EmbreeScene",
+    "closest_mesh_hit",
+    "intersect_batch",
+    "mesh_occluded",
+    "new_scratch",
+    "occluded_batch",
+    "occluded_packet",
+    "occluded_packets_batch",
+    "packet_ray",
+    "packet_words",
+    "packets_native",
+]
 
 INVALID_ID = 0xFFFFFFFF  # RTC_INVALID_GEOMETRY_ID
 _RTC_SCENE_FLAG_ROBUST = 1 << 2
 _RTC_GEOMETRY_TYPE_TRIANGLE = 0
 _RTC_BUFFER_TYPE_INDEX, _RTC_BUFFER_TYPE_VERTEX = 0, 1
 _RTC_FORMAT_UINT3, _RTC_FORMAT_FLOAT3 = 0x5003, 0x9003
-SCRATCH_WORDS = 32  # one row of ``scratch``: a 96-byte RTCRayHit padded to 128 bytes (two cache lines)
+# one row of ``scratch``: a 96-byte RTCRayHit padded to 128 bytes (two cache lines), then up to 60 bytes to a
+# 64-byte boundary, a 384-byte RTCRay8 and its 32-byte valid mask (640 bytes: the rows stay 64-byte multiples)
+SCRATCH_WORDS = 160
+PACKET = 8  # rays per rtcOccluded8 call
+_PACKET_WORDS = 13 * PACKET  # RTCRay8's 12 rows and the valid mask
 FAR = np.float32(3e38)  # tfar of a ray with no nearer analytic hit (as before, so hits are bit-identical)
 
 
@@ -72,6 +95,7 @@ def _load():
         "rtcCommitGeometry": (None, [vp]),
         "rtcAttachGeometry": (uint, [vp, vp]),
         "rtcReleaseGeometry": (None, [vp]),
+        "rtcGetDeviceProperty": (ctypes.c_ssize_t, [vp, ctypes.c_int]),
     }
     for name, (restype, argtypes) in signatures.items():
         fn = getattr(lib, name)
@@ -86,6 +110,21 @@ _lib = _load()
 # null arguments select Embree's defaults
 _rtc_occluded1 = types.ExternalFunction("rtcOccluded1", types.void(types.intp, types.intp, types.intp))
 _rtc_intersect1 = types.ExternalFunction("rtcIntersect1", types.void(types.intp, types.intp, types.intp))
+# void rtcOccluded8(const int* valid, RTCScene, RTCRay8*, RTCOccludedArguments*)
+_rtc_occluded8 = types.ExternalFunction("rtcOccluded8", types.void(types.intp, types.intp, types.intp, types.intp))
+_RTC_DEVICE_PROPERTY_NATIVE_RAY8_SUPPORTED = 33
+_native_packets: list[bool] = []
+
+
+def packets_native() -> bool:
+    """Does this CPU run Embree's 8-ray packets natively (AVX and up)?  Without, shadow rays go one at a time."""
+    if not _native_packets:
+        device = _lib.rtcNewDevice(None)
+        if not device:
+            raise LightprobeError("Embree could not create a device")
+        _native_packets.append(bool(_lib.rtcGetDeviceProperty(device, _RTC_DEVICE_PROPERTY_NATIVE_RAY8_SUPPORTED)))
+        _lib.rtcReleaseDevice(device)
+    return _native_packets[0]
 
 
 class EmbreeScene:
@@ -167,6 +206,43 @@ def mesh_occluded(scene, scratch, ox, oy, oz, dx, dy, dz, tfar):
 
 
 @jit_inline
+def packet_words(scratch):
+    """This thread's RTCRay8 and valid mask: 104 words of its scratch row, 64-byte aligned."""
+    words = scratch[numba.get_thread_id()]
+    start = 32 + ((64 - words.ctypes.data % 64) % 64) // 4
+    return words[start : start + _PACKET_WORDS]
+
+
+@jit_inline
+def packet_ray(packet, floats, i, ox, oy, oz, dx, dy, dz, tfar):
+    """Lane i of the packet (``floats`` is ``packet.view(np.float32)``): the ray on (0, tfar), as :func:`_put_ray`."""
+    floats[i], floats[8 + i], floats[16 + i], floats[24 + i] = (
+        np.float32(ox), np.float32(oy), np.float32(oz), np.float32(0.0)
+    )  # fmt: skip
+    floats[32 + i], floats[40 + i], floats[48 + i], floats[56 + i] = (
+        np.float32(dx), np.float32(dy), np.float32(dz), np.float32(0.0)
+    )  # fmt: skip
+    floats[64 + i] = np.float32(tfar)
+    packet[72 + i] = INVALID_ID  # mask: every geometry
+    packet[80 + i] = 0
+    packet[88 + i] = 0
+
+
+@jit_inline
+def occluded_packet(scene, packet, floats, count):
+    """Trace the packet's first ``count`` lanes (set by :func:`packet_ray`); bit i of the result: is lane i's ray
+    blocked?  (Embree marks a blocked ray by its tfar set to -inf, as for one ray.)"""
+    for i in range(PACKET):
+        packet[96 + i] = INVALID_ID if i < count else 0  # the valid mask: all bits set (-1) for a ray
+    _rtc_occluded8(packet.ctypes.data + 96 * 4, scene, packet.ctypes.data, 0)
+    blocked = 0
+    for i in range(count):
+        if floats[64 + i] == -np.inf:
+            blocked |= 1 << i
+    return blocked
+
+
+@jit_inline
 def closest_mesh_hit(scene, scratch, ox, oy, oz, dx, dy, dz, tfar):
     """The nearest triangle hit closer than tfar: (t, mesh, face, b1, b2); mesh -1 when there is none."""
     words = scratch[numba.get_thread_id()]
@@ -188,6 +264,26 @@ def occluded_batch(scene, scratch, origins, dirs, tfar):
         blocked[i] = mesh_occluded(
             scene, scratch, origins[i, 0], origins[i, 1], origins[i, 2], dirs[i, 0], dirs[i, 1], dirs[i, 2], tfar[i]
         )
+    return blocked
+
+
+@jit_parallel
+def occluded_packets_batch(scene, scratch, origins, dirs, tfar):
+    """:func:`occluded_batch` through :func:`occluded_packet`, 8 rays a call (the last packet partly empty)."""
+    n = dirs.shape[0]
+    blocked = np.empty(n, np.bool_)
+    for p in prange((n + PACKET - 1) // PACKET):
+        first = p * PACKET
+        count = min(PACKET, n - first)
+        packet = packet_words(scratch)
+        floats = packet.view(np.float32)
+        for i in range(count):
+            q = first + i
+            packet_ray(packet, floats, i, origins[q, 0], origins[q, 1], origins[q, 2], dirs[q, 0], dirs[q, 1],
+                       dirs[q, 2], tfar[q])  # fmt: skip
+        bits = occluded_packet(scene, packet, floats, count)
+        for i in range(count):
+            blocked[first + i] = bits >> i & 1 == 1
     return blocked
 
 

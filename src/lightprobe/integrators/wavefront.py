@@ -63,7 +63,15 @@ from ..errors import ParameterError
 from ..geometry.camera import camera_ray
 from ..geometry.camera_lanes import nearest_block
 from ..geometry.embree import FAR as MESH_FAR
-from ..geometry.embree import closest_mesh_hit, mesh_occluded
+from ..geometry.embree import (
+    PACKET,
+    closest_mesh_hit,
+    mesh_occluded,
+    occluded_packet,
+    packet_ray,
+    packet_words,
+    packets_native,
+)
 from ..geometry.frame import to_local, to_world
 from ..geometry.intersect import MESH, MISS, closest_analytic, may_hit_mesh, occluded_analytic, ray_offset
 from ..geometry.raytracer import RayTracer
@@ -768,7 +776,31 @@ def _analytic_shadow_scalar_stage(s, m, point, gnormal, wdir, flags):
 # evict Embree's BVH between rays (decisions.md 30).
 @jit_parallel
 def _mesh_shadow_stage(m, mesh_scene, scratch, ray_counts, todo, point, gnormal, wdir, flags):
-    """The slots in ``todo`` (shadow rays flagged TEST_MESH), through Embree: each becomes VISIBLE or BLOCKED."""
+    """The slots in ``todo`` (shadow rays flagged TEST_MESH), through Embree 8 at a time (decisions.md 55): each
+    becomes VISIBLE or BLOCKED."""
+    n = todo.shape[0]
+    for p in prange((n + PACKET - 1) // PACKET):
+        first = p * PACKET
+        packet = packet_words(scratch)
+        floats = packet.view(np.float32)
+        count = min(PACKET, n - first)
+        for i in range(count):
+            r = todo[first + i]
+            k = r // m
+            wx, wy, wz = wdir[r, 0], wdir[r, 1], wdir[r, 2]
+            qx, qy, qz = ray_offset(
+                point[k, 0], point[k, 1], point[k, 2], gnormal[k, 0], gnormal[k, 1], gnormal[k, 2], wx, wy, wz
+            )
+            packet_ray(packet, floats, i, qx, qy, qz, wx, wy, wz, MESH_FAR)
+        blocked = occluded_packet(mesh_scene, packet, floats, count)
+        ray_counts[numba.get_thread_id(), 1] += count
+        for i in range(count):
+            flags[todo[first + i]] = BLOCKED if blocked >> i & 1 else VISIBLE
+
+
+@jit_parallel
+def _mesh_shadow_single_stage(m, mesh_scene, scratch, ray_counts, todo, point, gnormal, wdir, flags):
+    """:func:`_mesh_shadow_stage` one ray at a time: where Embree's 8-ray packets are not native."""
     for q in prange(todo.shape[0]):
         r = todo[q]
         k = r // m
@@ -784,7 +816,11 @@ def _mesh_shadow_stage(m, mesh_scene, scratch, ray_counts, todo, point, gnormal,
 # where the meshes are on screen, and prange hands each thread one contiguous share of the index range, so a loop
 # over every slot gave one thread most of the rays (many-light demo in image order: 97 % of them in the second
 # half).  The spread pixel order of schedule.py evens that out too; the list makes the shares exactly equal.
-WORKLISTS = {_mesh_shadow_stage: lambda b: np.flatnonzero(b["flags"] == TEST_MESH)}
+def _mesh_worklist(b):
+    return np.flatnonzero(b["flags"] == TEST_MESH)
+
+
+WORKLISTS = {_mesh_shadow_stage: _mesh_worklist, _mesh_shadow_single_stage: _mesh_worklist}
 
 
 @jit_parallel
@@ -1031,7 +1067,7 @@ def render(
     camera_pass = _camera_pass_for()
     stages = (_shade_setup, *_environment_stages(scene, settings), _shade_finish, _analytic_shadow_stage_for())
     if tracer.mesh_scene:
-        stages += (_mesh_shadow_stage,)
+        stages += (_mesh_shadow_stage_for(),)
     worklists = WORKLISTS
     light_constants = {}
     if area_path:
@@ -1236,6 +1272,11 @@ def _analytic_shadow_stage_for():
     return _analytic_shadow_stage if lanes_compile() else _analytic_shadow_scalar_stage
 
 
+def _mesh_shadow_stage_for():
+    """The mesh shadow stage in Embree's 8-ray packets where they are native, else one ray at a time."""
+    return _mesh_shadow_stage if packets_native() else _mesh_shadow_single_stage
+
+
 def _camera_pass_for():
     """The camera pass with its analytic hits in lanes where this Numba's LLVM builds the intrinsics, else the
     scalar one."""
@@ -1264,7 +1305,7 @@ def kernels_cached(scene: Scene | None = None, settings: RenderSettings | None =
             _shade_finish,
             _analytic_shadow_stage_for(),
         )
-        shading += (_mesh_shadow_stage,) if meshes else ()
+        shading += (_mesh_shadow_stage_for(),) if meshes else ()
     return is_cached(_camera_pass_for(), *shading, _accumulate)
 
 
