@@ -423,8 +423,11 @@ def _shade_setup(
     tpdf,
     bweight,
     env_u,
+    numbers,
 ):
-    """Hit points, shading frames, and every direction except the environment samples (only their numbers)."""
+    """Hit points, shading frames, and every direction except the environment samples (only their numbers).
+    ``numbers``: one (m, 3) row per thread for a camera sample's Sobol' numbers, so that they do not go through the
+    pass buffers (decisions.md 56)."""
     m = n_bsdf + n_env
     ox, oy, oz = cam[0], cam[1], cam[2]
     for k in prange(dirs.shape[0]):
@@ -445,18 +448,19 @@ def _shade_setup(
         mk, mp = s.material_kind[material[k]], s.material_params[material[k]]
         rs = sample_state(sampler, seed, pixels[k // spp_pass], sample_start + k % spp_pass)
         sobol = sampler == SOBOL
+        own = numbers[numba.get_thread_id()]
         if sobol:
-            # the slots' Sobol' numbers 8 at a time (sampling/sobol_lanes.py), into wloc until directions replace
-            # them: the same bits as uniform_2d and uniform below
+            # the slots' Sobol' numbers 8 at a time (sampling/sobol_lanes.py): the same bits as uniform_2d and
+            # uniform below
             for first in range(0, m, LANES):
-                slot_numbers_block(wloc, SOBOL_Y, rs[2], rs[3], strategy == MIS, n_bsdf, m, base + first, first)
+                slot_numbers_block(own, SOBOL_Y, rs[2], rs[3], strategy == MIS, n_bsdf, m, first, first)
         for j in range(m):
             r = base + j
             technique = strategy
             if strategy == MIS:
                 technique = BRDF if j < n_bsdf else ENV
             if sobol:
-                u0, u1, u2 = wloc[r, 0], wloc[r, 1], wloc[r, 2]
+                u0, u1, u2 = own[j, 0], own[j, 1], own[j, 2]
             else:
                 rj, slot = technique_slot(rs, strategy, n_bsdf, n_env, j)
                 u0, u1 = uniform_2d(rj, 2 + 3 * slot)
@@ -476,7 +480,8 @@ def _shade_setup(
             state[r] = st
             wx, wy, wz = to_world(ts, tt, ns, wi[0], wi[1], wi[2])
             wdir[r, 0], wdir[r, 1], wdir[r, 2] = wx, wy, wz
-            wloc[r, 0], wloc[r, 1], wloc[r, 2] = wi
+            if st != SLOT_BSDF:  # the finish stage weighs a BSDF sample by bweight, the others by wi
+                wloc[r, 0], wloc[r, 1], wloc[r, 2] = wi
             tpdf[r] = pdf
 
 
@@ -1096,6 +1101,8 @@ def render(
         "mesh_scene": tracer.mesh_scene,
         "scratch": tracer.scratch,
         "ray_counts": ray_counts,
+        # a camera sample's Sobol' numbers, one row per thread (rows of whole cache lines: 8 slots x 24 bytes)
+        "numbers": np.zeros((numba.config.NUMBA_NUM_THREADS, (m + LANES - 1) // LANES * LANES, 3)),
         "s": arrays,
         "env": env,
         "cam": cam,
