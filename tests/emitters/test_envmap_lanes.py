@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 from numba import njit, prange
 
+from lightprobe._worksharing import claims
 from lightprobe.emitters.envmap import EnvironmentMap, env_lookup
 from lightprobe.emitters.envmap_lanes import LANES, applies, radiance_block
 from lightprobe.emitters.procedural import constant, sky_with_sun
@@ -167,7 +168,7 @@ def _sample(stage, case, *extra):
     out["uv"] = np.full((slots, 2), -7.0)
     c = case
     stage(c["env"], c["compensate"], *extra, c["m"], c["material"], c["frame"], out["state"], c["env_u"],
-          out["wdir"], out["tpdf"], out["uv"])  # fmt: skip
+          out["wdir"], out["tpdf"], out["uv"], *claims())  # fmt: skip
     return out
 
 
@@ -275,10 +276,12 @@ def test_coordinates_and_densities_in_lanes_are_the_scalar_stages(strategy_name,
     state[poles] = 1
     c = case
     uv_s, epdf_s = np.full((slots, 2), -7.0), np.full(slots, -7.0)
-    wavefront._env_coords_stage(c["env"], c["compensate"], m, c["material"], mis, state, directions, uv_s, epdf_s)
+    wavefront._env_coords_stage(
+        c["env"], c["compensate"], m, c["material"], mis, state, directions, uv_s, epdf_s, *claims()
+    )
     uv_l, epdf_l = np.full((slots, 2), -7.0), np.full(slots, -7.0)
     wavefront._env_coords_lanes_stage(
-        c["env"], c["compensate"], strategy, n_bsdf, m, c["material"], mis, state, directions, uv_l, epdf_l
+        c["env"], c["compensate"], strategy, n_bsdf, m, c["material"], mis, state, directions, uv_l, epdf_l, *claims()
     )
     # u on the circle: 1 - 1e-17 rounds to 1 and wraps to 0
     du = np.abs(uv_l[:, 0] - uv_s[:, 0])

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from lightprobe._worksharing import claims
 from lightprobe.bsdfs import Lambert
 from lightprobe.demo import blob_mesh
 from lightprobe.emitters.envmap import EnvironmentMap
@@ -46,7 +47,9 @@ def _hits(kernel, scene, cam, spp_pass=3, tracer=None, sampler="sobol"):
     mesh_scene = tracer.mesh_scene if tracer is not None else 0
     scratch = tracer.scratch if tracer is not None else new_scratch()
     ray_counts = np.zeros((64, 2), np.int64)
-    kernel(arrays, cam, SAMPLERS[sampler], 7, pixels, spp_pass, 0, mesh_scene, scratch, ray_counts, **out)
+    counter, workers = claims()
+    kernel(arrays, cam, SAMPLERS[sampler], 7, pixels, spp_pass, 0, mesh_scene, scratch, ray_counts, **out,
+           counter=counter, workers=workers)  # fmt: skip
     return out
 
 

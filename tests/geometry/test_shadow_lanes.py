@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from lightprobe._worksharing import claims
 from lightprobe.bsdfs import Lambert
 from lightprobe.demo import blob_mesh
 from lightprobe.emitters.envmap import EnvironmentMap
@@ -59,8 +60,8 @@ def test_lanes_flag_every_ray_as_the_scalar_stage_does(meshes, spheres, m):
     arrays = _scene(meshes, spheres)
     point, normal, wdir, flags = _rays(2503, m, seed=m)
     scalar, lanes = flags.copy(), flags.copy()
-    wavefront._analytic_shadow_scalar_stage(arrays, m, point, normal, wdir, scalar)
-    wavefront._analytic_shadow_stage(arrays, m, point, normal, wdir, lanes)
+    wavefront._analytic_shadow_scalar_stage(arrays, m, point, normal, wdir, scalar, *claims())
+    wavefront._analytic_shadow_stage(arrays, m, point, normal, wdir, lanes, *claims())
     assert np.array_equal(lanes, scalar)
     assert np.array_equal(lanes[flags != TEST_ANALYTIC], flags[flags != TEST_ANALYTIC])
     tested = lanes[flags == TEST_ANALYTIC]
@@ -86,8 +87,8 @@ def test_a_ray_grazing_a_sphere_or_leaving_its_surface():
     wdir = np.array(wdir)
     flags = np.full(wdir.shape[0], TEST_ANALYTIC, np.int8)
     scalar, lanes = flags.copy(), flags.copy()
-    wavefront._analytic_shadow_scalar_stage(arrays, 4, point, normals, wdir, scalar)
-    wavefront._analytic_shadow_stage(arrays, 4, point, normals, wdir, lanes)
+    wavefront._analytic_shadow_scalar_stage(arrays, 4, point, normals, wdir, scalar, *claims())
+    wavefront._analytic_shadow_stage(arrays, 4, point, normals, wdir, lanes, *claims())
     assert np.array_equal(lanes, scalar)
     assert np.all(lanes[0::4] == VISIBLE)  # nothing else in their way
     assert np.all(lanes[1::4] == BLOCKED)

@@ -30,6 +30,7 @@ import numpy as np
 
 from .._memory import fresh_array
 from .._numba import jit, jit_parallel, prange
+from .._worksharing import CHUNK, claim
 from ..bsdfs.dispatch import bsdf_eval, bsdf_pdf
 from ..emitters.area import light_intersect, light_pdf, light_radiance, light_sample
 from ..emitters.envmap import env_eval, env_eval_pdf, env_sample
@@ -140,82 +141,93 @@ def _lights_setup(
     hit_b1,
     hit_b2,
     hit_mesh,
+    counter,
+    workers,
 ):
     m = n_bsdf + n_light
     ox, oy, oz = cam[0], cam[1], cam[2]
-    for k in prange(dirs.shape[0]):
-        base = k * m
-        material[k] = -1
-        for j in range(m):
-            state[base + j] = SLOT_NONE
-            hit_mesh[base + j] = False
-        dx, dy, dz = dirs[k, 0], dirs[k, 1], dirs[k, 2]
-        if kind[k] == MISS:
-            if has_env:
-                direct[k, 0], direct[k, 1], direct[k, 2] = env_eval(env, dx, dy, dz)
-            else:
+    n_work = dirs.shape[0]
+    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing.py)
+        chunk = claim(counter)
+        while chunk * CHUNK < n_work:
+            for k in range(chunk * CHUNK, min(n_work, chunk * CHUNK + CHUNK)):
+                base = k * m
+                material[k] = -1
+                for j in range(m):
+                    state[base + j] = SLOT_NONE
+                    hit_mesh[base + j] = False
+                dx, dy, dz = dirs[k, 0], dirs[k, 1], dirs[k, 2]
+                if kind[k] == MISS:
+                    if has_env:
+                        direct[k, 0], direct[k, 1], direct[k, 2] = env_eval(env, dx, dy, dz)
+                    else:
+                        direct[k, 0] = direct[k, 1] = direct[k, 2] = 0.0
+                    continue
                 direct[k, 0] = direct[k, 1] = direct[k, 2] = 0.0
-            continue
-        direct[k, 0] = direct[k, 1] = direct[k, 2] = 0.0
-        emitter = emitter_of(s, kind[k], index[k], prim[k])
-        if emitter >= 0:  # the camera sees the light itself
-            tl, cos_light = light_intersect(lights, emitter, ox, oy, oz, dx, dy, dz)
-            if tl < math.inf:
-                direct[k, 0], direct[k, 1], direct[k, 2] = light_radiance(lights, emitter, cos_light)
-        hit = (kind[k], index[k], prim[k], b1[k], b2[k], t[k])
-        p, ng, wo = store_shading_frame(s, k, hit, ox, oy, oz, dx, dy, dz, point, gnormal, frame, wo_local, material)
-        if wo[2] <= 0.0:
-            continue
-        ts, tt, ns, wo = load_shading_frame(frame, wo_local, k)
-        mk, mp = s.material_kind[material[k]], s.material_params[material[k]]
-        rs = sample_state(sampler, seed, pixels[k // spp_pass], sample_start + k % spp_pass)
-        for j in range(m):
-            r = base + j
-            rj, slot = technique_slot(rs, strategy, n_bsdf, m - n_bsdf, j)
-            u0, u1 = uniform_2d(rj, 2 + 3 * slot)
-            technique = strategy
-            if strategy == MIS:
-                technique = BRDF if j < n_bsdf else ENV
-            if technique == ENV:
-                rp, picker = _pick_slot(rs, n_bsdf, n_per_light, m, strategy, j)
-                light, pmf = select_light(sel, p[0], p[1], p[2], ng[0], ng[1], ng[2], uniform(rp, 4 + 3 * picker))
-                if light < 0 or pmf <= 0.0:
+                emitter = emitter_of(s, kind[k], index[k], prim[k])
+                if emitter >= 0:  # the camera sees the light itself
+                    tl, cos_light = light_intersect(lights, emitter, ox, oy, oz, dx, dy, dz)
+                    if tl < math.inf:
+                        direct[k, 0], direct[k, 1], direct[k, 2] = light_radiance(lights, emitter, cos_light)
+                hit = (kind[k], index[k], prim[k], b1[k], b2[k], t[k])
+                p, ng, wo = store_shading_frame(
+                    s, k, hit, ox, oy, oz, dx, dy, dz, point, gnormal, frame, wo_local, material
+                )
+                if wo[2] <= 0.0:
                     continue
-                if light == sel.env_index:
-                    wx, wy, wz, pdf = env_sample(env, False, u0, u1)
-                    lr, lg, lb = env_eval(env, wx, wy, wz)
-                    dist = math.inf
-                else:
-                    wx, wy, wz, dist, lr, lg, lb, pdf = light_sample(
-                        lights, light, light_strategy, p[0], p[1], p[2], ng[0], ng[1], ng[2], u0, u1
-                    )
-                if pdf <= 0.0 or (lr == 0.0 and lg == 0.0 and lb == 0.0):
-                    continue
-                wdir[r, 0], wdir[r, 1], wdir[r, 2] = wx, wy, wz
-                radiance[r, 0], radiance[r, 1], radiance[r, 2] = lr, lg, lb
-                tpdf[r] = pmf * pdf
-                seg[r] = dist
-                state[r] = SLOT_LIGHT
-                continue
-            st, wi, pdf, w = sample_direction(technique, mk, mp, wo, u0, u1, uniform(rj, 4 + 3 * slot))
-            if st == SLOT_NONE:
-                continue
-            if st == SLOT_BSDF:
-                bweight[r, 0], bweight[r, 1], bweight[r, 2] = w
-            state[r] = st
-            wx, wy, wz = to_world(ts, tt, ns, wi[0], wi[1], wi[2])
-            wdir[r, 0], wdir[r, 1], wdir[r, 2] = wx, wy, wz
-            wloc[r, 0], wloc[r, 1], wloc[r, 2] = wi
-            tpdf[r] = pdf
-            # the nearest hit along the direction decides what it sees (an emitter, the sky, or nothing)
-            qx, qy, qz = ray_offset(p[0], p[1], p[2], ng[0], ng[1], ng[2], wx, wy, wz)
-            ray_o[r, 0], ray_o[r, 1], ray_o[r, 2] = qx, qy, qz
-            th, kh, ih = closest_analytic(s, qx, qy, qz, wx, wy, wz, np.inf)
-            hit_t[r], hit_kind[r], hit_index[r] = th, kh, ih
-            hit_prim[r] = 0
-            hit_b1[r] = 0.0
-            hit_b2[r] = 0.0
-            hit_mesh[r] = may_hit_mesh(s, qx, qy, qz, wx, wy, wz, th)
+                ts, tt, ns, wo = load_shading_frame(frame, wo_local, k)
+                mk, mp = s.material_kind[material[k]], s.material_params[material[k]]
+                rs = sample_state(sampler, seed, pixels[k // spp_pass], sample_start + k % spp_pass)
+                for j in range(m):
+                    r = base + j
+                    rj, slot = technique_slot(rs, strategy, n_bsdf, m - n_bsdf, j)
+                    u0, u1 = uniform_2d(rj, 2 + 3 * slot)
+                    technique = strategy
+                    if strategy == MIS:
+                        technique = BRDF if j < n_bsdf else ENV
+                    if technique == ENV:
+                        rp, picker = _pick_slot(rs, n_bsdf, n_per_light, m, strategy, j)
+                        light, pmf = select_light(
+                            sel, p[0], p[1], p[2], ng[0], ng[1], ng[2], uniform(rp, 4 + 3 * picker)
+                        )
+                        if light < 0 or pmf <= 0.0:
+                            continue
+                        if light == sel.env_index:
+                            wx, wy, wz, pdf = env_sample(env, False, u0, u1)
+                            lr, lg, lb = env_eval(env, wx, wy, wz)
+                            dist = math.inf
+                        else:
+                            wx, wy, wz, dist, lr, lg, lb, pdf = light_sample(
+                                lights, light, light_strategy, p[0], p[1], p[2], ng[0], ng[1], ng[2], u0, u1
+                            )
+                        if pdf <= 0.0 or (lr == 0.0 and lg == 0.0 and lb == 0.0):
+                            continue
+                        wdir[r, 0], wdir[r, 1], wdir[r, 2] = wx, wy, wz
+                        radiance[r, 0], radiance[r, 1], radiance[r, 2] = lr, lg, lb
+                        tpdf[r] = pmf * pdf
+                        seg[r] = dist
+                        state[r] = SLOT_LIGHT
+                        continue
+                    st, wi, pdf, w = sample_direction(technique, mk, mp, wo, u0, u1, uniform(rj, 4 + 3 * slot))
+                    if st == SLOT_NONE:
+                        continue
+                    if st == SLOT_BSDF:
+                        bweight[r, 0], bweight[r, 1], bweight[r, 2] = w
+                    state[r] = st
+                    wx, wy, wz = to_world(ts, tt, ns, wi[0], wi[1], wi[2])
+                    wdir[r, 0], wdir[r, 1], wdir[r, 2] = wx, wy, wz
+                    wloc[r, 0], wloc[r, 1], wloc[r, 2] = wi
+                    tpdf[r] = pdf
+                    # the nearest hit along the direction decides what it sees (an emitter, the sky, or nothing)
+                    qx, qy, qz = ray_offset(p[0], p[1], p[2], ng[0], ng[1], ng[2], wx, wy, wz)
+                    ray_o[r, 0], ray_o[r, 1], ray_o[r, 2] = qx, qy, qz
+                    th, kh, ih = closest_analytic(s, qx, qy, qz, wx, wy, wz, np.inf)
+                    hit_t[r], hit_kind[r], hit_index[r] = th, kh, ih
+                    hit_prim[r] = 0
+                    hit_b1[r] = 0.0
+                    hit_b2[r] = 0.0
+                    hit_mesh[r] = may_hit_mesh(s, qx, qy, qz, wx, wy, wz, th)
+            chunk = claim(counter)
 
 
 @jit_parallel
@@ -252,130 +264,174 @@ def _lights_finish(
     shadow_o,
     shadow_d,
     shadow_t,
+    counter,
+    workers,
 ):
     m = n_bsdf + n_light
     inv_m = 1.0 / m
-    for k in prange(point.shape[0]):
-        base = k * m
-        for j in range(m):
-            flags[base + j] = NONE
-        if material[k] < 0:
-            continue
-        ts, tt, ns, wo = load_shading_frame(frame, wo_local, k)
-        mk, mp = s.material_kind[material[k]], s.material_params[material[k]]
-        px, py, pz = point[k, 0], point[k, 1], point[k, 2]
-        nx, ny, nz = gnormal[k, 0], gnormal[k, 1], gnormal[k, 2]
-        for j in range(m):
-            r = base + j
-            st = state[r]
-            if st == SLOT_NONE:
-                continue
-            wx, wy, wz = wdir[r, 0], wdir[r, 1], wdir[r, 2]
-            if st == SLOT_LIGHT:
-                wi = to_local(ts, tt, ns, wx, wy, wz)
-                f = bsdf_eval(mk, mp, wo, wi)
-                if f[0] == 0.0 and f[1] == 0.0 and f[2] == 0.0:
+    n_work = point.shape[0]
+    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing.py)
+        chunk = claim(counter)
+        while chunk * CHUNK < n_work:
+            for k in range(chunk * CHUNK, min(n_work, chunk * CHUNK + CHUNK)):
+                base = k * m
+                for j in range(m):
+                    flags[base + j] = NONE
+                if material[k] < 0:
                     continue
-                scale = wi[2] / tpdf[r] * inv_m
-                if strategy == MIS:
-                    pb = bsdf_pdf(mk, mp, wo, wi)
-                    scale = wi[2] / tpdf[r] * mis_weight(n_light, tpdf[r], n_bsdf, pb, beta) / n_light
-                cr, cg, cb = f[0] * radiance[r, 0] * scale, f[1] * radiance[r, 1] * scale, f[2] * radiance[r, 2] * scale
-                if cr == 0.0 and cg == 0.0 and cb == 0.0:
-                    continue
-                qx, qy, qz = ray_offset(px, py, pz, nx, ny, nz, wx, wy, wz)
-                tmax = math.inf
-                if seg[r] < math.inf:
-                    # a point on an area light: the shadow ray leaves the offset origin aimed *at that point* and
-                    # stops just short of it (from the offset origin along the original direction, a grazing ray
-                    # would meet the light's plane before the segment ends and shadow itself)
-                    tx, ty, tz = px + seg[r] * wx - qx, py + seg[r] * wy - qy, pz + seg[r] * wz - qz
-                    length = math.sqrt(tx * tx + ty * ty + tz * tz)
-                    wx, wy, wz = tx / length, ty / length, tz / length
-                    tmax = length * (1.0 - 1e-5)
-                if occluded_analytic(s, qx, qy, qz, wx, wy, wz, tmax):
-                    flags[r] = BLOCKED
-                    continue
-                contrib[r, 0], contrib[r, 1], contrib[r, 2] = cr, cg, cb
-                if may_hit_mesh(s, qx, qy, qz, wx, wy, wz, tmax):
-                    flags[r] = TEST_MESH
-                    shadow_o[r, 0], shadow_o[r, 1], shadow_o[r, 2] = qx, qy, qz
-                    shadow_d[r, 0], shadow_d[r, 1], shadow_d[r, 2] = wx, wy, wz
-                    shadow_t[r] = tmax if tmax < MESH_FAR else MESH_FAR
-                else:
-                    flags[r] = VISIBLE
-                continue
-            # a BSDF or hemisphere direction: what does it hit?
-            light = -1
-            lr = lg = lb = 0.0
-            p_light = 0.0
-            if hit_kind[r] == MISS:
-                if has_env:
-                    (lr, lg, lb), penv = env_eval_pdf(env, False, wx, wy, wz)
-                    light = sel.env_index
-                    p_light = penv
-            else:
-                light = emitter_of(s, hit_kind[r], hit_index[r], hit_prim[r])
-                if light >= 0:
-                    tl, cos_light = light_intersect(lights, light, ray_o[r, 0], ray_o[r, 1], ray_o[r, 2], wx, wy, wz)
-                    if tl < math.inf:
-                        lr, lg, lb = light_radiance(lights, light, cos_light)
-                    p_light = light_pdf(lights, light, light_strategy, px, py, pz, nx, ny, nz, wx, wy, wz)
-            if light < 0 or (lr == 0.0 and lg == 0.0 and lb == 0.0):
-                continue
-            if st == SLOT_BSDF:
-                scale = inv_m
-                if strategy == MIS:
-                    pl = selector_pmf(sel, px, py, pz, nx, ny, nz, light) * p_light
-                    scale = mis_weight(n_bsdf, tpdf[r], n_light, pl, beta) / n_bsdf
-                cr, cg, cb = bweight[r, 0] * lr * scale, bweight[r, 1] * lg * scale, bweight[r, 2] * lb * scale
-            else:
-                wi = (wloc[r, 0], wloc[r, 1], wloc[r, 2])
-                f = bsdf_eval(mk, mp, wo, wi)
-                scale = wi[2] / tpdf[r] * inv_m
-                cr, cg, cb = f[0] * lr * scale, f[1] * lg * scale, f[2] * lb * scale
-            if cr == 0.0 and cg == 0.0 and cb == 0.0:
-                continue
-            contrib[r, 0], contrib[r, 1], contrib[r, 2] = cr, cg, cb
-            flags[r] = VISIBLE  # the closest hit already decided visibility
+                ts, tt, ns, wo = load_shading_frame(frame, wo_local, k)
+                mk, mp = s.material_kind[material[k]], s.material_params[material[k]]
+                px, py, pz = point[k, 0], point[k, 1], point[k, 2]
+                nx, ny, nz = gnormal[k, 0], gnormal[k, 1], gnormal[k, 2]
+                for j in range(m):
+                    r = base + j
+                    st = state[r]
+                    if st == SLOT_NONE:
+                        continue
+                    wx, wy, wz = wdir[r, 0], wdir[r, 1], wdir[r, 2]
+                    if st == SLOT_LIGHT:
+                        wi = to_local(ts, tt, ns, wx, wy, wz)
+                        f = bsdf_eval(mk, mp, wo, wi)
+                        if f[0] == 0.0 and f[1] == 0.0 and f[2] == 0.0:
+                            continue
+                        scale = wi[2] / tpdf[r] * inv_m
+                        if strategy == MIS:
+                            pb = bsdf_pdf(mk, mp, wo, wi)
+                            scale = wi[2] / tpdf[r] * mis_weight(n_light, tpdf[r], n_bsdf, pb, beta) / n_light
+                        cr, cg, cb = (
+                            f[0] * radiance[r, 0] * scale,
+                            f[1] * radiance[r, 1] * scale,
+                            f[2] * radiance[r, 2] * scale,
+                        )
+                        if cr == 0.0 and cg == 0.0 and cb == 0.0:
+                            continue
+                        qx, qy, qz = ray_offset(px, py, pz, nx, ny, nz, wx, wy, wz)
+                        tmax = math.inf
+                        if seg[r] < math.inf:
+                            # a point on an area light: the shadow ray leaves the offset origin aimed *at that
+                            # point* and stops just short of it (from the offset origin along the original
+                            # direction, a grazing ray would meet the light's plane before the segment ends and
+                            # shadow itself)
+                            tx, ty, tz = px + seg[r] * wx - qx, py + seg[r] * wy - qy, pz + seg[r] * wz - qz
+                            length = math.sqrt(tx * tx + ty * ty + tz * tz)
+                            wx, wy, wz = tx / length, ty / length, tz / length
+                            tmax = length * (1.0 - 1e-5)
+                        if occluded_analytic(s, qx, qy, qz, wx, wy, wz, tmax):
+                            flags[r] = BLOCKED
+                            continue
+                        contrib[r, 0], contrib[r, 1], contrib[r, 2] = cr, cg, cb
+                        if may_hit_mesh(s, qx, qy, qz, wx, wy, wz, tmax):
+                            flags[r] = TEST_MESH
+                            shadow_o[r, 0], shadow_o[r, 1], shadow_o[r, 2] = qx, qy, qz
+                            shadow_d[r, 0], shadow_d[r, 1], shadow_d[r, 2] = wx, wy, wz
+                            shadow_t[r] = tmax if tmax < MESH_FAR else MESH_FAR
+                        else:
+                            flags[r] = VISIBLE
+                        continue
+                    # a BSDF or hemisphere direction: what does it hit?
+                    light = -1
+                    lr = lg = lb = 0.0
+                    p_light = 0.0
+                    if hit_kind[r] == MISS:
+                        if has_env:
+                            (lr, lg, lb), penv = env_eval_pdf(env, False, wx, wy, wz)
+                            light = sel.env_index
+                            p_light = penv
+                    else:
+                        light = emitter_of(s, hit_kind[r], hit_index[r], hit_prim[r])
+                        if light >= 0:
+                            tl, cos_light = light_intersect(
+                                lights, light, ray_o[r, 0], ray_o[r, 1], ray_o[r, 2], wx, wy, wz
+                            )
+                            if tl < math.inf:
+                                lr, lg, lb = light_radiance(lights, light, cos_light)
+                            p_light = light_pdf(lights, light, light_strategy, px, py, pz, nx, ny, nz, wx, wy, wz)
+                    if light < 0 or (lr == 0.0 and lg == 0.0 and lb == 0.0):
+                        continue
+                    if st == SLOT_BSDF:
+                        scale = inv_m
+                        if strategy == MIS:
+                            pl = selector_pmf(sel, px, py, pz, nx, ny, nz, light) * p_light
+                            scale = mis_weight(n_bsdf, tpdf[r], n_light, pl, beta) / n_bsdf
+                        cr, cg, cb = bweight[r, 0] * lr * scale, bweight[r, 1] * lg * scale, bweight[r, 2] * lb * scale
+                    else:
+                        wi = (wloc[r, 0], wloc[r, 1], wloc[r, 2])
+                        f = bsdf_eval(mk, mp, wo, wi)
+                        scale = wi[2] / tpdf[r] * inv_m
+                        cr, cg, cb = f[0] * lr * scale, f[1] * lg * scale, f[2] * lb * scale
+                    if cr == 0.0 and cg == 0.0 and cb == 0.0:
+                        continue
+                    contrib[r, 0], contrib[r, 1], contrib[r, 2] = cr, cg, cb
+                    flags[r] = VISIBLE  # the closest hit already decided visibility
+            chunk = claim(counter)
 
 
 @jit_parallel
 def _lights_mesh_hits(
-    mesh_scene, scratch, ray_counts, todo, wdir, ray_o, hit_t, hit_kind, hit_index, hit_prim, hit_b1, hit_b2
+    mesh_scene,
+    scratch,
+    ray_counts,
+    todo,
+    wdir,
+    ray_o,
+    hit_t,
+    hit_kind,
+    hit_index,
+    hit_prim,
+    hit_b1,
+    hit_b2,
+    counter,
+    workers,
 ):
     """The slots in ``todo`` (BSDF and hemisphere directions flagged in ``hit_mesh``): the nearest mesh hit, where
     it is nearer than the analytic one."""
-    for q in prange(todo.shape[0]):
-        r = todo[q]
-        ray_counts[numba.get_thread_id(), 2] += 1
-        far = hit_t[r] if hit_t[r] < np.inf else MESH_FAR
-        mt, mesh, face, mb1, mb2 = closest_mesh_hit(
-            mesh_scene, scratch, ray_o[r, 0], ray_o[r, 1], ray_o[r, 2], wdir[r, 0], wdir[r, 1], wdir[r, 2], far
-        )
-        if mesh >= 0:
-            hit_t[r], hit_kind[r], hit_index[r], hit_prim[r], hit_b1[r], hit_b2[r] = mt, MESH, mesh, face, mb1, mb2
+    n_work = todo.shape[0]
+    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing.py)
+        chunk = claim(counter)
+        while chunk * CHUNK < n_work:
+            for q in range(chunk * CHUNK, min(n_work, chunk * CHUNK + CHUNK)):
+                r = todo[q]
+                ray_counts[numba.get_thread_id(), 2] += 1
+                far = hit_t[r] if hit_t[r] < np.inf else MESH_FAR
+                mt, mesh, face, mb1, mb2 = closest_mesh_hit(
+                    mesh_scene, scratch, ray_o[r, 0], ray_o[r, 1], ray_o[r, 2], wdir[r, 0], wdir[r, 1], wdir[r, 2], far
+                )
+                if mesh >= 0:
+                    hit_t[r], hit_kind[r], hit_index[r], hit_prim[r], hit_b1[r], hit_b2[r] = (
+                        mt,
+                        MESH,
+                        mesh,
+                        face,
+                        mb1,
+                        mb2,
+                    )
+            chunk = claim(counter)
 
 
 @jit_parallel
-def _lights_mesh_shadows(mesh_scene, scratch, ray_counts, todo, shadow_o, shadow_d, shadow_t, flags):
+def _lights_mesh_shadows(mesh_scene, scratch, ray_counts, todo, shadow_o, shadow_d, shadow_t, flags, counter, workers):
     """The slots in ``todo`` (shadow rays flagged TEST_MESH), over their segments (0, shadow_t), through Embree:
     each becomes VISIBLE or BLOCKED."""
-    for q in prange(todo.shape[0]):
-        r = todo[q]
-        ray_counts[numba.get_thread_id(), 1] += 1
-        blocked = mesh_occluded(
-            mesh_scene,
-            scratch,
-            shadow_o[r, 0],
-            shadow_o[r, 1],
-            shadow_o[r, 2],
-            shadow_d[r, 0],
-            shadow_d[r, 1],
-            shadow_d[r, 2],
-            shadow_t[r],
-        )
-        flags[r] = BLOCKED if blocked else VISIBLE
+    n_work = todo.shape[0]
+    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing.py)
+        chunk = claim(counter)
+        while chunk * CHUNK < n_work:
+            for q in range(chunk * CHUNK, min(n_work, chunk * CHUNK + CHUNK)):
+                r = todo[q]
+                ray_counts[numba.get_thread_id(), 1] += 1
+                blocked = mesh_occluded(
+                    mesh_scene,
+                    scratch,
+                    shadow_o[r, 0],
+                    shadow_o[r, 1],
+                    shadow_o[r, 2],
+                    shadow_d[r, 0],
+                    shadow_d[r, 1],
+                    shadow_d[r, 2],
+                    shadow_t[r],
+                )
+                flags[r] = BLOCKED if blocked else VISIBLE
+            chunk = claim(counter)
 
 
 #: the slots each Embree stage traces, gathered from the pass buffers before it runs (see wavefront.WORKLISTS)

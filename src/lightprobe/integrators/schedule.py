@@ -9,7 +9,8 @@ consecutive pixels, taken in the order (b x stride) mod blocks, the stride copri
 near blocks / golden ratio: every pixel appears once, and any run of consecutive blocks -- each thread's share --
 is spread over the whole band (a Kronecker sequence).  A pixel's samples keep their random numbers (they depend on
 the pixel and sample index, not on the position in the buffer) and are accumulated in sample order, so the order
-changes no bit of the image.  Measurements: decisions.md 31.
+changes no bit of the image.  Measurements: decisions.md 31.  (Since decisions.md 57 the kernels also claim their
+range in chunks as they go, `_worksharing.py`, which evens out what a fixed share would leave uneven.)
 """
 
 from __future__ import annotations

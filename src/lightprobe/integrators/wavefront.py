@@ -40,6 +40,7 @@ import numpy as np
 
 from .._memory import fresh_array
 from .._numba import jit_inline, jit_parallel, prange
+from .._worksharing import CHUNK, claim, new_counter
 from ..bsdfs.dispatch import bsdf_eval, bsdf_pdf
 from ..bsdfs.lambert import LAMBERT
 from ..bsdfs.phong import PHONG
@@ -334,25 +335,34 @@ def _camera_pass(
     prim,
     b1,
     b2,
+    counter,
+    workers,
 ):
     """Camera rays and their nearest hits: analytic shapes, 8 rays at a time, then meshes through Embree where a
     ray may reach a mesh's bounds before its analytic hit."""
     n = dirs.shape[0]
-    for block in prange((n + LANES - 1) // LANES):
-        start = block * LANES
-        stop = min(start + LANES, n)
-        if sampler == SOBOL:
-            # the rays' positions in their pixels 8 at a time (sampling/sobol_lanes.py), into dirs until the
-            # directions replace them: the same bits as uniform_2d
-            camera_numbers_block(dirs, SOBOL_Y, seed, pixels, spp_pass, sample_start, start)
-            for k in range(start, stop):
-                dirs[k, 0], dirs[k, 1], dirs[k, 2] = camera_ray(cam, pixels[k // spp_pass], dirs[k, 0], dirs[k, 1])
-        else:
-            for k in range(start, stop):
-                _camera_ray_into(cam, sampler, seed, pixels, spp_pass, sample_start, dirs, k)
-        nearest_block(dirs, t, kind, index, cam, s.spheres, s.rects, start)
-        for k in range(start, stop):
-            _mesh_hit_into(s, cam, mesh_scene, scratch, ray_counts, dirs, t, kind, index, prim, b1, b2, k)
+    n_work = (n + LANES - 1) // LANES
+    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing.py)
+        chunk = claim(counter)
+        while chunk * CHUNK < n_work:
+            for block in range(chunk * CHUNK, min(n_work, chunk * CHUNK + CHUNK)):
+                start = block * LANES
+                stop = min(start + LANES, n)
+                if sampler == SOBOL:
+                    # the rays' positions in their pixels 8 at a time (sampling/sobol_lanes.py), into dirs until the
+                    # directions replace them: the same bits as uniform_2d
+                    camera_numbers_block(dirs, SOBOL_Y, seed, pixels, spp_pass, sample_start, start)
+                    for k in range(start, stop):
+                        dirs[k, 0], dirs[k, 1], dirs[k, 2] = camera_ray(
+                            cam, pixels[k // spp_pass], dirs[k, 0], dirs[k, 1]
+                        )
+                else:
+                    for k in range(start, stop):
+                        _camera_ray_into(cam, sampler, seed, pixels, spp_pass, sample_start, dirs, k)
+                nearest_block(dirs, t, kind, index, cam, s.spheres, s.rects, start)
+                for k in range(start, stop):
+                    _mesh_hit_into(s, cam, mesh_scene, scratch, ray_counts, dirs, t, kind, index, prim, b1, b2, k)
+            chunk = claim(counter)
 
 
 @jit_parallel
@@ -374,13 +384,20 @@ def _camera_scalar_pass(
     prim,
     b1,
     b2,
+    counter,
+    workers,
 ):
     """:func:`_camera_pass` one ray at a time: where the vector intrinsics do not compile."""
     ox, oy, oz = cam[0], cam[1], cam[2]
-    for k in prange(dirs.shape[0]):
-        _camera_ray_into(cam, sampler, seed, pixels, spp_pass, sample_start, dirs, k)
-        t[k], kind[k], index[k] = closest_analytic(s, ox, oy, oz, dirs[k, 0], dirs[k, 1], dirs[k, 2], np.inf)
-        _mesh_hit_into(s, cam, mesh_scene, scratch, ray_counts, dirs, t, kind, index, prim, b1, b2, k)
+    n_work = dirs.shape[0]
+    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing.py)
+        chunk = claim(counter)
+        while chunk * CHUNK < n_work:
+            for k in range(chunk * CHUNK, min(n_work, chunk * CHUNK + CHUNK)):
+                _camera_ray_into(cam, sampler, seed, pixels, spp_pass, sample_start, dirs, k)
+                t[k], kind[k], index[k] = closest_analytic(s, ox, oy, oz, dirs[k, 0], dirs[k, 1], dirs[k, 2], np.inf)
+                _mesh_hit_into(s, cam, mesh_scene, scratch, ray_counts, dirs, t, kind, index, prim, b1, b2, k)
+            chunk = claim(counter)
 
 
 # Shading runs as five kernels rather than one: the environment lookups are cache misses (the map and its CDFs
@@ -424,120 +441,143 @@ def _shade_setup(
     bweight,
     env_u,
     numbers,
+    counter,
+    workers,
 ):
     """Hit points, shading frames, and every direction except the environment samples (only their numbers).
     ``numbers``: one (m, 3) row per thread for a camera sample's Sobol' numbers, so that they do not go through the
     pass buffers (decisions.md 56)."""
     m = n_bsdf + n_env
     ox, oy, oz = cam[0], cam[1], cam[2]
-    for k in prange(dirs.shape[0]):
-        base = k * m
-        material[k] = -1  # no shading for this camera sample (a miss, or the back of a one-sided surface)
-        for j in range(m):
-            state[base + j] = SLOT_NONE
-        dx, dy, dz = dirs[k, 0], dirs[k, 1], dirs[k, 2]
-        if kind[k] == MISS:
-            direct[k, 0], direct[k, 1], direct[k, 2] = env_eval(env, dx, dy, dz)
-            continue
-        direct[k, 0] = direct[k, 1] = direct[k, 2] = 0.0
-        hit = (kind[k], index[k], prim[k], b1[k], b2[k], t[k])
-        _, _, wo = store_shading_frame(s, k, hit, ox, oy, oz, dx, dy, dz, point, gnormal, frame, wo_local, material)
-        if wo[2] <= 0.0:
-            continue
-        ts, tt, ns, wo = load_shading_frame(frame, wo_local, k)
-        mk, mp = s.material_kind[material[k]], s.material_params[material[k]]
-        rs = sample_state(sampler, seed, pixels[k // spp_pass], sample_start + k % spp_pass)
-        sobol = sampler == SOBOL
-        own = numbers[numba.get_thread_id()]
-        if sobol:
-            # the slots' Sobol' numbers 8 at a time (sampling/sobol_lanes.py): the same bits as uniform_2d and
-            # uniform below
-            for first in range(0, m, LANES):
-                slot_numbers_block(own, SOBOL_Y, rs[2], rs[3], strategy == MIS, n_bsdf, m, first, first)
-        for j in range(m):
-            r = base + j
-            technique = strategy
-            if strategy == MIS:
-                technique = BRDF if j < n_bsdf else ENV
-            if sobol:
-                u0, u1, u2 = own[j, 0], own[j, 1], own[j, 2]
-            else:
-                rj, slot = technique_slot(rs, strategy, n_bsdf, n_env, j)
-                u0, u1 = uniform_2d(rj, 2 + 3 * slot)
-                u2 = -1.0  # drawn below where a technique takes it
-            if technique == ENV:
-                env_u[r, 0] = u0
-                env_u[r, 1] = u1
-                state[r] = SLOT_ENV
-                continue
-            if not sobol:
-                u2 = uniform(rj, 4 + 3 * slot)
-            st, wi, pdf, w = sample_direction(technique, mk, mp, wo, u0, u1, u2)
-            if st == SLOT_NONE:
-                continue
-            if st == SLOT_BSDF:
-                bweight[r, 0], bweight[r, 1], bweight[r, 2] = w
-            state[r] = st
-            wx, wy, wz = to_world(ts, tt, ns, wi[0], wi[1], wi[2])
-            wdir[r, 0], wdir[r, 1], wdir[r, 2] = wx, wy, wz
-            if st != SLOT_BSDF:  # the finish stage weighs a BSDF sample by bweight, the others by wi
-                wloc[r, 0], wloc[r, 1], wloc[r, 2] = wi
-            tpdf[r] = pdf
+    n_work = dirs.shape[0]
+    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing.py)
+        chunk = claim(counter)
+        while chunk * CHUNK < n_work:
+            for k in range(chunk * CHUNK, min(n_work, chunk * CHUNK + CHUNK)):
+                base = k * m
+                material[k] = -1  # no shading for this camera sample (a miss, or the back of a one-sided surface)
+                for j in range(m):
+                    state[base + j] = SLOT_NONE
+                dx, dy, dz = dirs[k, 0], dirs[k, 1], dirs[k, 2]
+                if kind[k] == MISS:
+                    direct[k, 0], direct[k, 1], direct[k, 2] = env_eval(env, dx, dy, dz)
+                    continue
+                direct[k, 0] = direct[k, 1] = direct[k, 2] = 0.0
+                hit = (kind[k], index[k], prim[k], b1[k], b2[k], t[k])
+                _, _, wo = store_shading_frame(
+                    s, k, hit, ox, oy, oz, dx, dy, dz, point, gnormal, frame, wo_local, material
+                )
+                if wo[2] <= 0.0:
+                    continue
+                ts, tt, ns, wo = load_shading_frame(frame, wo_local, k)
+                mk, mp = s.material_kind[material[k]], s.material_params[material[k]]
+                rs = sample_state(sampler, seed, pixels[k // spp_pass], sample_start + k % spp_pass)
+                sobol = sampler == SOBOL
+                own = numbers[numba.get_thread_id()]
+                if sobol:
+                    # the slots' Sobol' numbers 8 at a time (sampling/sobol_lanes.py): the same bits as uniform_2d and
+                    # uniform below
+                    for first in range(0, m, LANES):
+                        slot_numbers_block(own, SOBOL_Y, rs[2], rs[3], strategy == MIS, n_bsdf, m, first, first)
+                for j in range(m):
+                    r = base + j
+                    technique = strategy
+                    if strategy == MIS:
+                        technique = BRDF if j < n_bsdf else ENV
+                    if sobol:
+                        u0, u1, u2 = own[j, 0], own[j, 1], own[j, 2]
+                    else:
+                        rj, slot = technique_slot(rs, strategy, n_bsdf, n_env, j)
+                        u0, u1 = uniform_2d(rj, 2 + 3 * slot)
+                        u2 = -1.0  # drawn below where a technique takes it
+                    if technique == ENV:
+                        env_u[r, 0] = u0
+                        env_u[r, 1] = u1
+                        state[r] = SLOT_ENV
+                        continue
+                    if not sobol:
+                        u2 = uniform(rj, 4 + 3 * slot)
+                    st, wi, pdf, w = sample_direction(technique, mk, mp, wo, u0, u1, u2)
+                    if st == SLOT_NONE:
+                        continue
+                    if st == SLOT_BSDF:
+                        bweight[r, 0], bweight[r, 1], bweight[r, 2] = w
+                    state[r] = st
+                    wx, wy, wz = to_world(ts, tt, ns, wi[0], wi[1], wi[2])
+                    wdir[r, 0], wdir[r, 1], wdir[r, 2] = wx, wy, wz
+                    if st != SLOT_BSDF:  # the finish stage weighs a BSDF sample by bweight, the others by wi
+                        wloc[r, 0], wloc[r, 1], wloc[r, 2] = wi
+                    tpdf[r] = pdf
+            chunk = claim(counter)
 
 
 @jit_parallel
-def _env_sample_stage(env, compensate, m, material, frame, state, env_u, wdir, tpdf, uv):
+def _env_sample_stage(env, compensate, m, material, frame, state, env_u, wdir, tpdf, uv, counter, workers):
     """Environment samples: directions, densities and lat-long coordinates; those below the surface are dropped."""
-    for r in prange(state.shape[0]):
-        if state[r] != SLOT_ENV:
-            continue
-        k = r // m
-        wx, wy, wz, pdf, u, y, cos_theta = env_sample_full(env, compensate[material[k]], env_u[r, 0], env_u[r, 1])
-        if frame[k, 6] * wx + frame[k, 7] * wy + frame[k, 8] * wz <= 0.0 or pdf <= 0.0:
-            state[r] = SLOT_NONE
-            continue
-        wdir[r, 0], wdir[r, 1], wdir[r, 2] = wx, wy, wz
-        tpdf[r] = pdf
-        uv[r, 0] = u
-        uv[r, 1] = env_sample_coords(env, y, cos_theta)
+    n_work = state.shape[0]
+    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing.py)
+        chunk = claim(counter)
+        while chunk * CHUNK < n_work:
+            for r in range(chunk * CHUNK, min(n_work, chunk * CHUNK + CHUNK)):
+                if state[r] != SLOT_ENV:
+                    continue
+                k = r // m
+                wx, wy, wz, pdf, u, y, cos_theta = env_sample_full(
+                    env, compensate[material[k]], env_u[r, 0], env_u[r, 1]
+                )
+                if frame[k, 6] * wx + frame[k, 7] * wy + frame[k, 8] * wz <= 0.0 or pdf <= 0.0:
+                    state[r] = SLOT_NONE
+                    continue
+                wdir[r, 0], wdir[r, 1], wdir[r, 2] = wx, wy, wz
+                tpdf[r] = pdf
+                uv[r, 0] = u
+                uv[r, 1] = env_sample_coords(env, y, cos_theta)
+            chunk = claim(counter)
 
 
 @jit_parallel
-def _env_sample_lanes_stage(env, compensate, strategy, n_bsdf, m, material, frame, state, env_u, wdir, tpdf, uv):
+def _env_sample_lanes_stage(
+    env, compensate, strategy, n_bsdf, m, material, frame, state, env_u, wdir, tpdf, uv, counter, workers
+):
     """:func:`_env_sample_stage` 8 environment slots at a time (emitters/envmap_lanes.py), for the bilinear
     density: under MIS a camera sample's environment slots are its last m - n_bsdf, under ``env`` all m, and the
     other strategies have none (the lanes compute every slot they are given, so they are given none)."""
     first = n_bsdf if strategy == MIS else 0
     count = m - first if strategy == MIS or strategy == ENV else 0
-    for block in prange((material.shape[0] * count + LANES - 1) // LANES):
-        env_sample_block(
-            env_u,
-            state,
-            material,
-            compensate,
-            m,
-            frame,
-            env.luminance,
-            env.node_sines,
-            env.conditional_cdf,
-            env.marginal_cdf,
-            env.comp_conditional_cdf,
-            env.comp_marginal_cdf,
-            env.row_guide,
-            env.marginal_guide,
-            env.comp_row_guide,
-            env.comp_marginal_guide,
-            env.comp_offset,
-            env.row_angles,
-            env.column_angles,
-            env.to_world,
-            wdir,
-            tpdf,
-            uv,
-            first,
-            count,
-            block * LANES,
-        )
+    n_work = (material.shape[0] * count + LANES - 1) // LANES
+    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing.py)
+        chunk = claim(counter)
+        while chunk * CHUNK < n_work:
+            for block in range(chunk * CHUNK, min(n_work, chunk * CHUNK + CHUNK)):
+                env_sample_block(
+                    env_u,
+                    state,
+                    material,
+                    compensate,
+                    m,
+                    frame,
+                    env.luminance,
+                    env.node_sines,
+                    env.conditional_cdf,
+                    env.marginal_cdf,
+                    env.comp_conditional_cdf,
+                    env.comp_marginal_cdf,
+                    env.row_guide,
+                    env.marginal_guide,
+                    env.comp_row_guide,
+                    env.comp_marginal_guide,
+                    env.comp_offset,
+                    env.row_angles,
+                    env.column_angles,
+                    env.to_world,
+                    wdir,
+                    tpdf,
+                    uv,
+                    first,
+                    count,
+                    block * LANES,
+                )
+            chunk = claim(counter)
 
 
 @jit_parallel
@@ -564,6 +604,8 @@ def _env_resample_stage(
     tpdf,
     uv,
     epdf,
+    counter,
+    workers,
 ):
     """Environment samples by resampled importance sampling (Talbot, Cline and Egbert 2005): M candidates x_i from
     the environment's PDF p, one kept with probability proportional to w_i = p^(x_i) / p(x_i), where the target
@@ -574,110 +616,137 @@ def _env_resample_stage(
     needs to stay unbiased (Veach 1997, 9.2).  Candidate i > 0 of slot j takes the random numbers of virtual slot
     64 + j M + i (past every real slot); the choice uses each candidate's third number (weighted reservoir
     sampling), so the kept sample is a pure function of the sample's coordinates."""
-    for r in prange(state.shape[0]):
-        if state[r] != SLOT_ENV:
-            continue
-        k = r // m
-        j = r % m
-        rs = sample_state(sampler, seed, pixels[k // spp_pass], sample_start + k % spp_pass)
-        ts, tt, ns, wo = load_shading_frame(frame, wo_local, k)
-        mk, mp = s.material_kind[material[k]], s.material_params[material[k]]
-        wsum = 0.0
-        kept_target = 0.0
-        kept = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)  # direction, source pdf, u, v
-        for i in range(env_candidates):
-            if i == 0:
-                rj, slot = technique_slot(rs, strategy, n_bsdf, n_env, j)
-                u0, u1, uc = env_u[r, 0], env_u[r, 1], uniform(rj, 4 + 3 * slot)
-            else:
-                v = 64 + j * env_candidates + i
-                (u0, u1), uc = uniform_2d(rs, 2 + 3 * v), uniform(rs, 4 + 3 * v)
-            wx, wy, wz, pdf, u, y, cos_theta = env_sample_full(env, compensate[material[k]], u0, u1)
-            if pdf <= 0.0:
-                continue
-            wi = to_local(ts, tt, ns, wx, wy, wz)
-            if wi[2] <= 0.0:
-                continue
-            f = bsdf_eval(mk, mp, wo, wi)
-            vv = env_sample_coords(env, y, cos_theta)
-            lr, lg, lb = env_lookup(env, u, vv)
-            target = (0.212671 * f[0] * lr + 0.715160 * f[1] * lg + 0.072169 * f[2] * lb) * wi[2]
-            if not target > 0.0:
-                continue
-            w = target / pdf
-            wsum += w
-            if uc * wsum < w:  # keep candidate i with probability w_i / (w_0 + ... + w_i)
-                kept_target = target
-                kept = (wx, wy, wz, pdf, u, vv)
-        if wsum <= 0.0 or not math.isfinite(wsum):
-            state[r] = SLOT_NONE
-            continue
-        wdir[r, 0], wdir[r, 1], wdir[r, 2] = kept[0], kept[1], kept[2]
-        tpdf[r] = kept_target * env_candidates / wsum
-        epdf[r] = kept[3]
-        uv[r, 0] = kept[4]
-        uv[r, 1] = kept[5]
+    n_work = state.shape[0]
+    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing.py)
+        chunk = claim(counter)
+        while chunk * CHUNK < n_work:
+            for r in range(chunk * CHUNK, min(n_work, chunk * CHUNK + CHUNK)):
+                if state[r] != SLOT_ENV:
+                    continue
+                k = r // m
+                j = r % m
+                rs = sample_state(sampler, seed, pixels[k // spp_pass], sample_start + k % spp_pass)
+                ts, tt, ns, wo = load_shading_frame(frame, wo_local, k)
+                mk, mp = s.material_kind[material[k]], s.material_params[material[k]]
+                wsum = 0.0
+                kept_target = 0.0
+                kept = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)  # direction, source pdf, u, v
+                for i in range(env_candidates):
+                    if i == 0:
+                        rj, slot = technique_slot(rs, strategy, n_bsdf, n_env, j)
+                        u0, u1, uc = env_u[r, 0], env_u[r, 1], uniform(rj, 4 + 3 * slot)
+                    else:
+                        v = 64 + j * env_candidates + i
+                        (u0, u1), uc = uniform_2d(rs, 2 + 3 * v), uniform(rs, 4 + 3 * v)
+                    wx, wy, wz, pdf, u, y, cos_theta = env_sample_full(env, compensate[material[k]], u0, u1)
+                    if pdf <= 0.0:
+                        continue
+                    wi = to_local(ts, tt, ns, wx, wy, wz)
+                    if wi[2] <= 0.0:
+                        continue
+                    f = bsdf_eval(mk, mp, wo, wi)
+                    vv = env_sample_coords(env, y, cos_theta)
+                    lr, lg, lb = env_lookup(env, u, vv)
+                    target = (0.212671 * f[0] * lr + 0.715160 * f[1] * lg + 0.072169 * f[2] * lb) * wi[2]
+                    if not target > 0.0:
+                        continue
+                    w = target / pdf
+                    wsum += w
+                    if uc * wsum < w:  # keep candidate i with probability w_i / (w_0 + ... + w_i)
+                        kept_target = target
+                        kept = (wx, wy, wz, pdf, u, vv)
+                if wsum <= 0.0 or not math.isfinite(wsum):
+                    state[r] = SLOT_NONE
+                    continue
+                wdir[r, 0], wdir[r, 1], wdir[r, 2] = kept[0], kept[1], kept[2]
+                tpdf[r] = kept_target * env_candidates / wsum
+                epdf[r] = kept[3]
+                uv[r, 0] = kept[4]
+                uv[r, 1] = kept[5]
+            chunk = claim(counter)
 
 
 @jit_parallel
-def _env_coords_stage(env, compensate, m, material, mis, state, wdir, uv, epdf):
+def _env_coords_stage(env, compensate, m, material, mis, state, wdir, uv, epdf, counter, workers):
     """Lat-long coordinates of every live slot's direction (environment samples have theirs already), and the
     environment's density for BSDF samples under MIS."""
-    for r in prange(state.shape[0]):
-        st = state[r]
-        if st == SLOT_NONE or st == SLOT_ENV:
-            continue
-        u, v, cos_theta = env_coords(env, wdir[r, 0], wdir[r, 1], wdir[r, 2])
-        uv[r, 0] = u
-        uv[r, 1] = v
-        if mis and st == SLOT_BSDF:
-            epdf[r] = env_pdf_at(env, compensate[material[r // m]], u, v, cos_theta)
+    n_work = state.shape[0]
+    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing.py)
+        chunk = claim(counter)
+        while chunk * CHUNK < n_work:
+            for r in range(chunk * CHUNK, min(n_work, chunk * CHUNK + CHUNK)):
+                st = state[r]
+                if st == SLOT_NONE or st == SLOT_ENV:
+                    continue
+                u, v, cos_theta = env_coords(env, wdir[r, 0], wdir[r, 1], wdir[r, 2])
+                uv[r, 0] = u
+                uv[r, 1] = v
+                if mis and st == SLOT_BSDF:
+                    epdf[r] = env_pdf_at(env, compensate[material[r // m]], u, v, cos_theta)
+            chunk = claim(counter)
 
 
 @jit_parallel
-def _env_coords_lanes_stage(env, compensate, strategy, n_bsdf, m, material, mis, state, wdir, uv, epdf):
+def _env_coords_lanes_stage(
+    env, compensate, strategy, n_bsdf, m, material, mis, state, wdir, uv, epdf, counter, workers
+):
     """:func:`_env_coords_stage` 8 slots at a time (emitters/envmap_lanes.py), for the bilinear density: the slots
     that are not environment samples -- under MIS a camera sample's first n_bsdf, under ``env`` none, else all m --
     numbered over the pass's camera samples, so that the lanes hold no environment samples (decisions.md 46)."""
     count = n_bsdf if strategy == MIS else (0 if strategy == ENV else m)
-    for block in prange((material.shape[0] * count + LANES - 1) // LANES):
-        env_coords_block(
-            state,
-            material,
-            compensate,
-            m,
-            mis,
-            wdir,
-            env.to_env,
-            env.luminance,
-            env.node_sines,
-            env.marginal_cdf,
-            env.comp_marginal_cdf,
-            env.comp_offset,
-            uv,
-            epdf,
-            0,
-            count,
-            block * LANES,
-        )
+    n_work = (material.shape[0] * count + LANES - 1) // LANES
+    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing.py)
+        chunk = claim(counter)
+        while chunk * CHUNK < n_work:
+            for block in range(chunk * CHUNK, min(n_work, chunk * CHUNK + CHUNK)):
+                env_coords_block(
+                    state,
+                    material,
+                    compensate,
+                    m,
+                    mis,
+                    wdir,
+                    env.to_env,
+                    env.luminance,
+                    env.node_sines,
+                    env.marginal_cdf,
+                    env.comp_marginal_cdf,
+                    env.comp_offset,
+                    uv,
+                    epdf,
+                    0,
+                    count,
+                    block * LANES,
+                )
+            chunk = claim(counter)
 
 
 # The radiance lookups run 8 slots at a time in vector IR (emitters/envmap_lanes.py): half the time of the scalar
 # lookup (decisions.md 42).  Every slot of a pass takes this path, so block boundaries never change a pixel.
 @jit_parallel
-def _env_radiance_stage(env, state, uv, radiance):
+def _env_radiance_stage(env, state, uv, radiance, counter, workers):
     """Radiance for every live slot, 8 slots at a time."""
-    for block in prange((state.shape[0] + LANES - 1) // LANES):
-        radiance_block(radiance, env.image, uv, state, block * LANES)
+    n_work = (state.shape[0] + LANES - 1) // LANES
+    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing.py)
+        chunk = claim(counter)
+        while chunk * CHUNK < n_work:
+            for block in range(chunk * CHUNK, min(n_work, chunk * CHUNK + CHUNK)):
+                radiance_block(radiance, env.image, uv, state, block * LANES)
+            chunk = claim(counter)
 
 
 @jit_parallel
-def _env_radiance_scalar_stage(env, state, uv, radiance):
+def _env_radiance_scalar_stage(env, state, uv, radiance, counter, workers):
     """Radiance for every live slot, one at a time: for the maps :func:`radiance_block` does not take (nearest
     lookups, one-row maps)."""
-    for r in prange(state.shape[0]):
-        if state[r] != SLOT_NONE:
-            radiance[r, 0], radiance[r, 1], radiance[r, 2] = env_lookup(env, uv[r, 0], uv[r, 1])
+    n_work = state.shape[0]
+    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing.py)
+        chunk = claim(counter)
+        while chunk * CHUNK < n_work:
+            for r in range(chunk * CHUNK, min(n_work, chunk * CHUNK + CHUNK)):
+                if state[r] != SLOT_NONE:
+                    radiance[r, 0], radiance[r, 1], radiance[r, 2] = env_lookup(env, uv[r, 0], uv[r, 1])
+            chunk = claim(counter)
 
 
 @jit_parallel
@@ -702,125 +771,153 @@ def _shade_finish(
     epdf,
     contrib,
     flags,
+    counter,
+    workers,
 ):
     """Contributions (BSDF value, cosine, MIS weight); each nonzero one's shadow ray is flagged TEST_ANALYTIC for
     :func:`_analytic_shadow_stage`."""
     m = n_bsdf + n_env
     inv_m = 1.0 / m
-    for k in prange(point.shape[0]):
-        base = k * m
-        for j in range(m):
-            flags[base + j] = NONE
-        if material[k] < 0:
-            continue
-        ts, tt, ns, wo = load_shading_frame(frame, wo_local, k)
-        mk, mp = s.material_kind[material[k]], s.material_params[material[k]]
-        for j in range(m):
-            r = base + j
-            st = state[r]
-            if st == SLOT_NONE:
-                continue
-            wx, wy, wz = wdir[r, 0], wdir[r, 1], wdir[r, 2]
-            lr, lg, lb = radiance[r, 0], radiance[r, 1], radiance[r, 2]
-            if st == SLOT_BSDF:
-                scale = inv_m
-                if strategy == MIS:
-                    scale = mis_weight(n_bsdf, tpdf[r], n_env, epdf[r], beta) / n_bsdf
-                cr, cg, cb = bweight[r, 0] * lr * scale, bweight[r, 1] * lg * scale, bweight[r, 2] * lb * scale
-            else:
-                if st == SLOT_ENV:
-                    wi = to_local(ts, tt, ns, wx, wy, wz)
-                else:
-                    wi = (wloc[r, 0], wloc[r, 1], wloc[r, 2])
-                f = bsdf_eval(mk, mp, wo, wi)
-                if f[0] == 0.0 and f[1] == 0.0 and f[2] == 0.0:
+    n_work = point.shape[0]
+    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing.py)
+        chunk = claim(counter)
+        while chunk * CHUNK < n_work:
+            for k in range(chunk * CHUNK, min(n_work, chunk * CHUNK + CHUNK)):
+                base = k * m
+                for j in range(m):
+                    flags[base + j] = NONE
+                if material[k] < 0:
                     continue
-                pdf = tpdf[r]
-                scale = wi[2] / pdf * inv_m
-                if strategy == MIS:
-                    pb = bsdf_pdf(mk, mp, wo, wi)
-                    # a resampled sample's weight uses the density it was drawn from, not its effective one
-                    p_light = epdf[r] if st == SLOT_ENV and env_candidates > 1 else pdf
-                    scale = wi[2] / pdf * mis_weight(n_env, p_light, n_bsdf, pb, beta) / n_env
-                cr, cg, cb = f[0] * lr * scale, f[1] * lg * scale, f[2] * lb * scale
-            if cr == 0.0 and cg == 0.0 and cb == 0.0:
-                continue
-            contrib[r, 0], contrib[r, 1], contrib[r, 2] = cr, cg, cb
-            flags[r] = TEST_ANALYTIC
+                ts, tt, ns, wo = load_shading_frame(frame, wo_local, k)
+                mk, mp = s.material_kind[material[k]], s.material_params[material[k]]
+                for j in range(m):
+                    r = base + j
+                    st = state[r]
+                    if st == SLOT_NONE:
+                        continue
+                    wx, wy, wz = wdir[r, 0], wdir[r, 1], wdir[r, 2]
+                    lr, lg, lb = radiance[r, 0], radiance[r, 1], radiance[r, 2]
+                    if st == SLOT_BSDF:
+                        scale = inv_m
+                        if strategy == MIS:
+                            scale = mis_weight(n_bsdf, tpdf[r], n_env, epdf[r], beta) / n_bsdf
+                        cr, cg, cb = bweight[r, 0] * lr * scale, bweight[r, 1] * lg * scale, bweight[r, 2] * lb * scale
+                    else:
+                        if st == SLOT_ENV:
+                            wi = to_local(ts, tt, ns, wx, wy, wz)
+                        else:
+                            wi = (wloc[r, 0], wloc[r, 1], wloc[r, 2])
+                        f = bsdf_eval(mk, mp, wo, wi)
+                        if f[0] == 0.0 and f[1] == 0.0 and f[2] == 0.0:
+                            continue
+                        pdf = tpdf[r]
+                        scale = wi[2] / pdf * inv_m
+                        if strategy == MIS:
+                            pb = bsdf_pdf(mk, mp, wo, wi)
+                            # a resampled sample's weight uses the density it was drawn from, not its effective one
+                            p_light = epdf[r] if st == SLOT_ENV and env_candidates > 1 else pdf
+                            scale = wi[2] / pdf * mis_weight(n_env, p_light, n_bsdf, pb, beta) / n_env
+                        cr, cg, cb = f[0] * lr * scale, f[1] * lg * scale, f[2] * lb * scale
+                    if cr == 0.0 and cg == 0.0 and cb == 0.0:
+                        continue
+                    contrib[r, 0], contrib[r, 1], contrib[r, 2] = cr, cg, cb
+                    flags[r] = TEST_ANALYTIC
+            chunk = claim(counter)
 
 
 # The analytic shapes' shadow tests run 8 slots at a time in vector IR (geometry/shadow_lanes.py): inside the finish
 # stage, one ray at a time with early exits, they were half of its time (decisions.md 49).
 @jit_parallel
-def _analytic_shadow_stage(s, m, point, gnormal, wdir, flags):
+def _analytic_shadow_stage(s, m, point, gnormal, wdir, flags, counter, workers):
     """Shadow rays of the slots flagged TEST_ANALYTIC against the spheres and rectangles (BLOCKED), then the
     meshes' bounding boxes (TEST_MESH, for :func:`_mesh_shadow_stage`, or VISIBLE), 8 slots at a time."""
-    for block in prange((flags.shape[0] + LANES - 1) // LANES):
-        shadow_block(flags, point, gnormal, wdir, s.spheres, s.rects, s.mesh_bounds, m, block * LANES)
+    n_work = (flags.shape[0] + LANES - 1) // LANES
+    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing.py)
+        chunk = claim(counter)
+        while chunk * CHUNK < n_work:
+            for block in range(chunk * CHUNK, min(n_work, chunk * CHUNK + CHUNK)):
+                shadow_block(flags, point, gnormal, wdir, s.spheres, s.rects, s.mesh_bounds, m, block * LANES)
+            chunk = claim(counter)
 
 
 @jit_parallel
-def _analytic_shadow_scalar_stage(s, m, point, gnormal, wdir, flags):
+def _analytic_shadow_scalar_stage(s, m, point, gnormal, wdir, flags, counter, workers):
     """:func:`_analytic_shadow_stage` one slot at a time: where the vector intrinsics do not compile."""
-    for r in prange(flags.shape[0]):
-        if flags[r] != TEST_ANALYTIC:
-            continue
-        k = r // m
-        wx, wy, wz = wdir[r, 0], wdir[r, 1], wdir[r, 2]
-        qx, qy, qz = ray_offset(
-            point[k, 0], point[k, 1], point[k, 2], gnormal[k, 0], gnormal[k, 1], gnormal[k, 2], wx, wy, wz
-        )
-        if occluded_analytic(s, qx, qy, qz, wx, wy, wz, np.inf):
-            flags[r] = BLOCKED
-        else:
-            flags[r] = TEST_MESH if may_hit_mesh(s, qx, qy, qz, wx, wy, wz, np.inf) else VISIBLE
+    n_work = flags.shape[0]
+    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing.py)
+        chunk = claim(counter)
+        while chunk * CHUNK < n_work:
+            for r in range(chunk * CHUNK, min(n_work, chunk * CHUNK + CHUNK)):
+                if flags[r] != TEST_ANALYTIC:
+                    continue
+                k = r // m
+                wx, wy, wz = wdir[r, 0], wdir[r, 1], wdir[r, 2]
+                qx, qy, qz = ray_offset(
+                    point[k, 0], point[k, 1], point[k, 2], gnormal[k, 0], gnormal[k, 1], gnormal[k, 2], wx, wy, wz
+                )
+                if occluded_analytic(s, qx, qy, qz, wx, wy, wz, np.inf):
+                    flags[r] = BLOCKED
+                else:
+                    flags[r] = TEST_MESH if may_hit_mesh(s, qx, qy, qz, wx, wy, wz, np.inf) else VISIBLE
+            chunk = claim(counter)
 
 
 # Shadow rays that may reach a mesh are traced in a loop of their own, not inside _shade_finish: on the peer scene at
 # 64 spp, 3.9 M such rays added about 1.1 s to that loop body and take 0.9 s here, where the shading work does not
 # evict Embree's BVH between rays (decisions.md 30).
 @jit_parallel
-def _mesh_shadow_stage(m, mesh_scene, scratch, ray_counts, todo, point, gnormal, wdir, flags):
+def _mesh_shadow_stage(m, mesh_scene, scratch, ray_counts, todo, point, gnormal, wdir, flags, counter, workers):
     """The slots in ``todo`` (shadow rays flagged TEST_MESH), through Embree 8 at a time (decisions.md 55): each
     becomes VISIBLE or BLOCKED."""
     n = todo.shape[0]
-    for p in prange((n + PACKET - 1) // PACKET):
-        first = p * PACKET
-        packet = packet_words(scratch)
-        floats = packet.view(np.float32)
-        count = min(PACKET, n - first)
-        for i in range(count):
-            r = todo[first + i]
-            k = r // m
-            wx, wy, wz = wdir[r, 0], wdir[r, 1], wdir[r, 2]
-            qx, qy, qz = ray_offset(
-                point[k, 0], point[k, 1], point[k, 2], gnormal[k, 0], gnormal[k, 1], gnormal[k, 2], wx, wy, wz
-            )
-            packet_ray(packet, floats, i, qx, qy, qz, wx, wy, wz, MESH_FAR)
-        blocked = occluded_packet(mesh_scene, packet, floats, count)
-        ray_counts[numba.get_thread_id(), 1] += count
-        for i in range(count):
-            flags[todo[first + i]] = BLOCKED if blocked >> i & 1 else VISIBLE
+    n_work = (n + PACKET - 1) // PACKET
+    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing.py)
+        chunk = claim(counter)
+        while chunk * CHUNK < n_work:
+            for p in range(chunk * CHUNK, min(n_work, chunk * CHUNK + CHUNK)):
+                first = p * PACKET
+                packet = packet_words(scratch)
+                floats = packet.view(np.float32)
+                count = min(PACKET, n - first)
+                for i in range(count):
+                    r = todo[first + i]
+                    k = r // m
+                    wx, wy, wz = wdir[r, 0], wdir[r, 1], wdir[r, 2]
+                    qx, qy, qz = ray_offset(
+                        point[k, 0], point[k, 1], point[k, 2], gnormal[k, 0], gnormal[k, 1], gnormal[k, 2], wx, wy, wz
+                    )
+                    packet_ray(packet, floats, i, qx, qy, qz, wx, wy, wz, MESH_FAR)
+                blocked = occluded_packet(mesh_scene, packet, floats, count)
+                ray_counts[numba.get_thread_id(), 1] += count
+                for i in range(count):
+                    flags[todo[first + i]] = BLOCKED if blocked >> i & 1 else VISIBLE
+            chunk = claim(counter)
 
 
 @jit_parallel
-def _mesh_shadow_single_stage(m, mesh_scene, scratch, ray_counts, todo, point, gnormal, wdir, flags):
+def _mesh_shadow_single_stage(m, mesh_scene, scratch, ray_counts, todo, point, gnormal, wdir, flags, counter, workers):
     """:func:`_mesh_shadow_stage` one ray at a time: where Embree's 8-ray packets are not native."""
-    for q in prange(todo.shape[0]):
-        r = todo[q]
-        k = r // m
-        wx, wy, wz = wdir[r, 0], wdir[r, 1], wdir[r, 2]
-        qx, qy, qz = ray_offset(
-            point[k, 0], point[k, 1], point[k, 2], gnormal[k, 0], gnormal[k, 1], gnormal[k, 2], wx, wy, wz
-        )
-        ray_counts[numba.get_thread_id(), 1] += 1
-        flags[r] = BLOCKED if mesh_occluded(mesh_scene, scratch, qx, qy, qz, wx, wy, wz, MESH_FAR) else VISIBLE
+    n_work = todo.shape[0]
+    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing.py)
+        chunk = claim(counter)
+        while chunk * CHUNK < n_work:
+            for q in range(chunk * CHUNK, min(n_work, chunk * CHUNK + CHUNK)):
+                r = todo[q]
+                k = r // m
+                wx, wy, wz = wdir[r, 0], wdir[r, 1], wdir[r, 2]
+                qx, qy, qz = ray_offset(
+                    point[k, 0], point[k, 1], point[k, 2], gnormal[k, 0], gnormal[k, 1], gnormal[k, 2], wx, wy, wz
+                )
+                ray_counts[numba.get_thread_id(), 1] += 1
+                flags[r] = BLOCKED if mesh_occluded(mesh_scene, scratch, qx, qy, qz, wx, wy, wz, MESH_FAR) else VISIBLE
+            chunk = claim(counter)
 
 
 # The Embree stages loop over a list of the slots they trace, gathered in NumPy before they run: those slots cluster
-# where the meshes are on screen, and prange hands each thread one contiguous share of the index range, so a loop
-# over every slot gave one thread most of the rays (many-light demo in image order: 97 % of them in the second
-# half).  The spread pixel order of schedule.py evens that out too; the list makes the shares exactly equal.
+# where the meshes are on screen, and when prange handed each thread one contiguous share of the index range, a
+# loop over every slot gave one thread most of the rays (many-light demo in image order: 97 % of them in the second
+# half).  The kernels now claim chunks as they go (_worksharing.py, decisions.md 57), which balances either way;
+# the list still spares the stage a pass over every slot.
 def _mesh_worklist(b):
     return np.flatnonzero(b["flags"] == TEST_MESH)
 
@@ -829,33 +926,40 @@ WORKLISTS = {_mesh_shadow_stage: _mesh_worklist, _mesh_shadow_single_stage: _mes
 
 
 @jit_parallel
-def _accumulate(direct, contrib, flags, m, spp_pass, pixels, acc_mean, acc_m2, acc_count, acc_nonfinite):
+def _accumulate(
+    direct, contrib, flags, m, spp_pass, pixels, acc_mean, acc_m2, acc_count, acc_nonfinite, counter, workers
+):
     mean, m2, count, nonfinite = acc_mean, acc_m2, acc_count, acc_nonfinite
     n_pixels = direct.shape[0] // spp_pass
-    for q in prange(n_pixels):
-        p = pixels[q]
-        for j in range(spp_pass):
-            k = q * spp_pass + j
-            vr, vg, vb = direct[k, 0], direct[k, 1], direct[k, 2]
-            for i in range(k * m, k * m + m):
-                if flags[i] == VISIBLE:
-                    vr += contrib[i, 0]
-                    vg += contrib[i, 1]
-                    vb += contrib[i, 2]
-            if not (math.isfinite(vr) and math.isfinite(vg) and math.isfinite(vb)):
-                vr = vg = vb = 0.0
-                nonfinite[p] += 1
-            count[p] += 1
-            c = count[p]
-            d0 = vr - mean[p, 0]
-            d1 = vg - mean[p, 1]
-            d2 = vb - mean[p, 2]
-            mean[p, 0] += d0 / c
-            mean[p, 1] += d1 / c
-            mean[p, 2] += d2 / c
-            m2[p, 0] += d0 * (vr - mean[p, 0])
-            m2[p, 1] += d1 * (vg - mean[p, 1])
-            m2[p, 2] += d2 * (vb - mean[p, 2])
+    n_work = n_pixels
+    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing.py)
+        chunk = claim(counter)
+        while chunk * CHUNK < n_work:
+            for q in range(chunk * CHUNK, min(n_work, chunk * CHUNK + CHUNK)):
+                p = pixels[q]
+                for j in range(spp_pass):
+                    k = q * spp_pass + j
+                    vr, vg, vb = direct[k, 0], direct[k, 1], direct[k, 2]
+                    for i in range(k * m, k * m + m):
+                        if flags[i] == VISIBLE:
+                            vr += contrib[i, 0]
+                            vg += contrib[i, 1]
+                            vb += contrib[i, 2]
+                    if not (math.isfinite(vr) and math.isfinite(vg) and math.isfinite(vb)):
+                        vr = vg = vb = 0.0
+                        nonfinite[p] += 1
+                    count[p] += 1
+                    c = count[p]
+                    d0 = vr - mean[p, 0]
+                    d1 = vg - mean[p, 1]
+                    d2 = vb - mean[p, 2]
+                    mean[p, 0] += d0 / c
+                    mean[p, 1] += d1 / c
+                    mean[p, 2] += d2 / c
+                    m2[p, 0] += d0 * (vr - mean[p, 0])
+                    m2[p, 1] += d1 * (vg - mean[p, 1])
+                    m2[p, 2] += d2 * (vb - mean[p, 2])
+            chunk = claim(counter)
 
 
 # --- driver -------------------------------------------------------------------------------------------------------
@@ -983,6 +1087,9 @@ def _compensated_materials(kinds: np.ndarray, compensated) -> np.ndarray:
 def _launch(kernel, values: dict) -> None:
     """Call a kernel with its arguments taken by parameter name from ``values``."""
     code = kernel.py_func.__code__
+    if "counter" in code.co_varnames[: code.co_argcount]:
+        values["counter"][0] = 0  # the chunks of _worksharing.claim start over
+        values["workers"] = numba.get_num_threads()  # one per thread (in a kernel the call would prevent caching)
     args = [values[name] for name in code.co_varnames[: code.co_argcount]]
     if PROFILE is None:
         kernel(*args)
@@ -1101,6 +1208,7 @@ def render(
         "mesh_scene": tracer.mesh_scene,
         "scratch": tracer.scratch,
         "ray_counts": ray_counts,
+        "counter": new_counter(),  # for the kernels' chunk claims (_worksharing.py)
         # a camera sample's Sobol' numbers, one row per thread (rows of whole cache lines: 8 slots x 24 bytes)
         "numbers": np.zeros((numba.config.NUMBA_NUM_THREADS, (m + LANES - 1) // LANES * LANES, 3)),
         "s": arrays,
