@@ -10,9 +10,10 @@ run to run; what it computes does not (every item of a stage is independent, and
 overwritten before use), so images stay bit-identical.
 
 A kernel takes ``counter`` and ``workers`` (its last two parameters), loops ``for worker in prange(workers)``
-(one worker per thread) and, inside, claims chunks until none is left.  ``counter`` is an (8,) int64 array (one
-cache line) that must hold 0 when the kernel starts, ``workers`` the pool's thread count: ``wavefront._launch`` sets
-both before every launch; :func:`claims` gives a fresh pair to a direct call.
+(one worker per thread) and, inside, takes ``lo, hi = claim_range(counter, n)`` and its items ``range(lo, hi)``
+while ``lo < hi``.  ``counter`` is an (8,) int64 array (one cache line) that must hold 0 when the kernel starts,
+``workers`` the pool's thread count: ``wavefront._launch`` sets both before every launch; :func:`claims` gives a
+fresh pair to a direct call.
 """
 
 from __future__ import annotations
@@ -24,7 +25,9 @@ from numba import types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
-__all__ = ["CHUNK", "claim", "claims", "new_counter"]
+from ._numba import jit_inline
+
+__all__ = ["CHUNK", "claim", "claim_range", "claims", "new_counter"]
 
 #: items per claimed chunk (camera samples, slots or lanes blocks): thousands of chunks per pass, each tens of
 #: microseconds, so the counter is touched rarely and the last chunk ends soon after the others
@@ -49,6 +52,13 @@ def claim(typingctx, counter):
         return builder.atomic_rmw("add", pointer, ir.Constant(ir.IntType(64), 1), "monotonic")
 
     return types.int64(counter), codegen
+
+
+@jit_inline
+def claim_range(counter, n):
+    """The items [lo, hi) of the next unclaimed chunk of a loop over n items; lo >= hi once none is left."""
+    lo = claim(counter) * CHUNK
+    return lo, min(n, lo + CHUNK)
 
 
 def claims() -> tuple[np.ndarray, int]:

@@ -30,7 +30,7 @@ import numpy as np
 
 from .._memory import fresh_array
 from .._numba import jit, jit_parallel, prange
-from .._worksharing import CHUNK, claim
+from .._worksharing import claim_range
 from ..bsdfs.dispatch import bsdf_eval, bsdf_pdf
 from ..emitters.area import light_intersect, light_pdf, light_radiance, light_sample
 from ..emitters.envmap import env_eval, env_eval_pdf, env_sample
@@ -147,10 +147,10 @@ def _lights_setup(
     m = n_bsdf + n_light
     ox, oy, oz = cam[0], cam[1], cam[2]
     n_work = dirs.shape[0]
-    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing.py)
-        chunk = claim(counter)
-        while chunk * CHUNK < n_work:
-            for k in range(chunk * CHUNK, min(n_work, chunk * CHUNK + CHUNK)):
+    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing)
+        lo, hi = claim_range(counter, n_work)
+        while lo < hi:
+            for k in range(lo, hi):
                 base = k * m
                 material[k] = -1
                 for j in range(m):
@@ -227,7 +227,7 @@ def _lights_setup(
                     hit_b1[r] = 0.0
                     hit_b2[r] = 0.0
                     hit_mesh[r] = may_hit_mesh(s, qx, qy, qz, wx, wy, wz, th)
-            chunk = claim(counter)
+            lo, hi = claim_range(counter, n_work)
 
 
 @jit_parallel
@@ -270,10 +270,10 @@ def _lights_finish(
     m = n_bsdf + n_light
     inv_m = 1.0 / m
     n_work = point.shape[0]
-    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing.py)
-        chunk = claim(counter)
-        while chunk * CHUNK < n_work:
-            for k in range(chunk * CHUNK, min(n_work, chunk * CHUNK + CHUNK)):
+    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing)
+        lo, hi = claim_range(counter, n_work)
+        while lo < hi:
+            for k in range(lo, hi):
                 base = k * m
                 for j in range(m):
                     flags[base + j] = NONE
@@ -363,7 +363,7 @@ def _lights_finish(
                         continue
                     contrib[r, 0], contrib[r, 1], contrib[r, 2] = cr, cg, cb
                     flags[r] = VISIBLE  # the closest hit already decided visibility
-            chunk = claim(counter)
+            lo, hi = claim_range(counter, n_work)
 
 
 @jit_parallel
@@ -386,10 +386,10 @@ def _lights_mesh_hits(
     """The slots in ``todo`` (BSDF and hemisphere directions flagged in ``hit_mesh``): the nearest mesh hit, where
     it is nearer than the analytic one."""
     n_work = todo.shape[0]
-    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing.py)
-        chunk = claim(counter)
-        while chunk * CHUNK < n_work:
-            for q in range(chunk * CHUNK, min(n_work, chunk * CHUNK + CHUNK)):
+    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing)
+        lo, hi = claim_range(counter, n_work)
+        while lo < hi:
+            for q in range(lo, hi):
                 r = todo[q]
                 ray_counts[numba.get_thread_id(), 2] += 1
                 far = hit_t[r] if hit_t[r] < np.inf else MESH_FAR
@@ -405,7 +405,7 @@ def _lights_mesh_hits(
                         mb1,
                         mb2,
                     )
-            chunk = claim(counter)
+            lo, hi = claim_range(counter, n_work)
 
 
 @jit_parallel
@@ -413,10 +413,10 @@ def _lights_mesh_shadows(mesh_scene, scratch, ray_counts, todo, shadow_o, shadow
     """The slots in ``todo`` (shadow rays flagged TEST_MESH), over their segments (0, shadow_t), through Embree:
     each becomes VISIBLE or BLOCKED."""
     n_work = todo.shape[0]
-    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing.py)
-        chunk = claim(counter)
-        while chunk * CHUNK < n_work:
-            for q in range(chunk * CHUNK, min(n_work, chunk * CHUNK + CHUNK)):
+    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing)
+        lo, hi = claim_range(counter, n_work)
+        while lo < hi:
+            for q in range(lo, hi):
                 r = todo[q]
                 ray_counts[numba.get_thread_id(), 1] += 1
                 blocked = mesh_occluded(
@@ -431,7 +431,7 @@ def _lights_mesh_shadows(mesh_scene, scratch, ray_counts, todo, shadow_o, shadow
                     shadow_t[r],
                 )
                 flags[r] = BLOCKED if blocked else VISIBLE
-            chunk = claim(counter)
+            lo, hi = claim_range(counter, n_work)
 
 
 #: the slots each Embree stage traces, gathered from the pass buffers before it runs (see wavefront.WORKLISTS)

@@ -40,7 +40,7 @@ import numpy as np
 
 from .._memory import fresh_array
 from .._numba import jit_inline, jit_parallel, prange
-from .._worksharing import CHUNK, claim, new_counter
+from .._worksharing import claim_range, new_counter
 from ..bsdfs.dispatch import bsdf_eval, bsdf_pdf
 from ..bsdfs.lambert import LAMBERT
 from ..bsdfs.phong import PHONG
@@ -342,10 +342,10 @@ def _camera_pass(
     ray may reach a mesh's bounds before its analytic hit."""
     n = dirs.shape[0]
     n_work = (n + LANES - 1) // LANES
-    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing.py)
-        chunk = claim(counter)
-        while chunk * CHUNK < n_work:
-            for block in range(chunk * CHUNK, min(n_work, chunk * CHUNK + CHUNK)):
+    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing)
+        lo, hi = claim_range(counter, n_work)
+        while lo < hi:
+            for block in range(lo, hi):
                 start = block * LANES
                 stop = min(start + LANES, n)
                 if sampler == SOBOL:
@@ -362,7 +362,7 @@ def _camera_pass(
                 nearest_block(dirs, t, kind, index, cam, s.spheres, s.rects, start)
                 for k in range(start, stop):
                     _mesh_hit_into(s, cam, mesh_scene, scratch, ray_counts, dirs, t, kind, index, prim, b1, b2, k)
-            chunk = claim(counter)
+            lo, hi = claim_range(counter, n_work)
 
 
 @jit_parallel
@@ -390,14 +390,14 @@ def _camera_scalar_pass(
     """:func:`_camera_pass` one ray at a time: where the vector intrinsics do not compile."""
     ox, oy, oz = cam[0], cam[1], cam[2]
     n_work = dirs.shape[0]
-    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing.py)
-        chunk = claim(counter)
-        while chunk * CHUNK < n_work:
-            for k in range(chunk * CHUNK, min(n_work, chunk * CHUNK + CHUNK)):
+    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing)
+        lo, hi = claim_range(counter, n_work)
+        while lo < hi:
+            for k in range(lo, hi):
                 _camera_ray_into(cam, sampler, seed, pixels, spp_pass, sample_start, dirs, k)
                 t[k], kind[k], index[k] = closest_analytic(s, ox, oy, oz, dirs[k, 0], dirs[k, 1], dirs[k, 2], np.inf)
                 _mesh_hit_into(s, cam, mesh_scene, scratch, ray_counts, dirs, t, kind, index, prim, b1, b2, k)
-            chunk = claim(counter)
+            lo, hi = claim_range(counter, n_work)
 
 
 # Shading runs as five kernels rather than one: the environment lookups are cache misses (the map and its CDFs
@@ -450,10 +450,10 @@ def _shade_setup(
     m = n_bsdf + n_env
     ox, oy, oz = cam[0], cam[1], cam[2]
     n_work = dirs.shape[0]
-    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing.py)
-        chunk = claim(counter)
-        while chunk * CHUNK < n_work:
-            for k in range(chunk * CHUNK, min(n_work, chunk * CHUNK + CHUNK)):
+    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing)
+        lo, hi = claim_range(counter, n_work)
+        while lo < hi:
+            for k in range(lo, hi):
                 base = k * m
                 material[k] = -1  # no shading for this camera sample (a miss, or the back of a one-sided surface)
                 for j in range(m):
@@ -508,17 +508,17 @@ def _shade_setup(
                     if st != SLOT_BSDF:  # the finish stage weighs a BSDF sample by bweight, the others by wi
                         wloc[r, 0], wloc[r, 1], wloc[r, 2] = wi
                     tpdf[r] = pdf
-            chunk = claim(counter)
+            lo, hi = claim_range(counter, n_work)
 
 
 @jit_parallel
 def _env_sample_stage(env, compensate, m, material, frame, state, env_u, wdir, tpdf, uv, counter, workers):
     """Environment samples: directions, densities and lat-long coordinates; those below the surface are dropped."""
     n_work = state.shape[0]
-    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing.py)
-        chunk = claim(counter)
-        while chunk * CHUNK < n_work:
-            for r in range(chunk * CHUNK, min(n_work, chunk * CHUNK + CHUNK)):
+    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing)
+        lo, hi = claim_range(counter, n_work)
+        while lo < hi:
+            for r in range(lo, hi):
                 if state[r] != SLOT_ENV:
                     continue
                 k = r // m
@@ -532,7 +532,7 @@ def _env_sample_stage(env, compensate, m, material, frame, state, env_u, wdir, t
                 tpdf[r] = pdf
                 uv[r, 0] = u
                 uv[r, 1] = env_sample_coords(env, y, cos_theta)
-            chunk = claim(counter)
+            lo, hi = claim_range(counter, n_work)
 
 
 @jit_parallel
@@ -545,10 +545,10 @@ def _env_sample_lanes_stage(
     first = n_bsdf if strategy == MIS else 0
     count = m - first if strategy == MIS or strategy == ENV else 0
     n_work = (material.shape[0] * count + LANES - 1) // LANES
-    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing.py)
-        chunk = claim(counter)
-        while chunk * CHUNK < n_work:
-            for block in range(chunk * CHUNK, min(n_work, chunk * CHUNK + CHUNK)):
+    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing)
+        lo, hi = claim_range(counter, n_work)
+        while lo < hi:
+            for block in range(lo, hi):
                 env_sample_block(
                     env_u,
                     state,
@@ -577,7 +577,7 @@ def _env_sample_lanes_stage(
                     count,
                     block * LANES,
                 )
-            chunk = claim(counter)
+            lo, hi = claim_range(counter, n_work)
 
 
 @jit_parallel
@@ -617,10 +617,10 @@ def _env_resample_stage(
     64 + j M + i (past every real slot); the choice uses each candidate's third number (weighted reservoir
     sampling), so the kept sample is a pure function of the sample's coordinates."""
     n_work = state.shape[0]
-    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing.py)
-        chunk = claim(counter)
-        while chunk * CHUNK < n_work:
-            for r in range(chunk * CHUNK, min(n_work, chunk * CHUNK + CHUNK)):
+    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing)
+        lo, hi = claim_range(counter, n_work)
+        while lo < hi:
+            for r in range(lo, hi):
                 if state[r] != SLOT_ENV:
                     continue
                 k = r // m
@@ -663,7 +663,7 @@ def _env_resample_stage(
                 epdf[r] = kept[3]
                 uv[r, 0] = kept[4]
                 uv[r, 1] = kept[5]
-            chunk = claim(counter)
+            lo, hi = claim_range(counter, n_work)
 
 
 @jit_parallel
@@ -671,10 +671,10 @@ def _env_coords_stage(env, compensate, m, material, mis, state, wdir, uv, epdf, 
     """Lat-long coordinates of every live slot's direction (environment samples have theirs already), and the
     environment's density for BSDF samples under MIS."""
     n_work = state.shape[0]
-    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing.py)
-        chunk = claim(counter)
-        while chunk * CHUNK < n_work:
-            for r in range(chunk * CHUNK, min(n_work, chunk * CHUNK + CHUNK)):
+    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing)
+        lo, hi = claim_range(counter, n_work)
+        while lo < hi:
+            for r in range(lo, hi):
                 st = state[r]
                 if st == SLOT_NONE or st == SLOT_ENV:
                     continue
@@ -683,7 +683,7 @@ def _env_coords_stage(env, compensate, m, material, mis, state, wdir, uv, epdf, 
                 uv[r, 1] = v
                 if mis and st == SLOT_BSDF:
                     epdf[r] = env_pdf_at(env, compensate[material[r // m]], u, v, cos_theta)
-            chunk = claim(counter)
+            lo, hi = claim_range(counter, n_work)
 
 
 @jit_parallel
@@ -695,10 +695,10 @@ def _env_coords_lanes_stage(
     numbered over the pass's camera samples, so that the lanes hold no environment samples (decisions.md 46)."""
     count = n_bsdf if strategy == MIS else (0 if strategy == ENV else m)
     n_work = (material.shape[0] * count + LANES - 1) // LANES
-    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing.py)
-        chunk = claim(counter)
-        while chunk * CHUNK < n_work:
-            for block in range(chunk * CHUNK, min(n_work, chunk * CHUNK + CHUNK)):
+    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing)
+        lo, hi = claim_range(counter, n_work)
+        while lo < hi:
+            for block in range(lo, hi):
                 env_coords_block(
                     state,
                     material,
@@ -718,7 +718,7 @@ def _env_coords_lanes_stage(
                     count,
                     block * LANES,
                 )
-            chunk = claim(counter)
+            lo, hi = claim_range(counter, n_work)
 
 
 # The radiance lookups run 8 slots at a time in vector IR (emitters/envmap_lanes.py): half the time of the scalar
@@ -727,12 +727,12 @@ def _env_coords_lanes_stage(
 def _env_radiance_stage(env, state, uv, radiance, counter, workers):
     """Radiance for every live slot, 8 slots at a time."""
     n_work = (state.shape[0] + LANES - 1) // LANES
-    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing.py)
-        chunk = claim(counter)
-        while chunk * CHUNK < n_work:
-            for block in range(chunk * CHUNK, min(n_work, chunk * CHUNK + CHUNK)):
+    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing)
+        lo, hi = claim_range(counter, n_work)
+        while lo < hi:
+            for block in range(lo, hi):
                 radiance_block(radiance, env.image, uv, state, block * LANES)
-            chunk = claim(counter)
+            lo, hi = claim_range(counter, n_work)
 
 
 @jit_parallel
@@ -740,13 +740,13 @@ def _env_radiance_scalar_stage(env, state, uv, radiance, counter, workers):
     """Radiance for every live slot, one at a time: for the maps :func:`radiance_block` does not take (nearest
     lookups, one-row maps)."""
     n_work = state.shape[0]
-    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing.py)
-        chunk = claim(counter)
-        while chunk * CHUNK < n_work:
-            for r in range(chunk * CHUNK, min(n_work, chunk * CHUNK + CHUNK)):
+    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing)
+        lo, hi = claim_range(counter, n_work)
+        while lo < hi:
+            for r in range(lo, hi):
                 if state[r] != SLOT_NONE:
                     radiance[r, 0], radiance[r, 1], radiance[r, 2] = env_lookup(env, uv[r, 0], uv[r, 1])
-            chunk = claim(counter)
+            lo, hi = claim_range(counter, n_work)
 
 
 @jit_parallel
@@ -779,10 +779,10 @@ def _shade_finish(
     m = n_bsdf + n_env
     inv_m = 1.0 / m
     n_work = point.shape[0]
-    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing.py)
-        chunk = claim(counter)
-        while chunk * CHUNK < n_work:
-            for k in range(chunk * CHUNK, min(n_work, chunk * CHUNK + CHUNK)):
+    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing)
+        lo, hi = claim_range(counter, n_work)
+        while lo < hi:
+            for k in range(lo, hi):
                 base = k * m
                 for j in range(m):
                     flags[base + j] = NONE
@@ -822,7 +822,7 @@ def _shade_finish(
                         continue
                     contrib[r, 0], contrib[r, 1], contrib[r, 2] = cr, cg, cb
                     flags[r] = TEST_ANALYTIC
-            chunk = claim(counter)
+            lo, hi = claim_range(counter, n_work)
 
 
 # The analytic shapes' shadow tests run 8 slots at a time in vector IR (geometry/shadow_lanes.py): inside the finish
@@ -832,22 +832,22 @@ def _analytic_shadow_stage(s, m, point, gnormal, wdir, flags, counter, workers):
     """Shadow rays of the slots flagged TEST_ANALYTIC against the spheres and rectangles (BLOCKED), then the
     meshes' bounding boxes (TEST_MESH, for :func:`_mesh_shadow_stage`, or VISIBLE), 8 slots at a time."""
     n_work = (flags.shape[0] + LANES - 1) // LANES
-    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing.py)
-        chunk = claim(counter)
-        while chunk * CHUNK < n_work:
-            for block in range(chunk * CHUNK, min(n_work, chunk * CHUNK + CHUNK)):
+    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing)
+        lo, hi = claim_range(counter, n_work)
+        while lo < hi:
+            for block in range(lo, hi):
                 shadow_block(flags, point, gnormal, wdir, s.spheres, s.rects, s.mesh_bounds, m, block * LANES)
-            chunk = claim(counter)
+            lo, hi = claim_range(counter, n_work)
 
 
 @jit_parallel
 def _analytic_shadow_scalar_stage(s, m, point, gnormal, wdir, flags, counter, workers):
     """:func:`_analytic_shadow_stage` one slot at a time: where the vector intrinsics do not compile."""
     n_work = flags.shape[0]
-    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing.py)
-        chunk = claim(counter)
-        while chunk * CHUNK < n_work:
-            for r in range(chunk * CHUNK, min(n_work, chunk * CHUNK + CHUNK)):
+    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing)
+        lo, hi = claim_range(counter, n_work)
+        while lo < hi:
+            for r in range(lo, hi):
                 if flags[r] != TEST_ANALYTIC:
                     continue
                 k = r // m
@@ -859,7 +859,7 @@ def _analytic_shadow_scalar_stage(s, m, point, gnormal, wdir, flags, counter, wo
                     flags[r] = BLOCKED
                 else:
                     flags[r] = TEST_MESH if may_hit_mesh(s, qx, qy, qz, wx, wy, wz, np.inf) else VISIBLE
-            chunk = claim(counter)
+            lo, hi = claim_range(counter, n_work)
 
 
 # Shadow rays that may reach a mesh are traced in a loop of their own, not inside _shade_finish: on the peer scene at
@@ -871,10 +871,10 @@ def _mesh_shadow_stage(m, mesh_scene, scratch, ray_counts, todo, point, gnormal,
     becomes VISIBLE or BLOCKED."""
     n = todo.shape[0]
     n_work = (n + PACKET - 1) // PACKET
-    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing.py)
-        chunk = claim(counter)
-        while chunk * CHUNK < n_work:
-            for p in range(chunk * CHUNK, min(n_work, chunk * CHUNK + CHUNK)):
+    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing)
+        lo, hi = claim_range(counter, n_work)
+        while lo < hi:
+            for p in range(lo, hi):
                 first = p * PACKET
                 packet = packet_words(scratch)
                 floats = packet.view(np.float32)
@@ -891,17 +891,17 @@ def _mesh_shadow_stage(m, mesh_scene, scratch, ray_counts, todo, point, gnormal,
                 ray_counts[numba.get_thread_id(), 1] += count
                 for i in range(count):
                     flags[todo[first + i]] = BLOCKED if blocked >> i & 1 else VISIBLE
-            chunk = claim(counter)
+            lo, hi = claim_range(counter, n_work)
 
 
 @jit_parallel
 def _mesh_shadow_single_stage(m, mesh_scene, scratch, ray_counts, todo, point, gnormal, wdir, flags, counter, workers):
     """:func:`_mesh_shadow_stage` one ray at a time: where Embree's 8-ray packets are not native."""
     n_work = todo.shape[0]
-    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing.py)
-        chunk = claim(counter)
-        while chunk * CHUNK < n_work:
-            for q in range(chunk * CHUNK, min(n_work, chunk * CHUNK + CHUNK)):
+    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing)
+        lo, hi = claim_range(counter, n_work)
+        while lo < hi:
+            for q in range(lo, hi):
                 r = todo[q]
                 k = r // m
                 wx, wy, wz = wdir[r, 0], wdir[r, 1], wdir[r, 2]
@@ -910,7 +910,7 @@ def _mesh_shadow_single_stage(m, mesh_scene, scratch, ray_counts, todo, point, g
                 )
                 ray_counts[numba.get_thread_id(), 1] += 1
                 flags[r] = BLOCKED if mesh_occluded(mesh_scene, scratch, qx, qy, qz, wx, wy, wz, MESH_FAR) else VISIBLE
-            chunk = claim(counter)
+            lo, hi = claim_range(counter, n_work)
 
 
 # The Embree stages loop over a list of the slots they trace, gathered in NumPy before they run: those slots cluster
@@ -932,10 +932,10 @@ def _accumulate(
     mean, m2, count, nonfinite = acc_mean, acc_m2, acc_count, acc_nonfinite
     n_pixels = direct.shape[0] // spp_pass
     n_work = n_pixels
-    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing.py)
-        chunk = claim(counter)
-        while chunk * CHUNK < n_work:
-            for q in range(chunk * CHUNK, min(n_work, chunk * CHUNK + CHUNK)):
+    for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing)
+        lo, hi = claim_range(counter, n_work)
+        while lo < hi:
+            for q in range(lo, hi):
                 p = pixels[q]
                 for j in range(spp_pass):
                     k = q * spp_pass + j
@@ -959,7 +959,7 @@ def _accumulate(
                     m2[p, 0] += d0 * (vr - mean[p, 0])
                     m2[p, 1] += d1 * (vg - mean[p, 1])
                     m2[p, 2] += d2 * (vb - mean[p, 2])
-            chunk = claim(counter)
+            lo, hi = claim_range(counter, n_work)
 
 
 # --- driver -------------------------------------------------------------------------------------------------------
