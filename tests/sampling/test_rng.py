@@ -37,6 +37,26 @@ def test_sobol_pairs_are_nets(k):
             assert np.bincount(cells, minlength=1 << k).max() == 1, (a, b, bits_x)
 
 
+def test_sobol_second_dimension_is_its_direction_numbers():
+    """rng._sobol_y (a superset sum over GF(2), reversed) is the XOR of the direction numbers v_k of the index's set
+    bits, v_0 = 2^31 and v_{k+1} = v_k ^ (v_k >> 1): on each of the 32 one-bit indices, which decides every index
+    of a linear map, and on random ones."""
+    columns = [1 << 31]
+    for _ in range(31):
+        columns.append(columns[-1] ^ (columns[-1] >> 1))
+
+    def by_definition(i):
+        y = 0
+        for k in range(32):
+            if i >> k & 1:
+                y ^= columns[k]
+        return y
+
+    indices = [1 << k for k in range(32)] + [int(i) for i in np.random.default_rng(5).integers(0, 1 << 32, 2000)]
+    for i in indices:
+        assert int(rng._sobol_y(np.uint64(i))) == by_definition(i), i
+
+
 def test_independent_points_are_not_stratified():
     """Negative control: the same check rejects the independent sampler."""
     u = _one_pixel(INDEPENDENT)[:256]

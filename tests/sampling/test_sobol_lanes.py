@@ -6,7 +6,7 @@ from numba import njit
 
 from lightprobe.integrators.techniques import BRDF, MIS, technique_slot
 from lightprobe.sampling.rng import SAMPLERS, sample_state, uniform, uniform_2d
-from lightprobe.sampling.sobol_lanes import LANES, SOBOL_Y, camera_numbers_block, slot_numbers_block
+from lightprobe.sampling.sobol_lanes import LANES, camera_numbers_block, slot_numbers_block
 
 SOBOL = SAMPLERS["sobol"]
 
@@ -17,7 +17,7 @@ def _lanes(seed, pixels, samples, strategy, n_bsdf, m):
     for k in range(pixels.shape[0]):
         rs = sample_state(SOBOL, seed, pixels[k], samples[k])
         for first in range(0, m, LANES):
-            slot_numbers_block(out, SOBOL_Y, rs[2], rs[3], strategy == MIS, n_bsdf, m, k * m + first, first)
+            slot_numbers_block(out, rs[2], rs[3], strategy == MIS, n_bsdf, m, k * m + first, first)
     return out
 
 
@@ -56,7 +56,7 @@ def test_slot_numbers_in_lanes_are_the_scalar_samplers(strategy, n_bsdf, m):
 def _camera_lanes(seed, pixels, spp_pass, sample_start, n):
     dirs = np.full((n, 3), -7.0)
     for start in range(0, n, LANES):
-        camera_numbers_block(dirs[: n - 1], SOBOL_Y, seed, pixels, spp_pass, sample_start, start)  # all but the last
+        camera_numbers_block(dirs[: n - 1], seed, pixels, spp_pass, sample_start, start)  # all but the last
     return dirs
 
 

@@ -80,7 +80,7 @@ from ..geometry.scene import Scene
 from ..geometry.shadow_lanes import shadow_block
 from ..sampling.mis import mis_weight
 from ..sampling.rng import SAMPLERS, SOBOL, sample_state, uniform, uniform_2d
-from ..sampling.sobol_lanes import SOBOL_Y, camera_numbers_block, slot_numbers_block
+from ..sampling.sobol_lanes import camera_numbers_block, slot_numbers_block
 from . import adaptive
 from .schedule import pass_pixels
 from .techniques import (
@@ -351,7 +351,7 @@ def _camera_pass(
                 if sampler == SOBOL:
                     # the rays' positions in their pixels 8 at a time (sampling/sobol_lanes.py), into dirs until the
                     # directions replace them: the same bits as uniform_2d
-                    camera_numbers_block(dirs, SOBOL_Y, seed, pixels, spp_pass, sample_start, start)
+                    camera_numbers_block(dirs, seed, pixels, spp_pass, sample_start, start)
                     for k in range(start, stop):
                         dirs[k, 0], dirs[k, 1], dirs[k, 2] = camera_ray(
                             cam, pixels[k // spp_pass], dirs[k, 0], dirs[k, 1]
@@ -478,7 +478,7 @@ def _shade_setup(
                     # the slots' Sobol' numbers 8 at a time (sampling/sobol_lanes.py): the same bits as uniform_2d and
                     # uniform below
                     for first in range(0, m, LANES):
-                        slot_numbers_block(own, SOBOL_Y, rs[2], rs[3], strategy == MIS, n_bsdf, m, first, first)
+                        slot_numbers_block(own, rs[2], rs[3], strategy == MIS, n_bsdf, m, first, first)
                 for j in range(m):
                     r = base + j
                     technique = strategy

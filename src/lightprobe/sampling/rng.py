@@ -116,28 +116,9 @@ def owen_scramble(x, seed):
     return _reverse32(_laine_karras(_reverse32(x), seed))
 
 
-def _sobol_y_tables() -> np.ndarray:
-    """Sobol's second dimension y = C i (over GF(2)) as four byte tables: y = T[0][i & 255] ^ T[1][i >> 8 & 255]..."""
-    columns = []
-    v = 0x80000000
-    for _ in range(32):
-        columns.append(v)
-        v ^= v >> 1
-    tables = np.zeros((4, 256), dtype=np.uint64)
-    for q in range(4):
-        for byte in range(256):
-            y = 0
-            for t in range(8):
-                if byte >> t & 1:
-                    y ^= columns[8 * q + t]
-            tables[q, byte] = y
-    return tables
-
-
-_SOBOL_Y = _sobol_y_tables()
-_BYTE = np.uint64(0xFF)
-_S8 = np.uint64(8)
-_S24 = np.uint64(24)
+# the superset sum of Sobol's second dimension (_sobol_y): (shift, positions whose bit of that weight is 0)
+_SUPERSET = tuple((np.uint64(1 << q), np.uint64(m)) for q, m in enumerate(
+    (0x55555555, 0x33333333, 0x0F0F0F0F, 0x00FF00FF, 0x0000FFFF)))  # fmt: skip
 
 
 @jit
@@ -150,8 +131,14 @@ def sobol_2d(index):
 
 @jit
 def _sobol_y(i):
-    t = _SOBOL_Y
-    return t[0, i & _BYTE] ^ t[1, (i >> _S8) & _BYTE] ^ t[2, (i >> _S16) & _BYTE] ^ t[3, i >> _S24]
+    """Sobol's second dimension y = XOR of the direction numbers v_k of i's set bits k (v_0 = 2^31, v_{k+1} = v_k ^
+    (v_k >> 1)).  Bit-reversed, v_k is (1 + x)^k, whose bit j is C(k, j) mod 2, odd exactly where j's bits are a
+    subset of k's (Lucas's theorem); so reversed y's bit j is the XOR of i's bits k over the supersets k of j, a
+    superset sum over GF(2) that five shift-and-xor steps compute (in place of four byte-table lookups)."""
+    z = i & _U32
+    for shift, mask in _SUPERSET:
+        z ^= (z >> shift) & mask
+    return _reverse32(z)
 
 
 @jit

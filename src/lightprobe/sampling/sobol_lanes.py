@@ -17,12 +17,9 @@ from numba.core import cgutils
 from numba.extending import intrinsic
 
 from ..emitters.envmap_lanes import LANES, _Lanes
-from .rng import _DIM, _GOLDEN, _INV32, _LK1, _LK2, _LK3, _M1, _M2, _PIXEL, _SOBOL_Y
+from .rng import _DIM, _GOLDEN, _INV32, _LK1, _LK2, _LK3, _M1, _M2, _PIXEL, _SUPERSET
 
-__all__ = ["LANES", "SOBOL_Y", "camera_numbers_block", "slot_numbers_block"]
-
-#: Sobol's second dimension as four byte tables (``rng._sobol_y_tables``), passed to the intrinsic
-SOBOL_Y = _SOBOL_Y
+__all__ = ["LANES", "camera_numbers_block", "slot_numbers_block"]
 
 _F64, _I32, _I64 = ir.DoubleType(), ir.IntType(32), ir.IntType(64)
 _VI32, _VI64, _VF64 = ir.VectorType(_I32, LANES), ir.VectorType(_I64, LANES), ir.VectorType(_F64, LANES)
@@ -88,50 +85,46 @@ class _Integers:
         """rng._sobol_x."""
         return self.to_unit(self.reverse32(self.laine_karras(shuffled, self.b.lshr(h, self.c64(32)))))
 
-    def sobol_2d(self, pkey, index, pair, table):
+    def sobol_2d(self, pkey, index, pair):
         """Both coordinates of Sobol' pair ``pair`` for sample ``index`` (rng.uniform_2d): x as rng._sobol_x, y as
-        rng._sobol_y_scrambled (its four byte tables read from ``table``, :data:`SOBOL_Y`)."""
-        b, v = self.b, self.v
+        rng._sobol_y_scrambled.  rng._sobol_y is reverse32 of a superset sum z, and owen_scramble begins by
+        reversing its argument, so y's scrambled value is reverse32(laine_karras(z)) with no reversal before."""
+        b = self.b
         h, shuffled = self.pair_hash(pkey, index, pair)
-        wide = b.zext(shuffled, _VI64)
-        y = None
-        for q in range(4):
-            byte = b.and_(b.lshr(wide, v.i(8 * q)), v.i(255))
-            entry = v.gather(_I64, v.address(table, b.add(byte, v.i(256 * q)), 8))
-            y = entry if y is None else b.xor(y, entry)
-        return self.sobol_x(h, shuffled), self.to_unit(self.owen(b.trunc(y, _VI32), self.mix(h)))
+        z = shuffled
+        for shift, mask in _SUPERSET:
+            z = b.xor(z, b.and_(b.lshr(z, self.c32(shift)), self.c32(mask)))
+        y = self.reverse32(self.laine_karras(z, self.mix(h)))
+        return self.sobol_x(h, shuffled), self.to_unit(y)
 
 
 @intrinsic
-def slot_numbers_block(typingctx, out, sobol_y, pkey, sample, mis, n_bsdf, m, row, first_slot):
+def slot_numbers_block(typingctx, out, pkey, sample, mis, n_bsdf, m, row, first_slot):
     """out[row + j - first_slot] = (u0, u1, u2) for shading slots j = first_slot .. first_slot + 7 below m of one
     camera sample whose ``sample_state`` under ``sobol`` has pixel key ``pkey`` and sample index ``sample``: the
     numbers ``technique_slot(state, strategy, n_bsdf, m - n_bsdf, j)`` gives its slot, ``uniform_2d(rj, 2 + 3 slot)``
     and ``uniform(rj, 4 + 3 slot)``, where ``mis`` says whether the strategy is MIS.  out (N, 3) float64
-    C-contiguous, sobol_y (4, 256) uint64 (:data:`SOBOL_Y`), pkey uint64, mis a boolean, the rest integers."""
+    C-contiguous, pkey uint64, mis a boolean, the rest integers."""
     if not (
         out == types.Array(types.float64, 2, "C")
-        and isinstance(sobol_y, types.Array)  # a module-level global is a read-only array to Numba
-        and (sobol_y.dtype, sobol_y.ndim, sobol_y.layout) == (types.uint64, 2, "C")
         and pkey == types.uint64
         and isinstance(mis, types.Boolean)
         and all(isinstance(t, types.Integer) for t in (sample, n_bsdf, m, row, first_slot))
     ):
         return None
-    signature_args = (out, sobol_y, pkey, sample, mis, n_bsdf, m, row, first_slot)
+    signature_args = (out, pkey, sample, mis, n_bsdf, m, row, first_slot)
 
     def codegen(context, builder, signature, args):
         out_a = context.make_array(signature.args[0])(context, builder, args[0])
-        table_a = context.make_array(signature.args[1])(context, builder, args[1])
         v, b = _Lanes(builder), builder
         n = _Integers(v)
 
         def scalar(i):
             return context.cast(b, args[i], signature.args[i], types.int64)
 
-        sample_v, n_bsdf_v, m_v, first_v = (v.splat(scalar(i), _VI64) for i in (3, 5, 6, 8))
-        mis = v.splat(context.cast(b, args[4], signature.args[4], types.boolean), ir.VectorType(ir.IntType(1), LANES))
-        pkey_v = v.splat(args[2], _VI64)
+        sample_v, n_bsdf_v, m_v, first_v = (v.splat(scalar(i), _VI64) for i in (2, 4, 5, 7))
+        mis = v.splat(context.cast(b, args[3], signature.args[3], types.boolean), ir.VectorType(ir.IntType(1), LANES))
+        pkey_v = v.splat(args[1], _VI64)
         j = b.add(first_v, ir.Constant(_VI64, list(range(LANES))))
         live = b.icmp_signed("<", j, m_v)
         # techniques.technique_slot + rng.group_slot: under MIS the BSDF slots are one group and the light slots
@@ -143,53 +136,49 @@ def slot_numbers_block(typingctx, out, sobol_y, pkey, sample, mis, n_bsdf, m, ro
         index = b.add(b.mul(sample_v, group_size), b.sub(j, group_first))
 
         # the 2D pair: dimensions 2 + 3 slot and 3 + 3 slot are Sobol' pair 1 + 2 slot (rng._pair_of)
-        u0, u1 = n.sobol_2d(pkey_v, index, b.add(v.i(1), b.mul(v.i(2), group_first)), table_a)
+        u0, u1 = n.sobol_2d(pkey_v, index, b.add(v.i(1), b.mul(v.i(2), group_first)))
         # the 1D choice: dimension 4 + 3 slot is the first coordinate of Sobol' pair 2 + 2 slot
         h2, shuffled2 = n.pair_hash(pkey_v, index, b.add(v.i(2), b.mul(v.i(2), group_first)))
         u2 = n.sobol_x(h2, shuffled2)
         # the 8 rows (u0, u1, u2) are 24 consecutive doubles: one masked vector store (a scatter per number measured
         # the same in the render, 3.0-3.1 s of setup)
-        v.store_run([u0, u1, u2], b.gep(out_a.data, [b.mul(scalar(7), _I64(3))]), live)
+        v.store_run([u0, u1, u2], b.gep(out_a.data, [b.mul(scalar(6), _I64(3))]), live)
         return context.get_dummy_value()
 
     return types.void(*signature_args), codegen
 
 
 @intrinsic
-def camera_numbers_block(typingctx, dirs, sobol_y, seed, pixels, spp_pass, sample_start, start):
+def camera_numbers_block(typingctx, dirs, seed, pixels, spp_pass, sample_start, start):
     """dirs[k, 0:2] = ``uniform_2d(sample_state(sobol, seed, pixels[k // spp_pass], sample_start + k % spp_pass),
     0)`` -- the camera ray's position in its pixel -- for camera samples k = start .. start + 7 below len(dirs), and
-    dirs[k, 2] = 0 (the direction replaces the row).  dirs (N, 3) float64 C-contiguous, sobol_y (4, 256) uint64
-    (:data:`SOBOL_Y`), pixels (P,) int64, the rest integers."""
+    dirs[k, 2] = 0 (the direction replaces the row).  dirs (N, 3) float64 C-contiguous, pixels (P,) int64, the rest
+    integers."""
     if not (
         dirs == types.Array(types.float64, 2, "C")
-        and isinstance(sobol_y, types.Array)
-        and (sobol_y.dtype, sobol_y.ndim, sobol_y.layout) == (types.uint64, 2, "C")
         and isinstance(pixels, types.Array)
         and (pixels.dtype, pixels.ndim, pixels.layout) == (types.int64, 1, "C")
         and all(isinstance(t, types.Integer) for t in (seed, spp_pass, sample_start, start))
     ):
         return None
-    signature_args = (dirs, sobol_y, seed, pixels, spp_pass, sample_start, start)
+    signature_args = (dirs, seed, pixels, spp_pass, sample_start, start)
 
     def codegen(context, builder, signature, args):
-        dirs_a, table_a, _, pixels_a = (
-            context.make_array(t)(context, builder, a) if isinstance(t, types.Array) else None
-            for t, a in zip(signature.args[:4], args[:4], strict=True)
-        )
+        dirs_a = context.make_array(signature.args[0])(context, builder, args[0])
+        pixels_a = context.make_array(signature.args[2])(context, builder, args[2])
         v, b = _Lanes(builder), builder
         n = _Integers(v)
 
         def scalar(i):
             return context.cast(b, args[i], signature.args[i], types.int64)
 
-        seed_v, spp_v, first_sample_v = (v.splat(scalar(i), _VI64) for i in (2, 4, 5))
-        _, inside, k = v.slots(scalar(6), cgutils.unpack_tuple(b, dirs_a.shape, 2)[0])
+        seed_v, spp_v, first_sample_v = (v.splat(scalar(i), _VI64) for i in (1, 3, 4))
+        _, inside, k = v.slots(scalar(5), cgutils.unpack_tuple(b, dirs_a.shape, 2)[0])
         q = v.quotient(k, spp_v)  # the camera sample's pixel in the pass
         pixel = v.gather(_I64, v.address(pixels_a, q, 8))
         sample = b.add(first_sample_v, b.sub(k, b.mul(q, spp_v)))
         pkey = n.mix(b.add(b.mul(seed_v, n.c64(_GOLDEN)), b.mul(pixel, n.c64(_PIXEL))))  # rng.pixel_key
-        u0, u1 = n.sobol_2d(pkey, sample, v.i(0), table_a)  # dimensions 0 and 1: Sobol' pair 0
+        u0, u1 = n.sobol_2d(pkey, sample, v.i(0))  # dimensions 0 and 1: Sobol' pair 0
         first = b.extract_element(k, _I32(0))
         v.store_run([u0, u1, v.f(0.0)], b.gep(dirs_a.data, [b.mul(first, _I64(3))]), inside)
         return context.get_dummy_value()
