@@ -825,6 +825,18 @@ def _shade_finish(
             lo, hi = claim_range(counter, n_work)
 
 
+@jit_inline
+def _shadow_ray(m, point, gnormal, wdir, r):
+    """Slot r's shadow ray: its direction, from its camera sample's hit point offset along the geometric normal
+    (intersect.ray_offset).  Returns (origin x, y, z, direction x, y, z)."""
+    k = r // m
+    wx, wy, wz = wdir[r, 0], wdir[r, 1], wdir[r, 2]
+    qx, qy, qz = ray_offset(
+        point[k, 0], point[k, 1], point[k, 2], gnormal[k, 0], gnormal[k, 1], gnormal[k, 2], wx, wy, wz
+    )
+    return qx, qy, qz, wx, wy, wz
+
+
 # The analytic shapes' shadow tests run 8 slots at a time in vector IR (geometry/shadow_lanes.py): inside the finish
 # stage, one ray at a time with early exits, they were half of its time (decisions.md 49).
 @jit_parallel
@@ -850,11 +862,7 @@ def _analytic_shadow_scalar_stage(s, m, point, gnormal, wdir, flags, counter, wo
             for r in range(lo, hi):
                 if flags[r] != TEST_ANALYTIC:
                     continue
-                k = r // m
-                wx, wy, wz = wdir[r, 0], wdir[r, 1], wdir[r, 2]
-                qx, qy, qz = ray_offset(
-                    point[k, 0], point[k, 1], point[k, 2], gnormal[k, 0], gnormal[k, 1], gnormal[k, 2], wx, wy, wz
-                )
+                qx, qy, qz, wx, wy, wz = _shadow_ray(m, point, gnormal, wdir, r)
                 if occluded_analytic(s, qx, qy, qz, wx, wy, wz, np.inf):
                     flags[r] = BLOCKED
                 else:
@@ -881,11 +889,7 @@ def _mesh_shadow_stage(m, mesh_scene, scratch, ray_counts, todo, point, gnormal,
                 count = min(PACKET, n - first)
                 for i in range(count):
                     r = todo[first + i]
-                    k = r // m
-                    wx, wy, wz = wdir[r, 0], wdir[r, 1], wdir[r, 2]
-                    qx, qy, qz = ray_offset(
-                        point[k, 0], point[k, 1], point[k, 2], gnormal[k, 0], gnormal[k, 1], gnormal[k, 2], wx, wy, wz
-                    )
+                    qx, qy, qz, wx, wy, wz = _shadow_ray(m, point, gnormal, wdir, r)
                     packet_ray(packet, floats, i, qx, qy, qz, wx, wy, wz, MESH_FAR)
                 blocked = occluded_packet(mesh_scene, packet, floats, count)
                 ray_counts[numba.get_thread_id(), 1] += count
@@ -903,11 +907,7 @@ def _mesh_shadow_single_stage(m, mesh_scene, scratch, ray_counts, todo, point, g
         while lo < hi:
             for q in range(lo, hi):
                 r = todo[q]
-                k = r // m
-                wx, wy, wz = wdir[r, 0], wdir[r, 1], wdir[r, 2]
-                qx, qy, qz = ray_offset(
-                    point[k, 0], point[k, 1], point[k, 2], gnormal[k, 0], gnormal[k, 1], gnormal[k, 2], wx, wy, wz
-                )
+                qx, qy, qz, wx, wy, wz = _shadow_ray(m, point, gnormal, wdir, r)
                 ray_counts[numba.get_thread_id(), 1] += 1
                 flags[r] = BLOCKED if mesh_occluded(mesh_scene, scratch, qx, qy, qz, wx, wy, wz, MESH_FAR) else VISIBLE
             lo, hi = claim_range(counter, n_work)
