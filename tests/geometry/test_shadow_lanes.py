@@ -68,7 +68,25 @@ def test_lanes_flag_every_ray_as_the_scalar_stage_does(meshes, spheres, m):
     assert not np.any(tested == TEST_ANALYTIC)
     assert np.count_nonzero(tested == BLOCKED) > 300  # the ground, the wall and the spheres block many
     assert np.count_nonzero(tested == VISIBLE) > 300
-    assert (np.count_nonzero(tested == TEST_MESH) > 300) == meshes
+    assert (np.count_nonzero(tested == TEST_MESH) > 50) == meshes
+
+
+def test_the_mesh_spheres_only_settle_rays_the_boxes_sent_to_embree():
+    """With each mesh's spheres (geometry/proxies.py) a ray the boxes alone would send to Embree may become BLOCKED
+    (through a closed mesh's inner ball) or VISIBLE (past the sphere around it); no other ray's flag changes.
+    Lanes and scalar stage both."""
+    arrays = _scene()
+    boxes_only = arrays._replace(mesh_spheres=np.tile([0.0, 0.0, 0.0, 1e300, -1.0], (arrays.mesh_spheres.shape[0], 1)))
+    point, normal, wdir, flags = _rays(2503, 8, seed=5)
+    for stage in (wavefront._analytic_shadow_stage, wavefront._analytic_shadow_scalar_stage):
+        with_spheres, without = flags.copy(), flags.copy()
+        stage(arrays, 8, point, normal, wdir, with_spheres, *claims())
+        stage(boxes_only, 8, point, normal, wdir, without, *claims())
+        sent = without == TEST_MESH
+        np.testing.assert_array_equal(with_spheres[~sent], without[~sent])
+        assert np.count_nonzero(with_spheres[sent] == BLOCKED) > 100
+        assert np.count_nonzero(with_spheres[sent] == VISIBLE) > 100
+        assert np.count_nonzero(with_spheres[sent] == TEST_MESH) > 50
 
 
 def test_a_ray_grazing_a_sphere_or_leaving_its_surface():

@@ -130,9 +130,39 @@ def occluded_analytic(s, ox, oy, oz, dx, dy, dz, tmax):
 
 
 @jit_inline
+def ball_crossed(ox, oy, oz, dx, dy, dz, spheres, g, column, tmax):
+    """Does the segment [0, tmax) of a unit-direction ray come within the ball about row g's centre of ``spheres``
+    (G, 5: geometry/proxies.py) whose squared radius is in ``column``?  The line's nearest point to the centre as
+    in :func:`sphere_hit`; a squared radius < 0 (``NO_BALL``) is crossed by nothing."""
+    fx, fy, fz = ox - spheres[g, 0], oy - spheres[g, 1], oz - spheres[g, 2]
+    b = -(fx * dx + fy * dy + fz * dz)
+    qx, qy, qz = fx + b * dx, fy + b * dy, fz + b * dz
+    r2 = spheres[g, column]
+    gap = r2 - (qx * qx + qy * qy + qz * qz)
+    if not gap > 0.0:
+        return False
+    if fx * fx + fy * fy + fz * fz < r2:
+        return True  # the origin is inside
+    return b > 0.0 and b - math.sqrt(gap) < tmax
+
+
+@jit_inline
 def may_hit_mesh(s, ox, oy, oz, dx, dy, dz, tmax):
+    """Whether the segment (0, tmax) may reach a mesh: it crosses the mesh's bounding box and the sphere around it."""
     for g in range(s.mesh_bounds.shape[0]):
-        if box_hit(ox, oy, oz, dx, dy, dz, s.mesh_bounds, g, tmax):
+        if box_hit(ox, oy, oz, dx, dy, dz, s.mesh_bounds, g, tmax) and ball_crossed(
+            ox, oy, oz, dx, dy, dz, s.mesh_spheres, g, 3, tmax
+        ):
+            return True
+    return False
+
+
+@jit_inline
+def blocked_by_mesh_core(s, ox, oy, oz, dx, dy, dz):
+    """Whether an unbounded ray enters a closed mesh's inner ball, so that a triangle of the mesh blocks it
+    (geometry/proxies.py).  Only for rays to infinity: a bounded one could end inside the mesh."""
+    for g in range(s.mesh_spheres.shape[0]):
+        if ball_crossed(ox, oy, oz, dx, dy, dz, s.mesh_spheres, g, 4, INF):
             return True
     return False
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 import gzip
 import os
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -143,3 +144,12 @@ class TriangleMesh:
     @property
     def triangle_count(self) -> int:
         return int(self.faces.shape[0])
+
+    @cached_property
+    def spheres(self) -> np.ndarray:
+        """(centre x, y, z, outer radius^2, inner radius^2): the spheres that decide shadow rays without Embree
+        (:func:`lightprobe.geometry.proxies.mesh_spheres`; inner radius^2 is ``NO_BALL`` unless the mesh is
+        closed)."""
+        from .proxies import mesh_spheres
+
+        return mesh_spheres(self.vertices, self.faces)

@@ -53,6 +53,7 @@ class SceneArrays(NamedTuple):
     mesh_material: np.ndarray  # (M,) int64
     mesh_two_sided: np.ndarray  # (M,) int64
     mesh_bounds: np.ndarray  # (M, 2, 3) float64
+    mesh_spheres: np.ndarray  # (M, 5) float64: centre, outer radius^2, inner radius^2 (geometry/proxies.py)
     spheres: np.ndarray  # (S, 4) float64: centre, radius
     sphere_material: np.ndarray
     sphere_two_sided: np.ndarray
@@ -156,7 +157,7 @@ class Scene:
         spheres = [o for o in self.objects if isinstance(o.shape, Sphere)]
         rects = [o for o in self.objects if isinstance(o.shape, Rectangle)]
 
-        vertices, normals, faces, starts, smooth, bounds = [], [], [], [0], [], []
+        vertices, normals, faces, starts, smooth, bounds, proxies = [], [], [], [0], [], [], []
         base = 0
         for o in meshes:
             m: TriangleMesh = o.shape
@@ -167,6 +168,7 @@ class Scene:
             starts.append(starts[-1] + m.faces.shape[0])
             smooth.append(1 if m.normals is not None else 0)
             bounds.append(m.bounds)
+            proxies.append(m.spheres)
 
         def ints(values):
             return np.asarray(values, dtype=np.int64).reshape(-1)
@@ -191,6 +193,7 @@ class Scene:
             ints([index[o.material] for o in meshes]),
             ints([o.two_sided for o in meshes]),
             np.stack(bounds) if bounds else np.zeros((0, 2, 3)),
+            np.stack(proxies) if proxies else np.zeros((0, 5)),
             np.array([[*o.shape.center, o.shape.radius] for o in spheres]).reshape(-1, 4),
             ints([index[o.material] for o in spheres]),
             ints([o.two_sided for o in spheres]),

@@ -9,8 +9,10 @@ unbounded ray, each without its early exits (a lane's answer does not depend on 
 stays empty), in the scalar code's operations and order.  A lane whose test is decided by a last-bit difference of
 a fused multiply-add could differ from the scalar code's; the tests compare the two on random rays.
 
-Lanes hold the slots whose flag is ``TEST_ANALYTIC`` (the finish stage's contributions, not yet tested); each
-becomes ``BLOCKED``, ``TEST_MESH`` (for ``wavefront._mesh_shadow_stage``) or ``VISIBLE``.  Other slots and lanes
+Each mesh also has two spheres (``geometry/proxies.py``, decisions.md 59): a ray through a closed mesh's inner ball
+is ``BLOCKED`` and one that misses the sphere around a mesh does not reach it, so only rays between the two go to
+Embree.  Lanes hold the slots whose flag is ``TEST_ANALYTIC`` (the finish stage's contributions, not yet tested);
+each becomes ``BLOCKED``, ``TEST_MESH`` (for ``wavefront._mesh_shadow_stage``) or ``VISIBLE``.  Other slots and lanes
 past the pass's end are not written.
 """
 
@@ -146,17 +148,29 @@ def _box_hit(v: _Lanes, o, d, lows, highs):
     return v.le(t0, t1)
 
 
+def _ball_crossed(v: _Lanes, o, d, centre, radius2):
+    """intersect.ball_crossed(..., tmax=inf) for a splatted centre and squared radius."""
+    b = v.b
+    f = [v.sub(o[i], centre[i]) for i in range(3)]
+    bq = v.neg(_dot(v, f, d))
+    foot = [v.add(f[i], v.mul(bq, d[i])) for i in range(3)]
+    near = v.gt(v.sub(radius2, _dot(v, foot, foot)), v.f(0.0))
+    ahead = b.or_(v.lt(_dot(v, f, f), radius2), v.gt(bq, v.f(0.0)))
+    return b.and_(near, ahead)
+
+
 @intrinsic
-def shadow_block(typingctx, flags, point, gnormal, wdir, spheres, rects, bounds, m, start):
+def shadow_block(typingctx, flags, point, gnormal, wdir, spheres, rects, bounds, proxies, m, start):
     """For the slots ``start .. start + 7`` of a pass flagged TEST_ANALYTIC: the shadow ray from camera sample
     ``slot // m``'s point along the slot's direction, offset as ``ray_offset`` does, against every sphere and
-    rectangle (BLOCKED if one is hit) and then every mesh box (TEST_MESH if one is crossed, else VISIBLE).
-    flags (N,) int8; point, gnormal (K, 3), wdir (N, 3), spheres (S, 4), rects (R, 12) float64; bounds (G, 2, 3)
-    float64; all C-contiguous."""
+    rectangle and every closed mesh's inner ball (BLOCKED if one is hit), then every mesh's box and the sphere
+    around it (TEST_MESH if both of one mesh are crossed, else VISIBLE).  flags (N,) int8; point, gnormal (K, 3),
+    wdir (N, 3), spheres (S, 4), rects (R, 12) float64; bounds (G, 2, 3) float64; proxies (G, 5) float64
+    (``SceneArrays.mesh_spheres``); all C-contiguous."""
     f64 = types.float64
     if not (
         _c_array(flags, types.int8, 1)
-        and all(_c_array(t, f64, 2) for t in (point, gnormal, wdir, spheres, rects))
+        and all(_c_array(t, f64, 2) for t in (point, gnormal, wdir, spheres, rects, proxies))
         and _c_array(bounds, f64, 3)
         and isinstance(m, types.Integer)
         and isinstance(start, types.Integer)
@@ -164,10 +178,11 @@ def shadow_block(typingctx, flags, point, gnormal, wdir, spheres, rects, bounds,
         return None
 
     def codegen(context, builder, signature, args):
-        flags_a, point_a, normal_a, wdir_a, spheres_a, rects_a, bounds_a = _arrays(context, builder, signature, args, 7)
+        arrays = _arrays(context, builder, signature, args, 8)
+        flags_a, point_a, normal_a, wdir_a, spheres_a, rects_a, bounds_a, proxies_a = arrays
         v, b = _Lanes(builder), builder
-        m_v = v.splat(context.cast(b, args[7], signature.args[7], types.int64), ir.VectorType(_I64, LANES))
-        start_v = context.cast(b, args[8], signature.args[8], types.int64)
+        m_v = v.splat(context.cast(b, args[8], signature.args[8], types.int64), ir.VectorType(_I64, LANES))
+        start_v = context.cast(b, args[9], signature.args[9], types.int64)
         _, inside, read = v.slots(start_v, cgutils.unpack_tuple(b, flags_a.shape, 1)[0])
         first = b.extract_element(read, _I32(0))
         states = v.load_run(_I8, b.gep(flags_a.data, [first]), inside, 1, 0)
@@ -194,13 +209,16 @@ def shadow_block(typingctx, flags, point, gnormal, wdir, spheres, rects, bounds,
         def rect(i, blocked):
             return b.or_(blocked, v.lt(_rect_t(v, o, d, _row(v, rects_a, i, 12, range(12)), v.f(_INF)), v.f(_INF)))
 
-        def box(i, crossed):
+        def mesh(i, carried):
+            blocked, crossed = carried
             corners = _row(v, bounds_a, i, 6, range(6))
-            return b.or_(crossed, _box_hit(v, o, d, corners[0:3], corners[3:6]))
+            proxy = _row(v, proxies_a, i, 5, range(5))
+            around = b.and_(_box_hit(v, o, d, corners[0:3], corners[3:6]), _ball_crossed(v, o, d, proxy[0:3], proxy[3]))
+            return b.or_(blocked, _ball_crossed(v, o, d, proxy[0:3], proxy[4])), b.or_(crossed, around)
 
         blocked = _loop(v, counts[0], none, sphere)
         blocked = _loop(v, counts[1], blocked, rect)
-        crossed = _loop(v, counts[2], none, box)
+        blocked, crossed = _loop(v, counts[2], (blocked, none), mesh)
         result = b.select(
             blocked,
             ir.Constant(_VI8, [BLOCKED] * LANES),
@@ -210,4 +228,4 @@ def shadow_block(typingctx, flags, point, gnormal, wdir, spheres, rects, bounds,
         v.end_skip(skipped)
         return context.get_dummy_value()
 
-    return types.void(flags, point, gnormal, wdir, spheres, rects, bounds, m, start), codegen
+    return types.void(flags, point, gnormal, wdir, spheres, rects, bounds, proxies, m, start), codegen

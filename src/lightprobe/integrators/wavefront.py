@@ -74,7 +74,15 @@ from ..geometry.embree import (
     packets_native,
 )
 from ..geometry.frame import to_local, to_world
-from ..geometry.intersect import MESH, MISS, closest_analytic, may_hit_mesh, occluded_analytic, ray_offset
+from ..geometry.intersect import (
+    MESH,
+    MISS,
+    blocked_by_mesh_core,
+    closest_analytic,
+    may_hit_mesh,
+    occluded_analytic,
+    ray_offset,
+)
 from ..geometry.raytracer import RayTracer
 from ..geometry.scene import Scene
 from ..geometry.shadow_lanes import shadow_block
@@ -848,7 +856,9 @@ def _analytic_shadow_stage(s, m, point, gnormal, wdir, flags, counter, workers):
         lo, hi = claim_range(counter, n_work)
         while lo < hi:
             for block in range(lo, hi):
-                shadow_block(flags, point, gnormal, wdir, s.spheres, s.rects, s.mesh_bounds, m, block * LANES)
+                shadow_block(
+                    flags, point, gnormal, wdir, s.spheres, s.rects, s.mesh_bounds, s.mesh_spheres, m, block * LANES
+                )
             lo, hi = claim_range(counter, n_work)
 
 
@@ -863,7 +873,9 @@ def _analytic_shadow_scalar_stage(s, m, point, gnormal, wdir, flags, counter, wo
                 if flags[r] != TEST_ANALYTIC:
                     continue
                 qx, qy, qz, wx, wy, wz = _shadow_ray(m, point, gnormal, wdir, r)
-                if occluded_analytic(s, qx, qy, qz, wx, wy, wz, np.inf):
+                if occluded_analytic(s, qx, qy, qz, wx, wy, wz, np.inf) or blocked_by_mesh_core(
+                    s, qx, qy, qz, wx, wy, wz
+                ):
                     flags[r] = BLOCKED
                 else:
                     flags[r] = TEST_MESH if may_hit_mesh(s, qx, qy, qz, wx, wy, wz, np.inf) else VISIBLE
