@@ -434,7 +434,8 @@ def _lights_mesh_shadows(mesh_scene, scratch, ray_counts, todo, shadow_o, shadow
             lo, hi = claim_range(counter, n_work)
 
 
-#: the slots each Embree stage traces, gathered from the pass buffers before it runs (see wavefront.WORKLISTS)
+#: the slots each Embree stage traces, gathered from the pass buffers before it runs (wavefront.render passes them
+#: as ``todo``)
 WORKLISTS = {
     _lights_mesh_hits: lambda b: np.flatnonzero(b["hit_mesh"]),
     _lights_mesh_shadows: lambda b: np.flatnonzero(b["flags"] == TEST_MESH),

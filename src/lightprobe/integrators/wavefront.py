@@ -884,57 +884,57 @@ def _analytic_shadow_scalar_stage(s, m, point, gnormal, wdir, flags, counter, wo
 
 # Shadow rays that may reach a mesh are traced in a loop of their own, not inside _shade_finish: on the peer scene at
 # 64 spp, 3.9 M such rays added about 1.1 s to that loop body and take 0.9 s here, where the shading work does not
-# evict Embree's BVH between rays (decisions.md 30).
+# evict Embree's BVH between rays (decisions.md 30).  Each claimed chunk of slots gathers its flagged ones as it scans
+# them: a work list gathered in NumPy before the stage (np.flatnonzero, one thread) cost 4-5 ms a pass
+# (decisions.md 60).  Which rays share a packet changes no answer.
 @jit_parallel
-def _mesh_shadow_stage(m, mesh_scene, scratch, ray_counts, todo, point, gnormal, wdir, flags, counter, workers):
-    """The slots in ``todo`` (shadow rays flagged TEST_MESH), through Embree 8 at a time (decisions.md 55): each
-    becomes VISIBLE or BLOCKED."""
-    n = todo.shape[0]
-    n_work = (n + PACKET - 1) // PACKET
+def _mesh_shadow_stage(m, mesh_scene, scratch, ray_counts, point, gnormal, wdir, flags, counter, workers):
+    """Shadow rays flagged TEST_MESH through Embree 8 at a time (decisions.md 55): each becomes VISIBLE or
+    BLOCKED."""
+    n_work = flags.shape[0]
     for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing)
+        packet = packet_words(scratch)
+        floats = packet.view(np.float32)
+        lanes = np.empty(PACKET, np.int64)  # the slots in the packet
         lo, hi = claim_range(counter, n_work)
         while lo < hi:
-            for p in range(lo, hi):
-                first = p * PACKET
-                packet = packet_words(scratch)
-                floats = packet.view(np.float32)
-                count = min(PACKET, n - first)
-                for i in range(count):
-                    r = todo[first + i]
+            count = 0
+            for r in range(lo, hi + 1):
+                if r < hi:
+                    if flags[r] != TEST_MESH:
+                        continue
                     qx, qy, qz, wx, wy, wz = _shadow_ray(m, point, gnormal, wdir, r)
-                    packet_ray(packet, floats, i, qx, qy, qz, wx, wy, wz, MESH_FAR)
-                blocked = occluded_packet(mesh_scene, packet, floats, count)
-                ray_counts[numba.get_thread_id(), 1] += count
-                for i in range(count):
-                    flags[todo[first + i]] = BLOCKED if blocked >> i & 1 else VISIBLE
+                    packet_ray(packet, floats, count, qx, qy, qz, wx, wy, wz, MESH_FAR)
+                    lanes[count] = r
+                    count += 1
+                if count == PACKET or (r == hi and count > 0):  # a full packet, or the chunk's last rays
+                    blocked = occluded_packet(mesh_scene, packet, floats, count)
+                    ray_counts[numba.get_thread_id(), 1] += count
+                    for i in range(count):
+                        flags[lanes[i]] = BLOCKED if blocked >> i & 1 else VISIBLE
+                    count = 0
             lo, hi = claim_range(counter, n_work)
 
 
 @jit_parallel
-def _mesh_shadow_single_stage(m, mesh_scene, scratch, ray_counts, todo, point, gnormal, wdir, flags, counter, workers):
+def _mesh_shadow_single_stage(m, mesh_scene, scratch, ray_counts, point, gnormal, wdir, flags, counter, workers):
     """:func:`_mesh_shadow_stage` one ray at a time: where Embree's 8-ray packets are not native."""
-    n_work = todo.shape[0]
+    n_work = flags.shape[0]
     for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing)
         lo, hi = claim_range(counter, n_work)
         while lo < hi:
-            for q in range(lo, hi):
-                r = todo[q]
+            for r in range(lo, hi):
+                if flags[r] != TEST_MESH:
+                    continue
                 qx, qy, qz, wx, wy, wz = _shadow_ray(m, point, gnormal, wdir, r)
                 ray_counts[numba.get_thread_id(), 1] += 1
                 flags[r] = BLOCKED if mesh_occluded(mesh_scene, scratch, qx, qy, qz, wx, wy, wz, MESH_FAR) else VISIBLE
             lo, hi = claim_range(counter, n_work)
 
 
-# The Embree stages loop over a list of the slots they trace, gathered in NumPy before they run: those slots cluster
-# where the meshes are on screen, and when prange handed each thread one contiguous share of the index range, a
-# loop over every slot gave one thread most of the rays (many-light demo in image order: 97 % of them in the second
-# half).  The kernels now claim chunks as they go (_worksharing.py, decisions.md 57), which balances either way;
-# the list still spares the stage a pass over every slot.
-def _mesh_worklist(b):
-    return np.flatnonzero(b["flags"] == TEST_MESH)
-
-
-WORKLISTS = {_mesh_shadow_stage: _mesh_worklist, _mesh_shadow_single_stage: _mesh_worklist}
+#: the Embree stages that trace a work list gathered from the pass buffers before they run (the area-light path's,
+#: area_lights.WORKLISTS); this path's stages scan the slots themselves
+WORKLISTS: dict = {}
 
 
 @jit_parallel
