@@ -110,3 +110,21 @@ def test_a_ray_grazing_a_sphere_or_leaving_its_surface():
     assert np.array_equal(lanes, scalar)
     assert np.all(lanes[0::4] == VISIBLE)  # nothing else in their way
     assert np.all(lanes[1::4] == BLOCKED)
+
+
+def test_rays_from_inside_a_sphere_square_to_its_centre():
+    """A ray that starts inside a sphere (another object's point there) square to the direction of the centre:
+    its nearest point to the centre is its origin (bq = 0 exactly), and it leaves the sphere, so it is blocked; the
+    lanes decide this without the root (geometry/shadow_lanes._sphere_blocks), the scalar stage from it."""
+    arrays = _scene(meshes=False)
+    centre, radius = np.array([-1.5, 0.5, 0.0]), 0.5
+    offsets = np.array([[0.3, 0.0, 0.0], [0.0, 0.2, 0.0], [0.0, 0.0, -0.4], [0.1, 0.0, 0.0]]) * radius / 0.5
+    point = centre + offsets
+    normals = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    wdir = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
+    flags = np.full(4, TEST_ANALYTIC, np.int8)
+    scalar, lanes = flags.copy(), flags.copy()
+    wavefront._analytic_shadow_scalar_stage(arrays, 1, point, normals, wdir, scalar, *claims())
+    wavefront._analytic_shadow_stage(arrays, 1, point, normals, wdir, lanes, *claims())
+    assert np.array_equal(lanes, scalar)
+    assert np.all(lanes == BLOCKED)

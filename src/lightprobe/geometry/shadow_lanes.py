@@ -113,6 +113,26 @@ def _sphere_t(v: _Lanes, o, d, centre, radius, tmax):
     return b.select(v.ge(disc, v.f(0.0)), t, v.f(_INF))
 
 
+def _sphere_blocks(v: _Lanes, o, d, centre, radius):
+    """Whether ``_sphere_t(..., tmax=inf)`` is finite, without its square root and division: its roots are q and
+    c / q, so one is positive exactly when q > 0, or q < 0 and c < 0 (c / q cannot underflow to 0: c is a difference
+    of squares of order 1, q at most a scene's size); q = 0 gives no root in (0, inf) either way."""
+    b = v.b
+    f = [v.sub(o[i], centre[i]) for i in range(3)]
+    bq = v.neg(_dot(v, f, d))
+    foot = [v.add(f[i], v.mul(bq, d[i])) for i in range(3)]
+    r2 = v.mul(radius, radius)
+    disc = v.sub(r2, _dot(v, foot, foot))
+    c = v.sub(_dot(v, f, f), r2)
+    # q = bq + s where bq >= 0, else bq - s (s = sqrt(max(disc, 0)) >= 0): q > 0 when bq > 0, or bq = 0 and s > 0;
+    # q < 0 when bq < 0
+    s_positive = v.gt(disc, v.f(0.0))
+    q_positive = b.or_(v.gt(bq, v.f(0.0)), b.and_(b.fcmp_ordered("==", bq, v.f(0.0)), s_positive))
+    q_negative = v.lt(bq, v.f(0.0))
+    root = b.or_(q_positive, b.and_(q_negative, v.lt(c, v.f(0.0))))
+    return b.and_(v.ge(disc, v.f(0.0)), root)
+
+
 def _rect_t(v: _Lanes, o, d, row, tmax):
     """intersect.rect_hit(..., tmax) for a row (origin, edge u, edge v, normal) of splatted values: t, else inf."""
     b = v.b
@@ -204,7 +224,7 @@ def shadow_block(typingctx, flags, point, gnormal, wdir, spheres, rects, bounds,
 
         def sphere(i, blocked):
             row = _row(v, spheres_a, i, 4, range(4))
-            return b.or_(blocked, v.lt(_sphere_t(v, o, d, row[0:3], row[3], v.f(_INF)), v.f(_INF)))
+            return b.or_(blocked, _sphere_blocks(v, o, d, row[0:3], row[3]))
 
         def rect(i, blocked):
             return b.or_(blocked, v.lt(_rect_t(v, o, d, _row(v, rects_a, i, 12, range(12)), v.f(_INF)), v.f(_INF)))
