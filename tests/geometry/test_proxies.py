@@ -75,6 +75,12 @@ def test_closest_distances_against_dense_samples_of_each_triangle():
     np.testing.assert_allclose(cube, 0.5, atol=1e-15)
     outside = closest_distances(CUBE_VERTICES, CUBE_FACES, [2.0, 2.0, 2.0])
     assert outside.min() == pytest.approx(np.sqrt(3.0), abs=1e-15)
+    # a face without area is its longest edge: the segment from (0, 0, 0) to (2, 0, 0), seen from above its middle
+    # and from beyond its end
+    line = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]])
+    degenerate = np.array([[0, 1, 2], [0, 2, 2]])
+    np.testing.assert_allclose(closest_distances(line, degenerate, [1.5, 0.5, 0.0]), 0.5, atol=1e-15)
+    np.testing.assert_allclose(closest_distances(line, degenerate, [3.0, 0.0, 1.0]), np.sqrt(2.0), atol=1e-15)
 
 
 def test_the_spheres_of_a_closed_blob_and_of_an_open_one():

@@ -86,8 +86,8 @@ def closest_distances(vertices: np.ndarray, faces: np.ndarray, point) -> np.ndar
         for where, origin, edge, t in regions:
             closest = np.where(where[:, None], origin + edge * np.nan_to_num(t)[:, None], closest)
     distances = np.linalg.norm(p - closest, axis=1)
-    # a degenerate face (no area) has no face region: fall back to its vertices' distances, which bound it from above
-    # only -- so use the smallest of its three edges' closest points instead
+    # a degenerate face (no area: its barycentric weights divide by 0) is a segment or a point: the nearest of its
+    # three edges
     bad = ~np.isfinite(distances)
     if bad.any():
         distances[bad] = np.min([_segment_distance(p, x[bad], y[bad]) for x, y in ((a, b), (b, c), (c, a))], axis=0)

@@ -90,12 +90,18 @@ def _dot(v: _Lanes, x, y):
     return v.add(v.add(v.mul(x[0], y[0]), v.mul(x[1], y[1])), v.mul(x[2], y[2]))
 
 
+def _toward_centre(v: _Lanes, o, d, centre):
+    """(f, bq, foot) of intersect.sphere_hit: the origin from the centre, the distance along the ray to the line's
+    nearest point to the centre, and that point from the centre."""
+    f = [v.sub(o[i], centre[i]) for i in range(3)]
+    bq = v.neg(_dot(v, f, d))
+    return f, bq, [v.add(f[i], v.mul(bq, d[i])) for i in range(3)]
+
+
 def _sphere_t(v: _Lanes, o, d, centre, radius, tmax):
     """intersect.sphere_hit(..., tmax): the nearest t in (0, tmax), else inf."""
     b = v.b
-    f = [v.sub(o[i], centre[i]) for i in range(3)]
-    bq = v.neg(_dot(v, f, d))
-    foot = [v.add(f[i], v.mul(bq, d[i])) for i in range(3)]  # the line's nearest point to the centre, from it
+    f, bq, foot = _toward_centre(v, o, d, centre)
     r2 = v.mul(radius, radius)
     disc = v.sub(r2, _dot(v, foot, foot))
     c = v.sub(_dot(v, f, f), r2)
@@ -118,9 +124,7 @@ def _sphere_blocks(v: _Lanes, o, d, centre, radius):
     c / q, so one is positive exactly when q > 0, or q < 0 and c < 0 (c / q cannot underflow to 0: c is a difference
     of squares of order 1, q at most a scene's size); q = 0 gives no root in (0, inf) either way."""
     b = v.b
-    f = [v.sub(o[i], centre[i]) for i in range(3)]
-    bq = v.neg(_dot(v, f, d))
-    foot = [v.add(f[i], v.mul(bq, d[i])) for i in range(3)]
+    f, bq, foot = _toward_centre(v, o, d, centre)
     r2 = v.mul(radius, radius)
     disc = v.sub(r2, _dot(v, foot, foot))
     c = v.sub(_dot(v, f, f), r2)
@@ -171,9 +175,7 @@ def _box_hit(v: _Lanes, o, d, lows, highs):
 def _ball_crossed(v: _Lanes, o, d, centre, radius2):
     """intersect.ball_crossed(..., tmax=inf) for a splatted centre and squared radius."""
     b = v.b
-    f = [v.sub(o[i], centre[i]) for i in range(3)]
-    bq = v.neg(_dot(v, f, d))
-    foot = [v.add(f[i], v.mul(bq, d[i])) for i in range(3)]
+    f, bq, foot = _toward_centre(v, o, d, centre)
     near = v.gt(v.sub(radius2, _dot(v, foot, foot)), v.f(0.0))
     ahead = b.or_(v.lt(_dot(v, f, f), radius2), v.gt(bq, v.f(0.0)))
     return b.and_(near, ahead)
