@@ -132,6 +132,65 @@ def test_ggx_white_furnace_albedo():
     assert 0.999 < mean[0] <= 1.0
 
 
+def _textbook_microfacet(alpha, wo, wi):
+    """D(h) G1(wi, h) G1(wo, h) / (4 cos_i cos_o) and cos(wi, h) in the order the definitions give them
+    (microfacet.py's docstring: normalized h, tan^2, two divisions per G1), for directions above the surface."""
+    h = wo + wi
+    h /= np.linalg.norm(h, axis=1, keepdims=True)
+    a2 = alpha * alpha
+
+    def g1(v):
+        c2 = v[:, 2] ** 2
+        return np.where(np.sum(v * h, axis=1) * v[:, 2] > 0, 2 / (1 + np.sqrt(1 + a2 * (1 - c2) / c2)), 0.0)
+
+    d = a2 / (np.pi * (h[:, 2] ** 2 * (a2 - 1) + 1) ** 2)
+    return d * g1(wi) * g1(wo) / (4 * wi[:, 2] * wo[:, 2]), np.sum(wi * h, axis=1)
+
+
+@pytest.mark.parametrize("alpha", [1e-3, 0.05, 0.3, 1.0])
+def test_ggx_values_match_the_textbook_order(alpha):
+    """The kernels fold D, G1 and the cosines into one division (decisions.md 62); the values are the definitions'.
+    (Away from the peak of a narrow lobe: there the textbook's 1 - cos^2 loses the digits the folded form keeps.)"""
+    rng = np.random.default_rng(5)
+    wo = rng.normal(size=(4000, 3))
+    wi = rng.normal(size=(4000, 3))
+    wo[:, 2], wi[:, 2] = np.abs(wo[:, 2]) + 1e-3, np.abs(wi[:, 2]) + 1e-3
+    wo /= np.linalg.norm(wo, axis=1, keepdims=True)
+    wi /= np.linalg.norm(wi, axis=1, keepdims=True)
+    wo[:3] = [[0.0, 0.0, 1.0], [1e-9, 0.0, 1.0], [0.6, 0.0, 0.8]]  # normal incidence, G1 = 1 exactly
+    product, cos_h = _textbook_microfacet(alpha, wo, wi)
+    conductor = GGXConductor(alpha, material="Au")
+    eta, k = CONDUCTOR_PRESETS["Au"]
+    fresnel = np.array([[fresnel_conductor(c, e, kk) for e, kk in zip(eta, k, strict=True)] for c in cos_h])
+    for i in range(len(wo)):
+        got = conductor.eval(wo[i], wi[i : i + 1])[0]
+        np.testing.assert_allclose(got, fresnel[i] * product[i], rtol=1e-11, atol=1e-300)
+        # the density of reflected directions, G1(wo, h) D(h) / (4 cos_o), wi over the whole sphere
+        np.testing.assert_allclose(
+            conductor.pdf(wo[i], wi[i : i + 1] * [1, 1, -1])[0],
+            _reflection_pdf_textbook(alpha, wo[i], wi[i] * [1, 1, -1]),
+            rtol=1e-11,
+            atol=1e-300,
+        )
+    plastic = RoughPlastic([0.6, 0.15, 0.1], alpha)
+    diffuse = np.outer(plastic.diffuse_factor(wi[:, 2]) * plastic.diffuse_factor(wo[:, 2]) / np.pi, plastic.diffuse)
+    specular = product * np.array([fresnel_dielectric(c, plastic.eta) for c in cos_h])
+    for i in range(len(wo)):
+        got = plastic.eval(wo[i], wi[i : i + 1])[0]
+        np.testing.assert_allclose(got, specular[i] + diffuse[i], rtol=1e-11)
+
+
+def _reflection_pdf_textbook(alpha, wo, wi):
+    h = wo + wi
+    if h[2] <= 0 or np.dot(wo, h) <= 0:
+        return 0.0
+    h = h / np.linalg.norm(h)
+    a2 = alpha * alpha
+    c2 = wo[2] ** 2
+    g1 = 1.0 if c2 >= 1 else 2 / (1 + math.sqrt(1 + a2 * (1 - c2) / c2))
+    return g1 * a2 / (np.pi * (h[2] ** 2 * (a2 - 1) + 1) ** 2) / (4 * wo[2])
+
+
 def test_conductor_fresnel_at_normal_incidence_matches_the_peer_scene():
     """scene.json lists Mitsuba's normal-incidence reflectance of its Al and Au presets."""
     expected = {"Al": (0.928, 0.9178, 0.9189), "Au": (0.9667, 0.802, 0.3241)}

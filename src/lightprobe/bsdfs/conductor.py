@@ -35,7 +35,7 @@ from .._numba import jit, jit_inline
 from ..errors import ParameterError
 from .base import BSDF, rgb_param
 from .fresnel import fresnel_conductor
-from .microfacet import ggx_d, ggx_g1, ggx_sample_visible_normal
+from .microfacet import ggx_d_terms, ggx_g1, ggx_lambda_root, ggx_sample_visible_normal
 
 __all__ = ["CONDUCTOR_PRESETS", "GGX_CONDUCTOR", "GGXConductor", "ggx_reflection_pdf"]
 
@@ -47,15 +47,6 @@ CONDUCTOR_PRESETS = {
 }
 # parameter block (PARAM_SIZE floats): alpha[0], eta[1:4], k[4:7], specular_reflectance[7:10], fresnel[10]
 _ALPHA, _ETA, _K, _R, _FRESNEL = 0, 1, 4, 7, 10
-
-
-@jit
-def _half_vector(wo, wi):
-    hx, hy, hz = wo[0] + wi[0], wo[1] + wi[1], wo[2] + wi[2]
-    n = math.sqrt(hx * hx + hy * hy + hz * hz)
-    if n == 0.0:
-        return 0.0, 0.0, 0.0, False
-    return hx / n, hy / n, hz / n, True
 
 
 @jit_inline
@@ -71,28 +62,48 @@ def _fresnel_rgb(p, cos_theta):
 
 @jit
 def ggx_reflection_pdf(alpha, wo, wi):
-    """Density of wi = reflect(wo, m) with m ~ D_wo: G1(wo, m) D(m) / (4 cos(theta_o)), over the whole sphere."""
-    if wo[2] <= 0.0:
+    """Density of wi = reflect(wo, m) with m ~ D_wo: G1(wo, m) D(m) / (4 cos(theta_o)), over the whole sphere.
+    With the half vector h = wo + wi unnormalized (microfacet.ggx_d_terms) and G1 = 2 c / (c + r) this is
+    alpha^2 |h|^4 / (2 pi e^2 (c + r)): one square root and one division."""
+    co = wo[2]
+    if co <= 0.0:
         return 0.0
-    hx, hy, hz, ok = _half_vector(wo, wi)
-    if not ok or hz <= 0.0:
+    hx, hy, hz = wo[0] + wi[0], wo[1] + wi[1], wo[2] + wi[2]
+    if hz <= 0.0 or wo[0] * hx + wo[1] * hy + co * hz <= 0.0:  # D(h) = 0, or wo masked by h (G1 = 0)
         return 0.0
-    if wo[0] * hx + wo[1] * hy + wo[2] * hz <= 0.0:
-        return 0.0
-    return ggx_g1(alpha, wo[0], wo[1], wo[2], hx, hy, hz) * ggx_d(alpha, hx, hy, hz) / (4.0 * wo[2])
+    num, e2 = ggx_d_terms(alpha, hx, hy, hz)
+    if co >= 1.0:  # G1 = 1 (ggx_g1)
+        return num / (4.0 * math.pi * e2 * co)
+    return num / (2.0 * math.pi * e2 * (co + ggx_lambda_root(alpha, co)))
+
+
+@jit_inline
+def ggx_microfacet_product(alpha, wo, wi):
+    """D(h) G1(wi, h) G1(wo, h) / (4 cos(theta_i) cos(theta_o)) and cos(wi, h) for wo, wi above the surface, h their
+    half vector; (0, 0) where it vanishes. Unnormalized h and G1 = 2 c / (c + r) (microfacet.py) fold the product
+    into alpha^2 |h|^4 / (pi e^2 (ci + ri)(co + ro)): three square roots and two divisions where the textbook
+    order takes six and eight."""
+    ci, co = wi[2], wo[2]
+    hx, hy, hz = wo[0] + wi[0], wo[1] + wi[1], wo[2] + wi[2]
+    di = wi[0] * hx + wi[1] * hy + ci * hz
+    if di <= 0.0 or wo[0] * hx + wo[1] * hy + co * hz <= 0.0:  # a direction masked by h (G1 = 0)
+        return 0.0, 0.0
+    num, e2 = ggx_d_terms(alpha, hx, hy, hz)
+    # c + r with r = sqrt(c^2 + alpha^2 (1 - c^2)), and 2 c where c >= 1 (G1 = 1 there, as ggx_g1)
+    gi = 2.0 * ci if ci >= 1.0 else ci + ggx_lambda_root(alpha, ci)
+    go = 2.0 * co if co >= 1.0 else co + ggx_lambda_root(alpha, co)
+    cos_h = di / math.sqrt(hx * hx + hy * hy + hz * hz)
+    return num / (math.pi * e2 * gi * go), cos_h
 
 
 @jit_inline
 def ggx_conductor_eval(p, wo, wi):
     if wo[2] <= 0.0 or wi[2] <= 0.0:
         return 0.0, 0.0, 0.0
-    hx, hy, hz, ok = _half_vector(wo, wi)
-    if not ok:
+    k, cos_h = ggx_microfacet_product(p[_ALPHA], wo, wi)
+    if k == 0.0:
         return 0.0, 0.0, 0.0
-    a = p[_ALPHA]
-    g = ggx_g1(a, wi[0], wi[1], wi[2], hx, hy, hz) * ggx_g1(a, wo[0], wo[1], wo[2], hx, hy, hz)
-    k = ggx_d(a, hx, hy, hz) * g / (4.0 * wi[2] * wo[2])
-    f = _fresnel_rgb(p, wi[0] * hx + wi[1] * hy + wi[2] * hz)
+    f = _fresnel_rgb(p, cos_h)
     return f[0] * k, f[1] * k, f[2] * k
 
 

@@ -24,9 +24,10 @@ def fresnel_dielectric(cos_theta_i, eta):
     if sin2_t >= 1.0:
         return 1.0  # total internal reflection
     cos_t = math.sqrt(1.0 - sin2_t)
-    r_parl = (eta * c - cos_t) / (eta * c + cos_t)
-    r_perp = (c - eta * cos_t) / (c + eta * cos_t)
-    return 0.5 * (r_parl * r_parl + r_perp * r_perp)
+    # 0.5 (r_parl^2 + r_perp^2) with r_parl = a / b, r_perp = g / h over one division
+    a, b = eta * c - cos_t, eta * c + cos_t
+    g, h = c - eta * cos_t, c + eta * cos_t
+    return 0.5 * (a * a * h * h + g * g * b * b) / (b * b * h * h)
 
 
 @jit
@@ -43,8 +44,7 @@ def fresnel_conductor(cos_theta_i, eta, k):
     t1 = a2_plus_b2 + cos2
     a = math.sqrt(max(0.0, 0.5 * (a2_plus_b2 + t0)))
     t2 = 2.0 * c * a
-    rs = (t1 - t2) / (t1 + t2)
     t3 = cos2 * a2_plus_b2 + sin2 * sin2
     t4 = t2 * sin2
-    rp = rs * (t3 - t4) / (t3 + t4)
-    return 0.5 * (rp + rs)
+    # rs = (t1 - t2) / (t1 + t2), rp = rs (t3 - t4) / (t3 + t4), and 0.5 (rs + rp) = rs t3 / (t3 + t4): one division
+    return (t1 - t2) * t3 / ((t1 + t2) * (t3 + t4))

@@ -35,9 +35,9 @@ from .._numba import jit, jit_inline, jit_parallel, prange
 from ..errors import ParameterError
 from ..sampling.kernels import INV_PI, cosine_hemisphere_pdf, square_to_cosine_hemisphere
 from .base import BSDF, rgb_param
-from .conductor import _half_vector, check_alpha, ggx_reflection_pdf
+from .conductor import check_alpha, ggx_microfacet_product, ggx_reflection_pdf
 from .fresnel import fresnel_dielectric
-from .microfacet import ggx_d, ggx_g1, ggx_sample_visible_normal
+from .microfacet import ggx_g1, ggx_sample_visible_normal
 
 __all__ = ["PLASTIC", "RoughPlastic"]
 
@@ -57,13 +57,10 @@ def _transmittance(p, mu):
 
 @jit_inline
 def _specular(p, wo, wi):
-    hx, hy, hz, ok = _half_vector(wo, wi)
-    if not ok:
+    k, cos_h = ggx_microfacet_product(p[_ALPHA], wo, wi)
+    if k == 0.0:
         return 0.0
-    a = p[_ALPHA]
-    g = ggx_g1(a, wi[0], wi[1], wi[2], hx, hy, hz) * ggx_g1(a, wo[0], wo[1], wo[2], hx, hy, hz)
-    f = fresnel_dielectric(wi[0] * hx + wi[1] * hy + wi[2] * hz, p[_ETA])
-    return f * ggx_d(a, hx, hy, hz) * g / (4.0 * wi[2] * wo[2])
+    return fresnel_dielectric(cos_h, p[_ETA]) * k
 
 
 @jit_inline
