@@ -86,7 +86,7 @@ from ..geometry.intersect import (
 from ..geometry.raytracer import RayTracer
 from ..geometry.scene import Scene
 from ..geometry.shadow_lanes import shadow_block
-from ..sampling.mis import mis_weight
+from ..sampling.mis import mis_weight, mis_weight_over, mis_weight_share
 from ..sampling.rng import SAMPLERS, SOBOL, sample_state, uniform, uniform_2d
 from ..sampling.sobol_lanes import camera_numbers_block, slot_numbers_block
 from . import adaptive
@@ -808,7 +808,7 @@ def _shade_finish(
                     if st == SLOT_BSDF:
                         scale = inv_m
                         if strategy == MIS:
-                            scale = mis_weight(n_bsdf, tpdf[r], n_env, epdf[r], beta) / n_bsdf
+                            scale = mis_weight_share(n_bsdf, tpdf[r], n_env, epdf[r], beta)
                         cr, cg, cb = bweight[r, 0] * lr * scale, bweight[r, 1] * lg * scale, bweight[r, 2] * lb * scale
                     else:
                         if st == SLOT_ENV:
@@ -819,12 +819,16 @@ def _shade_finish(
                         if f[0] == 0.0 and f[1] == 0.0 and f[2] == 0.0:
                             continue
                         pdf = tpdf[r]
-                        scale = wi[2] / pdf * inv_m
-                        if strategy == MIS:
+                        if strategy != MIS:
+                            scale = wi[2] / pdf * inv_m
+                        else:
                             pb = bsdf_pdf(mk, mp, wo, wi)
                             # a resampled sample's weight uses the density it was drawn from, not its effective one
-                            p_light = epdf[r] if st == SLOT_ENV and env_candidates > 1 else pdf
-                            scale = wi[2] / pdf * mis_weight(n_env, p_light, n_bsdf, pb, beta) / n_env
+                            if st == SLOT_ENV and env_candidates > 1:
+                                p_light = epdf[r]
+                                scale = wi[2] / pdf * mis_weight(n_env, p_light, n_bsdf, pb, beta) / n_env
+                            else:
+                                scale = wi[2] * mis_weight_over(n_env, pdf, n_bsdf, pb, beta)
                         cr, cg, cb = f[0] * lr * scale, f[1] * lg * scale, f[2] * lb * scale
                     if cr == 0.0 and cg == 0.0 and cb == 0.0:
                         continue

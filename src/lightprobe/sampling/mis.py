@@ -21,7 +21,7 @@ import numpy as np
 
 from .._numba import jit, jit_parallel, prange
 
-__all__ = ["balance_heuristic", "mis_weight", "power_heuristic"]
+__all__ = ["balance_heuristic", "mis_weight", "mis_weight_over", "mis_weight_share", "power_heuristic"]
 
 
 @jit
@@ -43,6 +43,36 @@ def mis_weight(n_f, p_f, n_g, p_g, beta):
     if beta == 2.0:
         return 1.0 / (1.0 + r * r)
     return 1.0 / (1.0 + r**beta)
+
+
+@jit
+def mis_weight_over(n_f, p_f, n_g, p_g, beta):
+    """``mis_weight(n_f, p_f, n_g, p_g, beta) / (n_f p_f)``, the factor a sample's f / p_f takes: its contribution is
+    f w_f / (n_f p_f). Under the balance heuristic that is 1 / (n_f p_f + n_g p_g), one division where the weight
+    and the two divisions after it take four (decisions.md 63); the degenerate cases are mis_weight's (0 where
+    n_f p_f is not a positive number)."""
+    a = n_f * p_f
+    b = n_g * p_g
+    if beta == 1.0 and a > 0.0 and b >= 0.0:
+        s = a + b
+        if s < math.inf:  # a and b finite, and their sum too
+            return 1.0 / s
+    if not a > 0.0:
+        return 0.0
+    return mis_weight(n_f, p_f, n_g, p_g, beta) / a
+
+
+@jit
+def mis_weight_share(n_f, p_f, n_g, p_g, beta):
+    """``mis_weight(n_f, p_f, n_g, p_g, beta) / n_f``, a sample's share when f takes n_f samples: p_f / (n_f p_f +
+    n_g p_g) under the balance heuristic, one division for two."""
+    a = n_f * p_f
+    b = n_g * p_g
+    if beta == 1.0 and a > 0.0 and b >= 0.0:
+        s = a + b
+        if s < math.inf:
+            return p_f / s
+    return mis_weight(n_f, p_f, n_g, p_g, beta) / n_f
 
 
 @jit_parallel
