@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 import pytest
 
@@ -13,13 +14,31 @@ from lightprobe.sampling.rng import SAMPLERS, sample_state, uniform, uniform_2d
 WO = (0.3, -0.2, np.sqrt(1.0 - 0.13))
 
 
+# The numbers are drawn inside small kernels: a state tuple that crosses into Python comes back typed by its values
+# (int64 below 2^63, uint64 above), and a dispatcher may run it through a specialization compiled for other types,
+# giving numbers that depend on which test compiled first (this file's render test failed when run alone).
+@numba.njit
+def _own_number(sampler, seed, pixel, sample, dim):
+    return uniform(sample_state(sampler, seed, pixel, sample), dim)
+
+
+@numba.njit
+def _own_pair(sampler, seed, pixel, sample, dim):
+    return uniform_2d(sample_state(sampler, seed, pixel, sample), dim)
+
+
+@numba.njit
+def _grouped_pair(sampler, seed, pixel, sample, strategy, n_bsdf, n_env, j):
+    rj, slot = technique_slot(sample_state(sampler, seed, pixel, sample), strategy, n_bsdf, n_env, j)
+    return uniform_2d(rj, 2 + 3 * slot)
+
+
 def _slot_points(technique, n=256, slot=1, pixel=7):
     """The unit-square points behind n directions of one slot of one pixel, from the renderer's Sobol' sampler."""
     bsdf = Lambert(0.5)
     points = np.empty((n, 2))
     for i in range(n):
-        rs = sample_state(SAMPLERS["sobol"], 3, pixel, i)
-        u0, u1, u2 = (uniform(rs, 2 + 3 * slot + c) for c in range(3))
+        u0, u1, u2 = (_own_number(SAMPLERS["sobol"], 3, pixel, i, 2 + 3 * slot + c) for c in range(3))
         state, wi, pdf, _ = sample_direction(technique, bsdf.kind, bsdf.params, WO, u0, u1, u2)
         assert state == (SLOT_BSDF if technique == BRDF else SLOT_HEMI) and pdf > 0.0
         points[i] = cosine_hemisphere_to_square(*wi)
@@ -60,10 +79,8 @@ def _group_points(n_bsdf, n_env, group, camera_samples, pixel=7, sampler="sobol"
     slots = range(n_bsdf) if group == "bsdf" else range(n_bsdf, n_bsdf + n_env)
     points = []
     for i in range(camera_samples):
-        rs = sample_state(SAMPLERS[sampler], 3, pixel, i)
         for j in slots:
-            rj, slot = technique_slot(rs, MIS, n_bsdf, n_env, j)
-            points.append(uniform_2d(rj, 2 + 3 * slot))
+            points.append(_grouped_pair(SAMPLERS[sampler], 3, pixel, i, MIS, n_bsdf, n_env, j))
     return np.array(points)
 
 
@@ -75,19 +92,17 @@ def test_slots_of_one_technique_share_one_stratified_set():
     assert _is_net(_group_points(2, 2, "env", 128))
     # one slot per group: the slot's own sequence, as before grouping
     single = _group_points(1, 1, "env", 256)
-    rs = [sample_state(SAMPLERS["sobol"], 3, 7, i) for i in range(256)]
-    assert np.array_equal(single, np.array([uniform_2d(r, 2 + 3 * 1) for r in rs]))
+    assert np.array_equal(single, np.array([_own_pair(SAMPLERS["sobol"], 3, 7, i, 2 + 3 * 1) for i in range(256)]))
 
 
 def test_slots_side_by_side_are_not_one_net():
     # negative control: each slot with its own pair (the layout before grouping) gives two 128-nets, which
     # together fail the 256-point check; the independent sampler keeps exactly that layout
-    rs = [sample_state(SAMPLERS["sobol"], 3, 7, i) for i in range(128)]
-    side_by_side = np.array([uniform_2d(r, 2 + 3 * j) for r in rs for j in range(2)])
+    side_by_side = np.array([_own_pair(SAMPLERS["sobol"], 3, 7, i, 2 + 3 * j) for i in range(128) for j in range(2)])
     assert not _is_net(side_by_side)
     independent = _group_points(2, 1, "bsdf", 4, sampler="independent")
-    rs = [sample_state(SAMPLERS["independent"], 3, 7, i) for i in range(4)]
-    assert np.array_equal(independent, np.array([uniform_2d(r, 2 + 3 * j) for r in rs for j in range(2)]))
+    own = [_own_pair(SAMPLERS["independent"], 3, 7, i, 2 + 3 * j) for i in range(4) for j in range(2)]
+    assert np.array_equal(independent, np.array(own))
 
 
 @pytest.mark.parametrize("path", ["environment", "area lights"])
@@ -121,16 +136,14 @@ def test_the_renderer_takes_each_groups_numbers(path):
         ts, tt = coordinate_system(0.0, 1.0, 0.0)
         total = np.zeros(3)
         for i in range(spp):
-            rs = sample_state(SAMPLERS["sobol"], seed, 0, i)
             for j in range(slots):
-                rj, slot = layout(rs, j)
-                u0, u1 = uniform_2d(rj, 2 + 3 * slot)
-                wi = square_to_cosine_hemisphere(u0, u1)
+                wi = square_to_cosine_hemisphere(*layout(i, j))
                 total += env_eval(env.kernel, *to_world(ts, tt, (0.0, 1.0, 0.0), *wi))
         return total / (spp * slots)
 
-    grouped = expected(lambda rs, j: technique_slot(rs, STRATEGIES["cosine"], slots, 0, j))
-    side_by_side = expected(lambda rs, j: (rs, j))
+    sobol = SAMPLERS["sobol"]
+    grouped = expected(lambda i, j: _grouped_pair(sobol, seed, 0, i, STRATEGIES["cosine"], slots, 0, j))
+    side_by_side = expected(lambda i, j: _own_pair(sobol, seed, 0, i, 2 + 3 * j))
     np.testing.assert_allclose(image, grouped, rtol=1e-5)
     assert not np.allclose(image, side_by_side, rtol=1e-3)
 
@@ -142,16 +155,16 @@ def test_a_camera_samples_light_picks_are_stratified():
 
     k, n_bsdf = 16, 1
 
+    @numba.njit
+    def pick_number(sampler, sample, j):
+        rp, picker = _pick_slot(sample_state(sampler, 3, 7, sample), n_bsdf, 1, n_bsdf + k, MIS, j)
+        return uniform(rp, 4 + 3 * picker)
+
     def picks(sampler, sample):
-        rs = sample_state(SAMPLERS[sampler], 3, 7, sample)
-        out = []
-        for j in range(n_bsdf, n_bsdf + k):
-            rp, picker = _pick_slot(rs, n_bsdf, 1, n_bsdf + k, MIS, j)
-            out.append(uniform(rp, 4 + 3 * picker))
-        return np.array(out)
+        return np.array([pick_number(SAMPLERS[sampler], sample, j) for j in range(n_bsdf, n_bsdf + k)])
 
     for sample in (0, 1, 5):
         assert np.array_equal(np.sort((picks("sobol", sample) * k).astype(int)), np.arange(k))
-    rs = sample_state(SAMPLERS["independent"], 3, 7, 0)
-    assert np.array_equal(picks("independent", 0), [uniform(rs, 4 + 3 * j) for j in range(n_bsdf, n_bsdf + k)])
+    own = [_own_number(SAMPLERS["independent"], 3, 7, 0, 4 + 3 * j) for j in range(n_bsdf, n_bsdf + k)]
+    assert np.array_equal(picks("independent", 0), own)
     assert not np.array_equal(np.sort((picks("independent", 0) * k).astype(int)), np.arange(k))
