@@ -48,7 +48,7 @@ from ..geometry.intersect import (
     occluded_analytic,
     ray_offset,
 )
-from ..sampling.mis import mis_weight
+from ..sampling.mis import mis_weight_over, mis_weight_share
 from ..sampling.rng import group_slot, sample_state, uniform, uniform_2d
 from .techniques import (
     BLOCKED,
@@ -294,10 +294,11 @@ def _lights_finish(
                         f = bsdf_eval(mk, mp, wo, wi)
                         if f[0] == 0.0 and f[1] == 0.0 and f[2] == 0.0:
                             continue
-                        scale = wi[2] / tpdf[r] * inv_m
-                        if strategy == MIS:
+                        if strategy != MIS:
+                            scale = wi[2] / tpdf[r] * inv_m
+                        else:  # one division for the weight and the density (sampling/mis.py, decisions.md 63)
                             pb = bsdf_pdf(mk, mp, wo, wi)
-                            scale = wi[2] / tpdf[r] * mis_weight(n_light, tpdf[r], n_bsdf, pb, beta) / n_light
+                            scale = wi[2] * mis_weight_over(n_light, tpdf[r], n_bsdf, pb, beta)
                         cr, cg, cb = (
                             f[0] * radiance[r, 0] * scale,
                             f[1] * radiance[r, 1] * scale,
@@ -352,7 +353,7 @@ def _lights_finish(
                         scale = inv_m
                         if strategy == MIS:
                             pl = selector_pmf(sel, px, py, pz, nx, ny, nz, light) * p_light
-                            scale = mis_weight(n_bsdf, tpdf[r], n_light, pl, beta) / n_bsdf
+                            scale = mis_weight_share(n_bsdf, tpdf[r], n_light, pl, beta)
                         cr, cg, cb = bweight[r, 0] * lr * scale, bweight[r, 1] * lg * scale, bweight[r, 2] * lb * scale
                     else:
                         wi = (wloc[r, 0], wloc[r, 1], wloc[r, 2])
