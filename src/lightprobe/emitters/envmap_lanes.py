@@ -208,7 +208,16 @@ class _Lanes:
         function = _intrinsic(
             b, f"llvm.masked.store.v{width}f64.p0", ir.VoidType(), wide, wide.as_pointer(), _I32, wide_mask.type
         )
-        b.call(function, [values, b.bitcast(pointer, wide.as_pointer()), _I32(8), wide_mask])
+        target = b.bitcast(pointer, wide.as_pointer())
+        # every lane live (the usual block): a plain store, which a later scalar load of one of its values can take
+        # from the store buffer; a load after a masked store waits until the store has reached the cache (perf: the
+        # setup stage's reads of the Sobol' rows just stored, decisions.md 64)
+        full = b.call(_intrinsic(b, f"llvm.vector.reduce.and.v{LANES}i1", ir.IntType(1), _MASK), [mask])
+        with b.if_else(full) as (every_lane, some_lanes):
+            with every_lane:
+                b.store(values, target, align=8)
+            with some_lanes:
+                b.call(function, [values, target, _I32(8), wide_mask])
 
     def _widen(self, mask, fields):
         """Each lane's mask bit repeated ``fields`` times, in row order."""
