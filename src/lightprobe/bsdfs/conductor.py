@@ -35,7 +35,7 @@ from .._numba import jit, jit_inline
 from ..errors import ParameterError
 from .base import BSDF, rgb_param
 from .fresnel import fresnel_conductor
-from .microfacet import ggx_d_terms, ggx_g1, ggx_lambda_root, ggx_sample_visible_normal
+from .microfacet import ggx_d_terms, ggx_g1, ggx_g1_denominator, ggx_sample_visible_normal
 
 __all__ = ["CONDUCTOR_PRESETS", "GGX_CONDUCTOR", "GGXConductor", "ggx_reflection_pdf"]
 
@@ -64,7 +64,7 @@ def _fresnel_rgb(p, cos_theta):
 def ggx_reflection_pdf(alpha, wo, wi):
     """Density of wi = reflect(wo, m) with m ~ D_wo: G1(wo, m) D(m) / (4 cos(theta_o)), over the whole sphere.
     With the half vector h = wo + wi unnormalized (microfacet.ggx_d_terms) and G1 = 2 c / (c + r) this is
-    alpha^2 |h|^4 / (2 pi e^2 (c + r)): one square root and one division."""
+    alpha^2 |h|^4 / (2 pi e^2 (c + r)): one square root and one division (microfacet.ggx_g1_denominator)."""
     co = wo[2]
     if co <= 0.0:
         return 0.0
@@ -72,9 +72,7 @@ def ggx_reflection_pdf(alpha, wo, wi):
     if hz <= 0.0 or wo[0] * hx + wo[1] * hy + co * hz <= 0.0:  # D(h) = 0, or wo masked by h (G1 = 0)
         return 0.0
     num, e2 = ggx_d_terms(alpha, hx, hy, hz)
-    if co >= 1.0:  # G1 = 1 (ggx_g1)
-        return num / (4.0 * math.pi * e2 * co)
-    return num / (2.0 * math.pi * e2 * (co + ggx_lambda_root(alpha, co)))
+    return num / (2.0 * math.pi * e2 * ggx_g1_denominator(alpha, co))
 
 
 @jit_inline
@@ -89,9 +87,7 @@ def ggx_microfacet_product(alpha, wo, wi):
     if di <= 0.0 or wo[0] * hx + wo[1] * hy + co * hz <= 0.0:  # a direction masked by h (G1 = 0)
         return 0.0, 0.0
     num, e2 = ggx_d_terms(alpha, hx, hy, hz)
-    # c + r with r = sqrt(c^2 + alpha^2 (1 - c^2)), and 2 c where c >= 1 (G1 = 1 there, as ggx_g1)
-    gi = 2.0 * ci if ci >= 1.0 else ci + ggx_lambda_root(alpha, ci)
-    go = 2.0 * co if co >= 1.0 else co + ggx_lambda_root(alpha, co)
+    gi, go = ggx_g1_denominator(alpha, ci), ggx_g1_denominator(alpha, co)
     cos_h = di / math.sqrt(hx * hx + hy * hy + hz * hz)
     return num / (math.pi * e2 * gi * go), cos_h
 

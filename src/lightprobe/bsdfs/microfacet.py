@@ -16,13 +16,13 @@ import math
 from .._numba import jit, jit_inline
 from ..sampling.kernels import sincos_turns
 
-__all__ = ["ggx_d", "ggx_d_terms", "ggx_g1", "ggx_lambda_root", "ggx_sample_visible_normal"]
+__all__ = ["ggx_d", "ggx_d_terms", "ggx_g1", "ggx_g1_denominator", "ggx_sample_visible_normal"]
 
 
 @jit
 def ggx_d(alpha, mx, my, mz):
     """D of a unit microfacet normal m. With mx^2 + my^2 = 1 - mz^2 the denominator's cos^2 (alpha^2 - 1) + 1 is
-    mx^2 + my^2 + alpha^2 mz^2 (:func:`ggx_d_unnormalized`'s form)."""
+    mx^2 + my^2 + alpha^2 mz^2 (:func:`ggx_d_terms`'s form)."""
     if mz <= 0.0:
         return 0.0
     a2 = alpha * alpha
@@ -43,23 +43,22 @@ def ggx_d_terms(alpha, hx, hy, hz):
 
 
 @jit
-def ggx_lambda_root(alpha, vz):
-    """sqrt(cos^2 + alpha^2 sin^2) of a direction with cosine vz: |vz| sqrt(1 + alpha^2 tan^2), so that
-    G1 = 2 |vz| / (|vz| + root) needs no tan^2 (one division, not two)."""
-    c2 = vz * vz
-    return math.sqrt(c2 + alpha * alpha * (1.0 - c2))
+def ggx_g1_denominator(alpha, c):
+    """c + sqrt(c^2 + alpha^2 (1 - c^2)) for a direction's cosine c > 0 (2 c where c >= 1), so that G1 = 2 c / this:
+    2 / (1 + sqrt(1 + alpha^2 tan^2)) without tan^2's division; callers fold it into their one division."""
+    if c >= 1.0:
+        return 2.0 * c
+    return c + math.sqrt(c * c + alpha * alpha * (1.0 - c * c))
 
 
 @jit
 def ggx_g1(alpha, vx, vy, vz, mx, my, mz):
     """Smith masking of direction v for microfacet normal m (the separable form is G1(wi) G1(wo)):
-    2 / (1 + sqrt(1 + alpha^2 tan^2)) written as 2 |vz| / (|vz| + sqrt(vz^2 + alpha^2 (1 - vz^2)))."""
+    2 |vz| / ggx_g1_denominator(alpha, |vz|)."""
     if (vx * mx + vy * my + vz * mz) * vz <= 0.0:
         return 0.0
     c = abs(vz)
-    if c >= 1.0:
-        return 1.0
-    return 2.0 * c / (c + ggx_lambda_root(alpha, c))
+    return 2.0 * c / ggx_g1_denominator(alpha, c)
 
 
 @jit_inline

@@ -46,17 +46,26 @@ def mis_weight(n_f, p_f, n_g, p_g, beta):
 
 
 @jit
+def _balance_total(n_f, p_f, n_g, p_g, beta):
+    """n_f p_f + n_g p_g where the one-division forms below apply (the balance heuristic, n_f p_f > 0, n_g p_g >= 0,
+    the sum finite), 0 elsewhere (they then go through mis_weight)."""
+    a = n_f * p_f
+    b = n_g * p_g
+    if beta == 1.0 and a > 0.0 and b >= 0.0 and a + b < math.inf:
+        return a + b
+    return 0.0
+
+
+@jit
 def mis_weight_over(n_f, p_f, n_g, p_g, beta):
     """``mis_weight(n_f, p_f, n_g, p_g, beta) / (n_f p_f)``, the factor a sample's f / p_f takes: its contribution is
     f w_f / (n_f p_f). Under the balance heuristic that is 1 / (n_f p_f + n_g p_g), one division where the weight
     and the two divisions after it take four (decisions.md 63); the degenerate cases are mis_weight's (0 where
     n_f p_f is not a positive number)."""
+    total = _balance_total(n_f, p_f, n_g, p_g, beta)
+    if total > 0.0:
+        return 1.0 / total
     a = n_f * p_f
-    b = n_g * p_g
-    if beta == 1.0 and a > 0.0 and b >= 0.0:
-        s = a + b
-        if s < math.inf:  # a and b finite, and their sum too
-            return 1.0 / s
     if not a > 0.0:
         return 0.0
     return mis_weight(n_f, p_f, n_g, p_g, beta) / a
@@ -66,12 +75,9 @@ def mis_weight_over(n_f, p_f, n_g, p_g, beta):
 def mis_weight_share(n_f, p_f, n_g, p_g, beta):
     """``mis_weight(n_f, p_f, n_g, p_g, beta) / n_f``, a sample's share when f takes n_f samples: p_f / (n_f p_f +
     n_g p_g) under the balance heuristic, one division for two."""
-    a = n_f * p_f
-    b = n_g * p_g
-    if beta == 1.0 and a > 0.0 and b >= 0.0:
-        s = a + b
-        if s < math.inf:
-            return p_f / s
+    total = _balance_total(n_f, p_f, n_g, p_g, beta)
+    if total > 0.0:
+        return p_f / total
     return mis_weight(n_f, p_f, n_g, p_g, beta) / n_f
 
 
