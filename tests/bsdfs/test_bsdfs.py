@@ -132,19 +132,26 @@ def test_ggx_white_furnace_albedo():
     assert 0.999 < mean[0] <= 1.0
 
 
+def _textbook_g1(alpha, cos_v):
+    """G1 = 2 / (1 + sqrt(1 + alpha^2 tan^2)) as microfacet.py's docstring writes it (1 at normal incidence)."""
+    c2 = cos_v**2
+    return 2 / (1 + np.sqrt(1 + alpha * alpha * (1 - c2) / c2))
+
+
+def _textbook_d(alpha, cos_m):
+    return alpha * alpha / (np.pi * (cos_m**2 * (alpha * alpha - 1) + 1) ** 2)
+
+
 def _textbook_microfacet(alpha, wo, wi):
     """D(h) G1(wi, h) G1(wo, h) / (4 cos_i cos_o) and cos(wi, h) in the order the definitions give them
-    (microfacet.py's docstring: normalized h, tan^2, two divisions per G1), for directions above the surface."""
+    (normalized h, tan^2, two divisions per G1), for directions above the surface."""
     h = wo + wi
     h /= np.linalg.norm(h, axis=1, keepdims=True)
-    a2 = alpha * alpha
 
     def g1(v):
-        c2 = v[:, 2] ** 2
-        return np.where(np.sum(v * h, axis=1) * v[:, 2] > 0, 2 / (1 + np.sqrt(1 + a2 * (1 - c2) / c2)), 0.0)
+        return np.where(np.sum(v * h, axis=1) * v[:, 2] > 0, _textbook_g1(alpha, v[:, 2]), 0.0)
 
-    d = a2 / (np.pi * (h[:, 2] ** 2 * (a2 - 1) + 1) ** 2)
-    return d * g1(wi) * g1(wo) / (4 * wi[:, 2] * wo[:, 2]), np.sum(wi * h, axis=1)
+    return _textbook_d(alpha, h[:, 2]) * g1(wi) * g1(wo) / (4 * wi[:, 2] * wo[:, 2]), np.sum(wi * h, axis=1)
 
 
 @pytest.mark.parametrize("alpha", [1e-3, 0.05, 0.3, 1.0])
@@ -185,10 +192,7 @@ def _reflection_pdf_textbook(alpha, wo, wi):
     if h[2] <= 0 or np.dot(wo, h) <= 0:
         return 0.0
     h = h / np.linalg.norm(h)
-    a2 = alpha * alpha
-    c2 = wo[2] ** 2
-    g1 = 1.0 if c2 >= 1 else 2 / (1 + math.sqrt(1 + a2 * (1 - c2) / c2))
-    return g1 * a2 / (np.pi * (h[2] ** 2 * (a2 - 1) + 1) ** 2) / (4 * wo[2])
+    return _textbook_g1(alpha, wo[2]) * _textbook_d(alpha, h[2]) / (4 * wo[2])
 
 
 def test_conductor_fresnel_at_normal_incidence_matches_the_peer_scene():
