@@ -297,3 +297,77 @@ def test_plastic_energy():
         assert 0.3 < mean[0] < 1.0  # alpha = 1 keeps only 34 %
     mean, _ = directional_albedo(RoughPlastic(0.0, 0.05), wo_at(0.0))
     assert 0.035 < mean[0] < 0.042
+
+
+def _net_256():
+    """The first 256 points of Sobol's 2D sequence, moved to the centres of their cells: a (0, 8, 2)-net whose
+    points sit 1/512 from every cell edge (so a round trip's rounding keeps each in its cell)."""
+    from lightprobe.sampling.rng import sobol_2d
+
+    xy = np.array([sobol_2d(i) for i in range(256)], dtype=np.float64) / 2.0**32
+    return xy + 1.0 / 512.0
+
+
+def _is_net(points):
+    """Every elementary interval of area 1 / len(points) holds exactly one point."""
+    n = len(points)
+    m = int(round(math.log2(n)))
+    assert 2**m == n
+    for a in range(m + 1):
+        cx = np.minimum((points[:, 0] * 2**a).astype(int), 2**a - 1)
+        cy = np.minimum((points[:, 1] * 2 ** (m - a)).astype(int), 2 ** (m - a) - 1)
+        if not np.all(np.bincount(cx * 2 ** (m - a) + cy, minlength=n) == 1):
+            return False
+    return True
+
+
+def test_a_two_lobe_bsdf_gives_each_lobe_a_stratum_of_the_pair():
+    # Phong with rho_d = rho_s picks each lobe with probability 1/2, by the pair's second number rescaled
+    # (choose_rescaled): each lobe's 128 directions, mapped back through its own warp, are a (0, 7, 2)-net.  The
+    # lobe choice is the first column, drawn anew here: a BSDF that used it (the choice before decisions.md 67)
+    # would give each lobe a scattered half of the net and fail.
+    from lightprobe.geometry.frame import coordinate_system, to_local
+    from lightprobe.sampling.kernels import cosine_hemisphere_to_square, phong_lobe_to_square
+
+    n_exp = 10.0
+    bsdf = Phong(0.45, 0.45, n_exp)
+    wo = wo_at(30.0)
+    net = _net_256()
+    u = np.column_stack([np.random.default_rng(5).random(256), net])
+    wi, _ = bsdf.sample(wo, u)
+    diffuse = net[:, 1] < 0.5
+    mirror = (-wo[0], -wo[1], wo[2])
+    s, t = coordinate_system(*mirror)
+    back = np.array(
+        [
+            cosine_hemisphere_to_square(*w) if d else phong_lobe_to_square(*to_local(s, t, mirror, *w), n_exp)
+            for w, d in zip(wi, diffuse, strict=True)
+        ]
+    )
+    for lobe in (diffuse, ~diffuse):
+        assert lobe.sum() == 128
+        np.testing.assert_allclose(back[lobe, 0], net[lobe, 0], atol=1e-9)
+        assert _is_net(back[lobe])
+    scattered = back[diffuse].copy()
+    scattered[:, 1] = np.random.default_rng(6).random(128)
+    assert not _is_net(scattered)  # the check can fail
+
+
+def test_the_plastic_chooses_its_lobe_by_the_pairs_second_number():
+    from lightprobe.bsdfs.plastic import _specular_probability
+    from lightprobe.sampling.kernels import cosine_hemisphere_to_square
+
+    bsdf = RoughPlastic([0.6, 0.15, 0.1], 0.3)
+    wo = wo_at(40.0)
+    ps = _specular_probability(bsdf.params, (wo[0], wo[1], wo[2]))
+    assert 0.05 < ps < 0.95
+    net = _net_256()
+    rng = np.random.default_rng(7)
+    wi_a, pdf_a = bsdf.sample(wo, np.column_stack([rng.random(256), net]))
+    wi_b, pdf_b = bsdf.sample(wo, np.column_stack([rng.random(256), net]))
+    np.testing.assert_array_equal(wi_a, wi_b)  # the first column chooses nothing
+    np.testing.assert_array_equal(pdf_a, pdf_b)
+    diffuse = net[:, 1] >= ps
+    back = np.array([cosine_hemisphere_to_square(*w) for w in wi_a[diffuse]])
+    np.testing.assert_allclose(back[:, 0], net[diffuse, 0], atol=1e-9)
+    np.testing.assert_allclose(back[:, 1], (net[diffuse, 1] - ps) / (1.0 - ps), atol=1e-9)

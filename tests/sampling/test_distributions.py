@@ -105,3 +105,23 @@ def test_2d_all_zero_is_uniform():
     pts, pdf = dist.sample(np.array([[0.5, 0.25]]))
     np.testing.assert_allclose(pts, [[0.5, 0.25]])
     np.testing.assert_allclose(pdf, 1.0)
+
+
+@pytest.mark.parametrize("p", [0.0, 0.3, 0.5, 1.0 - 1e-9, 1.0])
+def test_choose_rescaled_keeps_each_share_uniform(p):
+    from lightprobe.sampling.distributions import choose_rescaled
+
+    u = (np.arange(4096) + 0.5) / 4096  # evenly spaced: each option's rescaled numbers must be evenly spaced too
+    chosen = np.array([choose_rescaled(x, p) for x in u])
+    first, v = chosen[:, 0].astype(bool), chosen[:, 1]
+    assert np.all((v >= 0.0) & (v < 1.0))
+    assert first.sum() == np.count_nonzero(u < p)
+    for share, lo, width in ((first, 0.0, p), (~first, p, 1.0 - p)):
+        if share.any():
+            np.testing.assert_allclose(v[share], (u[share] - lo) / width, rtol=1e-12)
+            # uniform on [0, 1): the spread of an evenly spaced share (a share of one point sits anywhere)
+            if share.sum() > 1:
+                assert v[share].min() < 2.0 / share.sum() and v[share].max() > 1.0 - 2.0 / share.sum()
+    if p > 0.0:  # just below p: the first option, rescaled to below 1 however u / p rounds
+        first_below, v_below = choose_rescaled(np.nextafter(p, 0.0), p)
+        assert first_below and v_below < 1.0

@@ -6,7 +6,10 @@ the pdf from ``sample`` are per steradian over the whole sphere (a sampler may p
 horizon, whose value is 0: they are valid samples of its density).  All materials are one-sided: f = 0 unless
 both directions are above the surface, and nothing is sampled when ``wo`` is below it (pdf 0).
 
-``u`` has three columns: column 0 picks a lobe (for materials with several), columns 1 and 2 drive the warp.
+``u`` has three columns: columns 1 and 2 drive the warp, and a material with two lobes picks one by column 2,
+rescaled into the chosen lobe's share of [0, 1) (:func:`lightprobe.sampling.distributions.choose_rescaled`), so that
+a stratified pair stays stratified in each lobe.  Column 0, a number of its own, is not used by today's materials
+(it chose the lobe until decisions.md 67).
 
 Every material is a kind (an integer) and a fixed-size float64 parameter block; one dispatching kernel per
 operation (:mod:`lightprobe.bsdfs.dispatch`) serves these Python methods and the renderer alike.

@@ -14,7 +14,8 @@ exponent : float
 estimator : {"mixture", "chosen_lobe"}
     How a BSDF sample is weighted.  Sampling first picks a lobe with probability P_d = rho_d / (rho_d + rho_s)
     (on scalar luminance albedos), then samples cos(theta)/pi (diffuse) or (n + 1)/(2 pi) cos^n about the mirror
-    direction (specular, seed eqs. 11-13; samples below the horizon are valid and have value 0).
+    direction (specular, seed eqs. 11-13; samples below the horizon are valid and have value 0).  The choice is
+    made by the direction's second number, rescaled into the chosen lobe's share (see ``bsdfs/base.py``).
 
     * ``mixture`` (default): the sample's pdf is the full mixture (seed eq. 19)
       P_d p_d + P_s p_s and its weight f cos / pdf uses the whole BRDF.  This is the density ``pdf()`` returns,
@@ -32,6 +33,7 @@ from .._numba import jit
 from ..color import luminance
 from ..errors import ParameterError
 from ..geometry.frame import coordinate_system, to_world
+from ..sampling.distributions import choose_rescaled
 from ..sampling.kernels import (
     INV_2PI,
     INV_PI,
@@ -97,13 +99,14 @@ def phong_sample(p, wo, u0, u1, u2):
     if wo[2] <= 0.0:
         return (0.0, 0.0, 1.0), 0.0, zero
     p_diffuse = p[_PD]
-    diffuse = u0 < p_diffuse
+    # the lobe from the pair's second coordinate, rescaled (choose_rescaled), as the plastic's
+    diffuse, v = choose_rescaled(u2, p_diffuse)
     if diffuse:
-        wi = square_to_cosine_hemisphere(u1, u2)
+        wi = square_to_cosine_hemisphere(u1, v)
     else:
         mirror = (-wo[0], -wo[1], wo[2])
         s, t = coordinate_system(mirror[0], mirror[1], mirror[2])
-        local = square_to_phong_lobe(u1, u2, p[_EXP])
+        local = square_to_phong_lobe(u1, v, p[_EXP])
         wi = to_world(s, t, mirror, local[0], local[1], local[2])
     pd, ps = _lobe_pdfs(p, wo, wi)
     if p[_EST] == 0.0:  # mixture

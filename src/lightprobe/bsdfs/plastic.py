@@ -22,7 +22,8 @@ eta : float
     Relative index of refraction of the coating (default 1.49 / 1.000277, Mitsuba's polypropylene in air).
 
 Sampling picks the specular lobe with probability (1 - T(wo)) w / ((1 - T(wo)) w + T(wo) (1 - w)),
-w = 1 / (1 + mean diffuse) (Mitsuba's weighting), else a cosine-weighted direction; ``pdf`` is the mixture.
+w = 1 / (1 + mean diffuse) (Mitsuba's weighting), else a cosine-weighted direction; ``pdf`` is the mixture.  The
+choice is made by the direction's second number, rescaled into the chosen lobe's share (see ``bsdfs/base.py``).
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ import numpy as np
 
 from .._numba import jit, jit_inline, jit_parallel, prange
 from ..errors import ParameterError
+from ..sampling.distributions import choose_rescaled
 from ..sampling.kernels import INV_PI, cosine_hemisphere_pdf, square_to_cosine_hemisphere
 from .base import BSDF, rgb_param
 from .conductor import check_alpha, ggx_microfacet_product, ggx_reflection_pdf
@@ -92,12 +94,15 @@ def plastic_sample(p, wo, u0, u1, u2):
     zero = (0.0, 0.0, 0.0)
     if wo[2] <= 0.0:
         return (0.0, 0.0, 1.0), 0.0, zero
-    if u0 < _specular_probability(p, wo):
-        mx, my, mz = ggx_sample_visible_normal(p[_ALPHA], wo[0], wo[1], wo[2], u1, u2)
+    # the lobe from the pair's second coordinate, rescaled (choose_rescaled): u0, a number of its own, would give
+    # each lobe a scattered subset of the pair's stratified set
+    specular, v = choose_rescaled(u2, _specular_probability(p, wo))
+    if specular:
+        mx, my, mz = ggx_sample_visible_normal(p[_ALPHA], wo[0], wo[1], wo[2], u1, v)
         d = wo[0] * mx + wo[1] * my + wo[2] * mz
         wi = (2.0 * d * mx - wo[0], 2.0 * d * my - wo[1], 2.0 * d * mz - wo[2])
     else:
-        wi = square_to_cosine_hemisphere(u1, u2)
+        wi = square_to_cosine_hemisphere(u1, v)
     pdf = plastic_pdf(p, wo, wi)
     if pdf <= 0.0 or wi[2] <= 0.0:
         return wi, pdf, zero

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._numba import jit, jit_parallel, prange
+from .._numba import jit, jit_inline, jit_parallel, prange
 
 __all__ = ["PiecewiseConstant1D", "PiecewiseConstant2D"]
 
@@ -55,6 +55,21 @@ def _check_function(func, ndim: int, name: str) -> np.ndarray:
     if np.any(arr < 0.0):
         raise ValueError(f"{name} contains negative values (min {arr.min():g})")
     return np.ascontiguousarray(arr)
+
+
+# --- a choice between two options, from a coordinate the sample also uses --------------------------------------
+@jit_inline
+def choose_rescaled(u, p):
+    """The first of two options with probability ``p`` (``u < p``), and ``u`` rescaled to [0, 1) within the
+    chosen option's share of [0, 1): (first chosen, u').  pbrt-v3's remapping of a BSDF's lobe choice
+    (``BSDF::Sample_f``): given u uniform, u' is uniform whichever option is chosen, so a two-lobe BSDF can choose
+    its lobe with one coordinate of its 2D pair and still sample the lobe with both.  From a stratified set (a
+    Sobol' (0, m, 2)-net) each lobe then gets a stratum of it -- the points with u < p, stretched -- where a choice
+    by a number of its own would give each lobe a scattered subset (peer scene: 7 % lower relMSE, decisions.md 67).
+    """
+    if u < p:
+        return True, min(u / p, ONE_MINUS_EPSILON)
+    return False, min((u - p) / (1.0 - p), ONE_MINUS_EPSILON)
 
 
 # --- scalar kernels (used by the environment map) ---------------------------------------------------------------
