@@ -31,6 +31,20 @@ def load_quietly(path, **options):
         return EnvironmentMap.load(path, **options)
 
 
+def is_net(points) -> bool:
+    """Whether n = len(points) points of the unit square (n a power of two) are a (0, m, 2)-net: every elementary
+    interval of area 1/n (2^a x 2^b cells, a + b = log2 n) holds exactly one point."""
+    n = len(points)
+    m = n.bit_length() - 1
+    assert n == 2**m, f"{n} points: not a power of two"
+    for a in range(m + 1):
+        cx = np.minimum((points[:, 0] * 2**a).astype(int), 2**a - 1)
+        cy = np.minimum((points[:, 1] * 2 ** (m - a)).astype(int), 2 ** (m - a) - 1)
+        if not np.all(np.bincount(cx * 2 ** (m - a) + cy, minlength=n) == 1):
+            return False
+    return True
+
+
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)

@@ -15,6 +15,8 @@ from lightprobe.bsdfs.microfacet import ggx_d
 from lightprobe.errors import ParameterError
 from lightprobe.geometry.frame import frame_matrix
 
+from ..conftest import is_net
+
 
 def wo_at(theta_deg: float, phi: float = 0.3) -> np.ndarray:
     t = math.radians(theta_deg)
@@ -308,19 +310,6 @@ def _net_256():
     return xy + 1.0 / 512.0
 
 
-def _is_net(points):
-    """Every elementary interval of area 1 / len(points) holds exactly one point."""
-    n = len(points)
-    m = int(round(math.log2(n)))
-    assert 2**m == n
-    for a in range(m + 1):
-        cx = np.minimum((points[:, 0] * 2**a).astype(int), 2**a - 1)
-        cy = np.minimum((points[:, 1] * 2 ** (m - a)).astype(int), 2 ** (m - a) - 1)
-        if not np.all(np.bincount(cx * 2 ** (m - a) + cy, minlength=n) == 1):
-            return False
-    return True
-
-
 def test_a_two_lobe_bsdf_gives_each_lobe_a_stratum_of_the_pair():
     # Phong with rho_d = rho_s picks each lobe with probability 1/2, by the pair's second number rescaled
     # (choose_rescaled): each lobe's 128 directions, mapped back through its own warp, are a (0, 7, 2)-net.  The
@@ -347,10 +336,10 @@ def test_a_two_lobe_bsdf_gives_each_lobe_a_stratum_of_the_pair():
     for lobe in (diffuse, ~diffuse):
         assert lobe.sum() == 128
         np.testing.assert_allclose(back[lobe, 0], net[lobe, 0], atol=1e-9)
-        assert _is_net(back[lobe])
+        assert is_net(back[lobe])
     scattered = back[diffuse].copy()
     scattered[:, 1] = np.random.default_rng(6).random(128)
-    assert not _is_net(scattered)  # the check can fail
+    assert not is_net(scattered)  # the check can fail
 
 
 def test_the_plastic_chooses_its_lobe_by_the_pairs_second_number():

@@ -11,6 +11,8 @@ from lightprobe.integrators.techniques import BRDF, COSINE, MIS, SLOT_BSDF, SLOT
 from lightprobe.sampling.kernels import cosine_hemisphere_to_square
 from lightprobe.sampling.rng import SAMPLERS, sample_state, uniform, uniform_2d
 
+from ..conftest import is_net
+
 WO = (0.3, -0.2, np.sqrt(1.0 - 0.13))
 
 
@@ -45,32 +47,20 @@ def _slot_points(technique, n=256, slot=1, pixel=7):
     return points
 
 
-def _is_net(points, n=256):
-    """Every elementary interval of area 1/n (2^a x 2^b cells, a + b = log2 n) holds exactly one point."""
-    m = int(np.log2(n))
-    for a in range(m + 1):
-        cx = np.minimum((points[:, 0] * 2**a).astype(int), 2**a - 1)
-        cy = np.minimum((points[:, 1] * 2 ** (m - a)).astype(int), 2 ** (m - a) - 1)
-        counts = np.bincount(cx * 2 ** (m - a) + cy, minlength=n)
-        if not np.all(counts == 1):
-            return False
-    return True
-
-
 def test_bsdf_directions_come_from_the_slots_2d_pair():
     # cosine-hemisphere sampling inverts exactly, so a Lambertian's sampled directions map back to the numbers
     # that made them; from a (0, 2)-sequence pair those form a (0, 8, 2)-net.  A lobe choice taken from the pair
     # (the layout before issue 9's fix) mixes two pairs and breaks it.
-    assert _is_net(_slot_points(BRDF))
-    assert _is_net(_slot_points(COSINE))
+    assert is_net(_slot_points(BRDF))
+    assert is_net(_slot_points(COSINE))
 
 
 def test_the_net_check_can_fail():
     rng = np.random.default_rng(1)
-    assert not _is_net(rng.random((256, 2)))
+    assert not is_net(rng.random((256, 2)))
     mixed = _slot_points(BRDF)
     mixed[:, 1] = _slot_points(BRDF, slot=2)[:, 1]  # coordinates of two different pairs
-    assert not _is_net(mixed)
+    assert not is_net(mixed)
 
 
 def _group_points(n_bsdf, n_env, group, camera_samples, pixel=7, sampler="sobol"):
@@ -87,9 +77,9 @@ def _group_points(n_bsdf, n_env, group, camera_samples, pixel=7, sampler="sobol"
 def test_slots_of_one_technique_share_one_stratified_set():
     # MIS with 2 (or 4) BSDF samples per camera sample: a pixel's 128 x 2 (64 x 4) BSDF directions are one
     # (0, 8, 2)-net, not two (four) smaller nets side by side; likewise 2 environment samples
-    assert _is_net(_group_points(2, 1, "bsdf", 128))
-    assert _is_net(_group_points(4, 1, "bsdf", 64))
-    assert _is_net(_group_points(2, 2, "env", 128))
+    assert is_net(_group_points(2, 1, "bsdf", 128))
+    assert is_net(_group_points(4, 1, "bsdf", 64))
+    assert is_net(_group_points(2, 2, "env", 128))
     # one slot per group: the slot's own sequence, as before grouping
     single = _group_points(1, 1, "env", 256)
     assert np.array_equal(single, np.array([_own_pair(SAMPLERS["sobol"], 3, 7, i, 2 + 3 * 1) for i in range(256)]))
@@ -99,7 +89,7 @@ def test_slots_side_by_side_are_not_one_net():
     # negative control: each slot with its own pair (the layout before grouping) gives two 128-nets, which
     # together fail the 256-point check; the independent sampler keeps exactly that layout
     side_by_side = np.array([_own_pair(SAMPLERS["sobol"], 3, 7, i, 2 + 3 * j) for i in range(128) for j in range(2)])
-    assert not _is_net(side_by_side)
+    assert not is_net(side_by_side)
     independent = _group_points(2, 1, "bsdf", 4, sampler="independent")
     own = [_own_pair(SAMPLERS["independent"], 3, 7, i, 2 + 3 * j) for i in range(4) for j in range(2)]
     assert np.array_equal(independent, np.array(own))
