@@ -76,6 +76,9 @@ def scene_dir(tmp_path):
     write_image(tmp_path / "sky.exr", np.ones((8, 16, 3), np.float32))
     (tmp_path / "meshes").mkdir()
     trimesh.creation.box().export(tmp_path / "meshes" / "box.obj")
+    panels = trimesh.Trimesh([[0, 2, 0], [1, 2, 0], [1, 2, 1], [0, 2, 1]], [[0, 1, 2], [0, 2, 3]], process=False)
+    panels.export(tmp_path / "meshes" / "panels.ply")
+    np.save(tmp_path / "meshes" / "panels.npy", np.array([[1.0, 2.0, 3.0], [0.5, 0.5, 0.5]]))
     (tmp_path / "scene.toml").write_text(SCENE)
     return tmp_path
 
@@ -179,6 +182,7 @@ def _scene_texts():
         .replace("exponent = 200\n", 'exponent = 200\nestimator = "mixture"\n')
         + '[materials.metal]\ntype = "conductor"\nalpha = 0.2\neta = [0.2, 0.9, 1.1]\nk = [3.9, 2.4, 2.2]\n'
         "specular_reflectance = 0.9\nfresnel = true\n"
+        + '[[objects]]\ntype = "mesh"\nfile = "meshes/panels.ply"\nface_emission = "meshes/panels.npy"\n'
     )
     sky = full.replace('[environment]\nfile = "sky.exr"\n', SKY)
     white = full.replace('[environment]\nfile = "sky.exr"\n', "[environment]\nconstant = [1.0, 0.5, 0.25]\n")
@@ -224,3 +228,57 @@ def test_every_key_of_the_wrong_type_is_one_error_naming_it(scene_dir, variant, 
     # it loaded: only a value of the right type can (a negative angle, a string for a string key, ...)
     assert wrong in ("-1", "true", '"x"'), f"{key} = {wrong} was accepted"
     assert wrong != '"x"' or leaf in STRING_KEYS
+
+
+PANEL_FACES = [[0, 1, 2], [0, 2, 3]]
+
+
+def _panels_file(folder, colors=None):
+    vertices = [[0, 2, 0], [1, 2, 0], [1, 2, 1], [0, 2, 1]]
+    mesh = trimesh.Trimesh(vertices, PANEL_FACES, process=False, face_colors=colors)
+    mesh.export(folder / "panels.ply")
+
+
+def _mesh_scene(folder, extra):
+    text = SCENE.split("[[objects]]")[0].replace('file = "sky.exr"', 'constant = [0.1, 0.1, 0.1]')
+    (folder / "m.toml").write_text(text + f'[[objects]]\ntype = "mesh"\nfile = "panels.ply"\n{extra}\n')
+    return folder / "m.toml"
+
+
+def test_a_mesh_takes_one_radiance_per_face_from_a_file_or_its_colours(tmp_path):
+    """face_emission = "x.npy" ((F, 3) or (F,)) or "colors" (the file's face colours / 255), times emission_scale:
+    one light per face with its own radiance."""
+    _panels_file(tmp_path, colors=[[255, 0, 0, 255], [0, 51, 255, 255]])
+    np.save(tmp_path / "rgb.npy", np.array([[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]))
+    np.save(tmp_path / "grey.npy", np.array([2.0, 0.5]))
+    cases = {
+        'face_emission = "rgb.npy"\nemission_scale = 2.0': [[2.0, 4.0, 6.0], [8.0, 10.0, 12.0]],
+        'face_emission = "grey.npy"': [[2.0, 2.0, 2.0], [0.5, 0.5, 0.5]],
+        'face_emission = "colors"\nemission_scale = 10.0': [[10.0, 0.0, 0.0], [0.0, 2.0, 10.0]],
+    }
+    for extra, expected in cases.items():
+        scene, _ = load_scene(_mesh_scene(tmp_path, extra))
+        np.testing.assert_allclose(scene.light_table().radiance, expected, err_msg=extra)
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        ('face_emission = "missing.npy"', "missing.npy: no such file"),
+        ('face_emission = "three.npy"', "one row per face"),
+        ('face_emission = "text.npy"', "text.npy: face_emission must be"),
+        ('face_emission = "colors"', "has no face colours"),
+        ('face_emission = "bad.npy"', "face_emission must give each face"),
+        ('face_emission = "rgb.npy"\nemission = 1.0', "emission or face_emission, not both"),
+        ('face_emission = "rgb.txt"', 'must be "colors" or a .npy file'),
+    ],
+)
+def test_face_emission_mistakes_are_one_error_naming_the_file(tmp_path, extra, message):
+    _panels_file(tmp_path)
+    np.save(tmp_path / "rgb.npy", np.ones((2, 3)))
+    np.save(tmp_path / "three.npy", np.ones((3, 3)))
+    np.save(tmp_path / "text.npy", np.array(["a", "b"]))
+    np.save(tmp_path / "bad.npy", np.array([[1.0, np.nan, 0.0], [1.0, 1.0, 1.0]]))
+    with pytest.raises(SceneError, match=message) as info:
+        load_scene(_mesh_scene(tmp_path, extra))
+    assert "\n" not in str(info.value) and ("m.toml" in str(info.value) or "panels" in str(info.value))

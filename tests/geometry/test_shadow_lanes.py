@@ -10,6 +10,7 @@ from lightprobe.bsdfs import Lambert
 from lightprobe.demo import blob_mesh
 from lightprobe.emitters.envmap import EnvironmentMap
 from lightprobe.geometry.camera import Camera
+from lightprobe.geometry.intersect import ANALYTIC_ERROR
 from lightprobe.geometry.scene import Scene
 from lightprobe.geometry.shapes import Rectangle, Sphere
 from lightprobe.integrators import wavefront
@@ -28,6 +29,11 @@ def _scene(meshes=True, spheres=True):
     sc.add(Rectangle.ground(size=8), "m")
     sc.add(Rectangle([-2.0, 0.0, -2.0], [0.0, 2.0, 0.0], [0.0, 0.0, 1.5]), "m")  # a wall facing +x
     return sc.compile()
+
+
+def _errors(point, normal):
+    """Error bounds of analytic points (intersect.point_error with a shape of size 8, the ground's)."""
+    return ANALYTIC_ERROR * (np.abs(point) * np.abs(normal)).sum(axis=1) + ANALYTIC_ERROR * 8.0
 
 
 def _rays(n_samples, m, seed):
@@ -60,8 +66,8 @@ def test_lanes_flag_every_ray_as_the_scalar_stage_does(meshes, spheres, m):
     arrays = _scene(meshes, spheres)
     point, normal, wdir, flags = _rays(2503, m, seed=m)
     scalar, lanes = flags.copy(), flags.copy()
-    wavefront._analytic_shadow_scalar_stage(arrays, m, point, normal, wdir, scalar, *claims())
-    wavefront._analytic_shadow_stage(arrays, m, point, normal, wdir, lanes, *claims())
+    wavefront._analytic_shadow_scalar_stage(arrays, m, point, normal, _errors(point, normal), wdir, scalar, *claims())
+    wavefront._analytic_shadow_stage(arrays, m, point, normal, _errors(point, normal), wdir, lanes, *claims())
     assert np.array_equal(lanes, scalar)
     assert np.array_equal(lanes[flags != TEST_ANALYTIC], flags[flags != TEST_ANALYTIC])
     tested = lanes[flags == TEST_ANALYTIC]
@@ -80,8 +86,8 @@ def test_the_mesh_spheres_only_settle_rays_the_boxes_sent_to_embree():
     point, normal, wdir, flags = _rays(2503, 8, seed=5)
     for stage in (wavefront._analytic_shadow_stage, wavefront._analytic_shadow_scalar_stage):
         with_spheres, without = flags.copy(), flags.copy()
-        stage(arrays, 8, point, normal, wdir, with_spheres, *claims())
-        stage(boxes_only, 8, point, normal, wdir, without, *claims())
+        stage(arrays, 8, point, normal, _errors(point, normal), wdir, with_spheres, *claims())
+        stage(boxes_only, 8, point, normal, _errors(point, normal), wdir, without, *claims())
         sent = without == TEST_MESH
         np.testing.assert_array_equal(with_spheres[~sent], without[~sent])
         assert np.count_nonzero(with_spheres[sent] == BLOCKED) > 100
@@ -105,8 +111,8 @@ def test_a_ray_grazing_a_sphere_or_leaving_its_surface():
     wdir = np.array(wdir)
     flags = np.full(wdir.shape[0], TEST_ANALYTIC, np.int8)
     scalar, lanes = flags.copy(), flags.copy()
-    wavefront._analytic_shadow_scalar_stage(arrays, 4, point, normals, wdir, scalar, *claims())
-    wavefront._analytic_shadow_stage(arrays, 4, point, normals, wdir, lanes, *claims())
+    wavefront._analytic_shadow_scalar_stage(arrays, 4, point, normals, _errors(point, normals), wdir, scalar, *claims())
+    wavefront._analytic_shadow_stage(arrays, 4, point, normals, _errors(point, normals), wdir, lanes, *claims())
     assert np.array_equal(lanes, scalar)
     assert np.all(lanes[0::4] == VISIBLE)  # nothing else in their way
     assert np.all(lanes[1::4] == BLOCKED)
@@ -124,7 +130,7 @@ def test_rays_from_inside_a_sphere_square_to_its_centre():
     wdir = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
     flags = np.full(4, TEST_ANALYTIC, np.int8)
     scalar, lanes = flags.copy(), flags.copy()
-    wavefront._analytic_shadow_scalar_stage(arrays, 1, point, normals, wdir, scalar, *claims())
-    wavefront._analytic_shadow_stage(arrays, 1, point, normals, wdir, lanes, *claims())
+    wavefront._analytic_shadow_scalar_stage(arrays, 1, point, normals, _errors(point, normals), wdir, scalar, *claims())
+    wavefront._analytic_shadow_stage(arrays, 1, point, normals, _errors(point, normals), wdir, lanes, *claims())
     assert np.array_equal(lanes, scalar)
     assert np.all(lanes == BLOCKED)

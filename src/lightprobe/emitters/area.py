@@ -8,7 +8,9 @@ pdf_direction / eval``: for a reference point ``p`` with normal ``n`` and two ra
   back of a one-sided light) and the density **per steradian**; ``pdf == 0`` means "no sample" (the point is
   behind a one-sided light, or in its plane);
 * ``light_pdf(...) -> pdf``: the density with which the same strategy produces direction ``w`` (0 where it never
-  does);
+  does); ``light_pdf_at(...)`` the same for a direction whose ray is already known to meet the light at point x
+  (a BSDF sample's hit: the renderer weighs it with the density *at the point its own ray hit*, as Mitsuba 3's
+  ``direct`` does, never by intersecting again from another origin);
 * ``light_radiance(...)``: the radiance seen along a ray that hits the light with cosine ``cos_light`` between
   the light's normal and the reversed ray (the camera and BSDF samples use it).
 
@@ -50,7 +52,16 @@ import numpy as np
 from .._numba import jit, jit_parallel, prange
 from ..errors import ParameterError
 from ..geometry.frame import coordinate_system, normalize, to_world
-from ..geometry.intersect import sphere_hit
+from ..geometry.intersect import (
+    ANALYTIC_ERROR,
+    RECT_WIDTH,
+    point_error,
+    rect_extent,
+    rect_hit,
+    rectangle_rows,
+    sphere_hit,
+    triangle_error,
+)
 from ..sampling.kernels import (
     INV_2PI,
     INV_PI,
@@ -67,7 +78,10 @@ __all__ = [
     "LightArrays",
     "LightSample",
     "light_arrays",
+    "light_normal",
     "light_pdf",
+    "light_pdf_at",
+    "light_point_error",
     "light_radiance",
     "light_sample",
 ]
@@ -84,8 +98,9 @@ class LightArrays(NamedTuple):
     """The light table the kernels read: row l is one emitter."""
 
     kind: np.ndarray  # (L,) int64: LIGHT_RECT / LIGHT_SPHERE / LIGHT_TRIANGLE
-    geom: np.ndarray  # (L, 12) float64: rect origin, edge_u, edge_v, unit normal | sphere centre, radius |
-    #                                    triangle v0, v1, v2, unit normal
+    geom: np.ndarray  # (L, RECT_WIDTH) float64: a rectangle's row of geometry/intersect.rectangle_rows (origin,
+    #                   edge_u, edge_v, unit normal, dual vectors) | sphere centre, radius | triangle v0, v1, v2,
+    #                   unit normal (unused columns 0)
     radiance: np.ndarray  # (L, 3) float64
     two_sided: np.ndarray  # (L,) int64
     area: np.ndarray  # (L,) float64
@@ -143,30 +158,6 @@ def _triangle_hit(ox, oy, oz, dx, dy, dz, g):
 
 
 @jit
-def _rect_hit(ox, oy, oz, dx, dy, dz, g):
-    nx, ny, nz = g[9], g[10], g[11]
-    denom = _dot(dx, dy, dz, nx, ny, nz)
-    if denom == 0.0:
-        return math.inf
-    t = _dot(g[0] - ox, g[1] - oy, g[2] - oz, nx, ny, nz) / denom
-    if not t > 0.0:
-        return math.inf
-    px, py, pz = ox + t * dx - g[0], oy + t * dy - g[1], oz + t * dz - g[2]
-    # coordinates in the (possibly oblique) edge basis: solve the 2x2 Gram system
-    uu = _dot(g[3], g[4], g[5], g[3], g[4], g[5])
-    vv = _dot(g[6], g[7], g[8], g[6], g[7], g[8])
-    uv = _dot(g[3], g[4], g[5], g[6], g[7], g[8])
-    pu = _dot(px, py, pz, g[3], g[4], g[5])
-    pv = _dot(px, py, pz, g[6], g[7], g[8])
-    det = uu * vv - uv * uv
-    a = (pu * vv - pv * uv) / det
-    b = (pv * uu - pu * uv) / det
-    if a < 0.0 or a > 1.0 or b < 0.0 or b > 1.0:
-        return math.inf
-    return t
-
-
-@jit
 def light_intersect(lights, l, ox, oy, oz, dx, dy, dz):
     """(t, cos_light) of the ray (o, unit d) with light l's own surface (t = inf: missed); cos_light is the cosine
     between the light's normal at the hit and -d (> 0: the front)."""
@@ -179,10 +170,32 @@ def light_intersect(lights, l, ox, oy, oz, dx, dy, dz):
         nx, ny, nz = normalize(ox + t * dx - g[0], oy + t * dy - g[1], oz + t * dz - g[2])
         return t, -_dot(nx, ny, nz, dx, dy, dz)
     if kind == LIGHT_RECT:
-        t = _rect_hit(ox, oy, oz, dx, dy, dz, g)
+        t = rect_hit(ox, oy, oz, dx, dy, dz, lights.geom, l, math.inf)
     else:
         t = _triangle_hit(ox, oy, oz, dx, dy, dz, g)
     return t, -_dot(g[9], g[10], g[11], dx, dy, dz)
+
+
+@jit
+def light_normal(lights, l, x, y, z):
+    """Unit normal of light l at its point (x, y, z): outward for a sphere, the row's normal for a planar light."""
+    g = lights.geom[l]
+    if lights.kind[l] == LIGHT_SPHERE:
+        return normalize(x - g[0], y - g[1], z - g[2])
+    return g[9], g[10], g[11]
+
+
+@jit
+def light_point_error(lights, l, x, y, z, n):
+    """Error bound along normal n of light l's point (x, y, z) (geometry/intersect.py): a triangle's is a mesh face's
+    (Embree traces it in float32), a rectangle's and a sphere's are their float64 bounds.  A shadow ray to a sampled
+    point ends this far before it, as pbrt-v4's ``SpawnRayTo`` offsets both ends."""
+    g = lights.geom[l]
+    kind = lights.kind[l]
+    if kind == LIGHT_TRIANGLE:
+        return triangle_error(g[0], g[1], g[2], g[3], g[4], g[5], g[6], g[7], g[8], n)
+    extent = g[3] if kind == LIGHT_SPHERE else rect_extent(lights.geom, l)
+    return point_error(ANALYTIC_ERROR, x, y, z, n[0], n[1], n[2], extent)
 
 
 @jit
@@ -466,22 +479,44 @@ def light_pdf(lights, l, strategy, px, py, pz, nx, ny, nz, wx, wy, wz):
         return INV_2PI if strategy == HEMISPHERE else c * INV_PI
     if _behind(lights, l, px, py, pz):
         return 0.0
-    t, cos_light = light_intersect(lights, l, px, py, pz, wx, wy, wz)
+    t, _ = light_intersect(lights, l, px, py, pz, wx, wy, wz)
     if t == math.inf:
+        return 0.0
+    return light_pdf_at(lights, l, strategy, px, py, pz, nx, ny, nz, px + t * wx, py + t * wy, pz + t * wz)
+
+
+@jit
+def light_pdf_at(lights, l, strategy, px, py, pz, nx, ny, nz, x, y, z):
+    """Density per steradian with which ``light_sample(..., strategy, ...)`` from p produces the direction toward
+    point (x, y, z) of light l, a point a ray is known to have hit: the density of *that* point, with no second
+    intersection (a BSDF ray leaves an offset origin, and from p itself its twin may miss a small light's edge;
+    weighing it with a density of 0 there counted that band twice under MIS)."""
+    dx, dy, dz = x - px, y - py, z - pz
+    dist = math.sqrt(dx * dx + dy * dy + dz * dz)
+    if dist == 0.0:
+        return 0.0
+    wx, wy, wz = dx / dist, dy / dist, dz / dist
+    if strategy == HEMISPHERE or strategy == COSINE:
+        c = _dot(nx, ny, nz, wx, wy, wz)
+        if c <= 0.0:
+            return 0.0
+        return INV_2PI if strategy == HEMISPHERE else c * INV_PI
+    if _behind(lights, l, px, py, pz):
         return 0.0
     if strategy == SOLID_ANGLE:
         spherical, omega, _ = _solid_angle_mode(lights, l, px, py, pz)
         if spherical:
             return 1.0 / omega
-    pdf = _area_to_solid_angle(lights, l, t, cos_light)
+    ln = light_normal(lights, l, x, y, z)
+    cos_light = -_dot(ln[0], ln[1], ln[2], wx, wy, wz)
+    pdf = _area_to_solid_angle(lights, l, dist, cos_light)
     if lights.kind[l] == LIGHT_SPHERE:
         # the ray crosses the sphere twice; area sampling can pick either point (the far one seen through the
         # sphere), so the density of the direction is the sum over both crossings
         g = lights.geom[l]
-        ox, oy, oz = px + t * wx, py + t * wy, pz + t * wz
         # second crossing: along the chord, t2 = t + 2 (c - x) . w with c the centre
-        t2 = t + 2.0 * _dot(g[0] - ox, g[1] - oy, g[2] - oz, wx, wy, wz)
-        if t2 > t:
+        t2 = dist + 2.0 * _dot(g[0] - x, g[1] - y, g[2] - z, wx, wy, wz)
+        if t2 > dist:
             pdf += _area_to_solid_angle(lights, l, t2, cos_light)
     return pdf
 
@@ -585,7 +620,7 @@ class AreaLight:
         if kind not in KINDS:
             raise ParameterError(f"light kind must be one of {list(KINDS)}, got {kind!r}")
         self.kind = kind
-        self.geom = np.asarray(geom, dtype=np.float64).reshape(12)
+        self.geom = _geom_row(kind, geom)
         self.radiance = _rgb(radiance, "emission")
         self.two_sided = bool(two_sided)
         self._arrays = light_arrays([self])
@@ -595,14 +630,14 @@ class AreaLight:
         from ..geometry.shapes import Rectangle
 
         r = Rectangle(origin, edge_u, edge_v)
-        return cls("rectangle", [*r.origin, *r.edge_u, *r.edge_v, *r.normal], radiance, two_sided=two_sided)
+        return cls("rectangle", [*r.origin, *r.edge_u, *r.edge_v], radiance, two_sided=two_sided)
 
     @classmethod
     def sphere(cls, center, radius, radiance, *, two_sided: bool = False) -> AreaLight:
         from ..geometry.shapes import Sphere
 
         s = Sphere(center, radius)
-        return cls("sphere", [*s.center, s.radius, *([0.0] * 8)], radiance, two_sided=two_sided)
+        return cls("sphere", [*s.center, s.radius], radiance, two_sided=two_sided)
 
     @classmethod
     def triangle(cls, v0, v1, v2, radiance, *, two_sided: bool = False) -> AreaLight:
@@ -654,6 +689,17 @@ class AreaLight:
         return f"AreaLight({self.kind!r}, radiance={self.radiance.tolist()}, two_sided={self.two_sided})"
 
 
+def _geom_row(kind: str, geom) -> np.ndarray:
+    """A light table row (RECT_WIDTH,) from a rectangle's corner and edges (9 numbers), a sphere's centre and radius
+    (4) or a triangle's vertices and unit normal (12); the rest 0."""
+    g = np.asarray(geom, dtype=np.float64).reshape(-1)
+    if kind == "rectangle":
+        return rectangle_rows(g[0:3], g[3:6], g[6:9])[0]
+    row = np.zeros(RECT_WIDTH)
+    row[: g.size] = g
+    return row
+
+
 def _area(kind: str, g: np.ndarray) -> float:
     if kind == "rectangle":
         return float(np.linalg.norm(np.cross(g[3:6], g[6:9])))
@@ -667,7 +713,7 @@ def light_arrays(lights) -> LightArrays:
     n = len(lights)
     return LightArrays(
         np.array([KINDS[x.kind] for x in lights], dtype=np.int64).reshape(n),
-        np.array([x.geom for x in lights], dtype=np.float64).reshape(n, 12),
+        np.array([x.geom for x in lights], dtype=np.float64).reshape(n, RECT_WIDTH),
         np.array([x.radiance for x in lights], dtype=np.float64).reshape(n, 3),
         np.array([x.two_sided for x in lights], dtype=np.int64).reshape(n),
         np.array([_area(x.kind, x.geom) for x in lights], dtype=np.float64).reshape(n),

@@ -48,6 +48,7 @@ from __future__ import annotations
 import math
 import numbers
 import os
+from functools import cached_property
 from pathlib import Path
 from typing import NamedTuple
 
@@ -599,6 +600,24 @@ class EnvironmentMap:
     def integral(self) -> float:
         """Integral of luminance over the sphere (with ``scale``), for the nearest-texel function."""
         return 4.0 * math.pi * self.mean_luminance * self.scale
+
+    @cached_property
+    def irradiance_terms(self) -> np.ndarray:
+        """(a, bx, by, bz): the irradiance of the luminance to first order, E(n) ~ a + b . n for a surface with
+        world normal n.  With L(w) ~ c0 + c1 . w (c0 the mean, c1 = 3 / (4 pi) int L w dw), the cosine-weighted
+        hemisphere integral gives a = pi c0 and b = 2 pi / 3 c1.  The light selectors weigh the environment
+        against the area lights with it (emitters/selection.py).  Texel centres, nearest-texel quadrature."""
+        h, w = self.luminance.shape
+        theta = np.pi * (np.arange(h) + 0.5) / h
+        phi = TWO_PI * (np.arange(w) + 0.5) / w
+        weighted = self.luminance.astype(np.float64) * self.texel_solid_angle[:, None]  # L dw per texel
+        rows = weighted.sum(axis=1)
+        sin_phi, cos_phi = weighted @ np.sin(phi), weighted @ np.cos(phi)
+        # local directions (sin phi sin theta, cos theta, -cos phi sin theta), as pdf_image's
+        first = np.array([sin_phi @ np.sin(theta), rows @ np.cos(theta), -(cos_phi @ np.sin(theta))])
+        c0 = rows.sum() / (4.0 * math.pi)
+        c1 = 3.0 / (4.0 * math.pi) * (self.to_world @ first)
+        return np.array([math.pi * c0, *(2.0 * math.pi / 3.0 * c1)]) * self.scale
 
     def pdf_image(self, *, compensated: bool = False) -> np.ndarray:
         """Sampling density per steradian on the PDF grid (``pdf_resolution`` x the image in each dimension;

@@ -18,7 +18,7 @@ from numba.core import cgutils
 from numba.extending import intrinsic
 
 from ..emitters.envmap_lanes import _F64, _I32, _I64, _VF64, _VI64, LANES, _Lanes
-from .intersect import MISS, RECT, SPHERE
+from .intersect import MISS, RECT, RECT_WIDTH, SPHERE
 from .shadow_lanes import _INF, _arrays, _c_array, _loop, _rect_t, _row, _sphere_t
 
 __all__ = ["LANES", "nearest_block"]
@@ -28,8 +28,8 @@ __all__ = ["LANES", "nearest_block"]
 def nearest_block(typingctx, dirs, t, kind, index, cam, spheres, rects, start):
     """For camera samples ``start .. start + 7`` (those below ``len(dirs)``): (t, kind, index) of
     ``intersect.closest_analytic`` from the camera's origin ``cam[0:3]`` along ``dirs[k]`` with no bound: MISS, -1
-    and inf where no sphere or rectangle is hit.  dirs (N, 3), t (N,), cam (>= 3,), spheres (S, 4), rects (R, 12)
-    float64; kind, index (N,) int64; all C-contiguous."""
+    and inf where no sphere or rectangle is hit.  dirs (N, 3), t (N,), cam (>= 3,), spheres (S, 4),
+    rects (R, RECT_WIDTH) float64; kind, index (N,) int64; all C-contiguous."""
     f64, i64 = types.float64, types.int64
     if not (
         all(_c_array(a, f64, 2) for a in (dirs, spheres, rects))
@@ -72,7 +72,7 @@ def nearest_block(typingctx, dirs, t, kind, index, cam, spheres, rects, start):
             return _sphere_t(v, o, d, row[0:3], row[3], best)
 
         def rect(i, best):
-            return _rect_t(v, o, d, _row(v, rects_a, i, 12, range(12)), best)
+            return _rect_t(v, o, d, _row(v, rects_a, i, RECT_WIDTH, range(RECT_WIDTH)), best)
 
         found = (v.f(_INF), v.i(MISS), v.i(-1))
         found = _loop(v, counts[0], found, nearer(SPHERE, sphere))

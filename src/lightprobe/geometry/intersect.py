@@ -5,23 +5,63 @@ double precision.  Before a ray goes to Embree its segment is tested against eve
 that cannot reach a mesh (most shadow rays from a ground plane toward the sky, for instance) never leave Numba.
 
 Hit kinds: ``MISS`` (0), ``MESH`` (1), ``SPHERE`` (2), ``RECT`` (3).
+
+Rectangles are parallelograms: a row of ``RECT_WIDTH`` numbers (:func:`rectangle_rows`) holds the corner, the two
+edges, the unit normal and the edges' *dual* vectors, so that a point's coordinates in the oblique edge basis are
+two dot products (``rect_hit``; the same row layout serves the light table, ``emitters/area.py``).
+
+Rays leave a surface from an origin moved along the geometric normal by the hit point's error bound
+(:func:`ray_offset`; pbrt-v4's ``OffsetRayOrigin`` with the point's floating-point error, Physically Based Rendering
+4th ed. 6.8.6): a bound in each coordinate, weighted by the normal's components, so that a horizontal ground
+1000 units from the origin moves its rays by the error of its height, not of its x coordinate.  Mesh points are
+traced by Embree in float32, analytic shapes here in float64: their bounds differ by nine orders of magnitude.
 """
 
 from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from .._numba import jit, jit_inline
 from .frame import normalize
+from .shape_bvh import box_entered
 
-__all__ = ["MESH", "MISS", "RECT", "SPHERE", "closest_analytic", "occluded_analytic", "ray_offset", "surface"]
+__all__ = [
+    "MESH",
+    "MISS",
+    "RECT",
+    "RECT_WIDTH",
+    "SPHERE",
+    "closest_analytic",
+    "occluded_analytic",
+    "ray_offset",
+    "rectangle_rows",
+    "surface",
+]
 
 MISS, MESH, SPHERE, RECT = 0, 1, 2, 3
 INF = math.inf
-# Secondary rays start this far from the surface, relative to the largest coordinate of the point (plus 1 so the
-# origin is covered): about 64 float32 ulps, far above the ~1e-7 relative error of Embree's float32 hits and of our
-# float64 reconstruction, and far below any feature size that matters.
-OFFSET_SCALE = 2.0**-16
+RECT_WIDTH = 18  # a rectangle's row: corner 0-2, edge u 3-5, edge v 6-8, unit normal 9-11, dual u 12-14, dual v 15-17
+# Error bounds of hit points, relative to the magnitudes of the coordinates they come from (the distance a spawned
+# ray's origin moves along the normal, see ray_offset).  Meshes: Embree holds vertices and ray origins in float32
+# (half an ulp each, 2^-24 relative) and its Pluecker test subtracts the origin from the vertices (errors of the
+# triangle's size times 2^-24); 2^-20 is 8-16 float32 ulps, a margin of 4-8 over those sums (the self-intersection
+# test in tests/geometry/test_intersect.py measures where it starts).  Analytic shapes: float64 throughout (points
+# projected back onto their surface), 2^-40 = 4096 float64 ulps.
+MESH_ERROR = 2.0**-20
+ANALYTIC_ERROR = 2.0**-40
+
+
+def rectangle_rows(origin, edge_u, edge_v):
+    """Rows (R, RECT_WIDTH) of parallelograms given their corners and edges (R, 3) each: the normal
+    normalize(u x v) and the dual vectors u* = (v x n) / |u x v|, v* = (n x u) / |u x v|, which give a point
+    p = a u + b v of the plane its coordinates a = p . u*, b = p . v* (u* . u = 1, u* . v = 0, and so on)."""
+    o, u, v = (np.asarray(x, dtype=np.float64).reshape(-1, 3) for x in (origin, edge_u, edge_v))
+    cross = np.cross(u, v)
+    area = np.linalg.norm(cross, axis=1, keepdims=True)
+    n = cross / area
+    return np.ascontiguousarray(np.concatenate([o, u, v, n, np.cross(v, n) / area, np.cross(n, u) / area], axis=1))
 
 
 @jit
@@ -49,8 +89,20 @@ def sphere_hit(ox, oy, oz, dx, dy, dz, cx, cy, cz, r, tmax):
 
 
 @jit_inline
+def rect_coordinates(rects, i, px, py, pz):
+    """(a, b) with p = corner + a edge_u + b edge_v for a point p in the plane of parallelogram i of ``rects``
+    (rows of :func:`rectangle_rows`): the offset from the corner against the dual vectors."""
+    qx, qy, qz = px - rects[i, 0], py - rects[i, 1], pz - rects[i, 2]
+    return qx * rects[i, 12] + qy * rects[i, 13] + qz * rects[i, 14], qx * rects[i, 15] + qy * rects[
+        i, 16
+    ] + qz * rects[i, 17]
+
+
+@jit_inline
 def rect_hit(ox, oy, oz, dx, dy, dz, rects, i, tmax):
-    """Distance to rectangle i of ``rects`` (R, 12: origin, edge u, edge v, normal), INF if missed before tmax."""
+    """Distance to parallelogram i of ``rects`` (rows of :func:`rectangle_rows`), INF if missed before tmax.  The
+    single routine for every caller: camera, shadow and BSDF rays, the light table (``emitters/area.py``), and the
+    vector lanes' ``_rect_t`` (geometry/shadow_lanes.py) in the same operations."""
     nx, ny, nz = rects[i, 9], rects[i, 10], rects[i, 11]
     denom = dx * nx + dy * ny + dz * nz
     if denom == 0.0:
@@ -58,10 +110,7 @@ def rect_hit(ox, oy, oz, dx, dy, dz, rects, i, tmax):
     t = ((rects[i, 0] - ox) * nx + (rects[i, 1] - oy) * ny + (rects[i, 2] - oz) * nz) / denom
     if not (0.0 < t < tmax):
         return INF
-    px, py, pz = ox + t * dx - rects[i, 0], oy + t * dy - rects[i, 1], oz + t * dz - rects[i, 2]
-    ux, uy, uz, vx, vy, vz = rects[i, 3], rects[i, 4], rects[i, 5], rects[i, 6], rects[i, 7], rects[i, 8]
-    a = (px * ux + py * uy + pz * uz) / (ux**2 + uy**2 + uz**2)
-    b = (px * vx + py * vy + pz * vz) / (vx**2 + vy**2 + vz**2)
+    a, b = rect_coordinates(rects, i, ox + t * dx, oy + t * dy, oz + t * dz)
     if a < 0.0 or a > 1.0 or b < 0.0 or b > 1.0:
         return INF
     return t
@@ -99,33 +148,86 @@ def box_hit(ox, oy, oz, dx, dy, dz, bounds, g, tmax):
 
 
 @jit_inline
+def _shape_t(s, p, ox, oy, oz, dx, dy, dz, tmax):
+    """Distance to analytic shape p (p < S: sphere p, else rectangle p - S), INF if missed before tmax."""
+    n_spheres = s.spheres.shape[0]
+    if p < n_spheres:
+        return sphere_hit(
+            ox, oy, oz, dx, dy, dz, s.spheres[p, 0], s.spheres[p, 1], s.spheres[p, 2], s.spheres[p, 3], tmax
+        )
+    return rect_hit(ox, oy, oz, dx, dy, dz, s.rects, p - n_spheres, tmax)
+
+
+@jit_inline
+def _reciprocal(d):
+    """1 / d for the slab tests, a huge finite number for d = 0 (no 0 x inf = NaN on a box face)."""
+    return 1.0 / d if d != 0.0 else 1e300
+
+
+@jit_inline
 def closest_analytic(s, ox, oy, oz, dx, dy, dz, tmax):
-    """(t, kind, index) of the nearest sphere or rectangle hit before tmax."""
+    """(t, kind, index) of the nearest sphere or rectangle hit before tmax: every shape in turn, or through the
+    scene's shape hierarchy when it has one (geometry/shape_bvh.py)."""
     best = tmax
     kind = MISS
     index = -1
-    for i in range(s.spheres.shape[0]):
-        t = sphere_hit(ox, oy, oz, dx, dy, dz, s.spheres[i, 0], s.spheres[i, 1], s.spheres[i, 2], s.spheres[i, 3], best)
-        if t < best:
-            best, kind, index = t, SPHERE, i
-    for i in range(s.rects.shape[0]):
-        t = rect_hit(ox, oy, oz, dx, dy, dz, s.rects, i, best)
-        if t < best:
-            best, kind, index = t, RECT, i
+    if s.tree_skip.shape[0] == 0:
+        for i in range(s.spheres.shape[0]):
+            t = sphere_hit(
+                ox, oy, oz, dx, dy, dz, s.spheres[i, 0], s.spheres[i, 1], s.spheres[i, 2], s.spheres[i, 3], best
+            )
+            if t < best:
+                best, kind, index = t, SPHERE, i
+        for i in range(s.rects.shape[0]):
+            t = rect_hit(ox, oy, oz, dx, dy, dz, s.rects, i, best)
+            if t < best:
+                best, kind, index = t, RECT, i
+        return best, kind, index
+    ix, iy, iz = _reciprocal(dx), _reciprocal(dy), _reciprocal(dz)
+    n_spheres = s.spheres.shape[0]
+    i = 0
+    while i < s.tree_skip.shape[0]:
+        if box_entered(ox, oy, oz, ix, iy, iz, s.tree_lo, s.tree_hi, i, best):
+            if s.tree_count[i] == 0:
+                i += 1
+                continue
+            for j in range(s.tree_first[i], s.tree_first[i] + s.tree_count[i]):
+                p = s.tree_prims[j]
+                t = _shape_t(s, p, ox, oy, oz, dx, dy, dz, best)
+                if t < best:
+                    best = t
+                    kind, index = (SPHERE, p) if p < n_spheres else (RECT, p - n_spheres)
+        i = s.tree_skip[i]
     return best, kind, index
 
 
 @jit_inline
 def occluded_analytic(s, ox, oy, oz, dx, dy, dz, tmax):
-    for i in range(s.spheres.shape[0]):
-        if (
-            sphere_hit(ox, oy, oz, dx, dy, dz, s.spheres[i, 0], s.spheres[i, 1], s.spheres[i, 2], s.spheres[i, 3], tmax)
-            < tmax
-        ):
-            return True
-    for i in range(s.rects.shape[0]):
-        if rect_hit(ox, oy, oz, dx, dy, dz, s.rects, i, tmax) < tmax:
-            return True
+    """Whether a sphere or rectangle lies on the segment (0, tmax) (through the shape hierarchy when there is one)."""
+    if s.tree_skip.shape[0] == 0:
+        for i in range(s.spheres.shape[0]):
+            if (
+                sphere_hit(
+                    ox, oy, oz, dx, dy, dz, s.spheres[i, 0], s.spheres[i, 1], s.spheres[i, 2], s.spheres[i, 3], tmax
+                )
+                < tmax
+            ):
+                return True
+        for i in range(s.rects.shape[0]):
+            if rect_hit(ox, oy, oz, dx, dy, dz, s.rects, i, tmax) < tmax:
+                return True
+        return False
+    ix, iy, iz = _reciprocal(dx), _reciprocal(dy), _reciprocal(dz)
+    i = 0
+    while i < s.tree_skip.shape[0]:
+        if box_entered(ox, oy, oz, ix, iy, iz, s.tree_lo, s.tree_hi, i, tmax):
+            if s.tree_count[i] == 0:
+                i += 1
+                continue
+            for j in range(s.tree_first[i], s.tree_first[i] + s.tree_count[i]):
+                if _shape_t(s, s.tree_prims[j], ox, oy, oz, dx, dy, dz, tmax) < tmax:
+                    return True
+        i = s.tree_skip[i]
     return False
 
 
@@ -167,22 +269,32 @@ def blocked_by_mesh_core(s, ox, oy, oz, dx, dy, dz):
     return False
 
 
-@jit
-def ray_offset(px, py, pz, nx, ny, nz, dx, dy, dz):
-    """Origin for a ray leaving surface point p in direction d: p moved along the geometric normal n, toward
-    the side d goes to, by OFFSET_SCALE x (1 + max |p_i|)."""
-    eps = OFFSET_SCALE * (1.0 + max(abs(px), abs(py), abs(pz)))
+@jit_inline
+def ray_offset(px, py, pz, nx, ny, nz, error, dx, dy, dz):
+    """Origin for a ray leaving surface point p in direction d: p moved by ``error`` (the point's error bound along
+    the geometric normal n, from :func:`surface` or :func:`point_error`) along n, to the side d goes to."""
+    eps = error
     if dx * nx + dy * ny + dz * nz < 0.0:
         eps = -eps
     return px + eps * nx, py + eps * ny, pz + eps * nz
 
 
 @jit_inline
+def point_error(scale, px, py, pz, nx, ny, nz, extent):
+    """A point's error bound along its normal n: ``scale`` (MESH_ERROR or ANALYTIC_ERROR) x (sum_i |n_i| |p_i| +
+    ``extent``), the coordinates' rounding seen along n plus the shape's size (what its intersection routine
+    subtracts from the origin).  pbrt-v4 offsets by dot(|n|, pError) the same way."""
+    return scale * (abs(nx) * abs(px) + abs(ny) * abs(py) + abs(nz) * abs(pz) + extent)
+
+
+@jit_inline
 def surface(s, kind, index, prim, bu, bv, ox, oy, oz, dx, dy, dz, t):
-    """Hit point, geometric normal, shading normal, material and two-sidedness of a hit.
+    """Hit point, geometric normal, shading normal, material, two-sidedness and error bound of a hit.
 
     Mesh points are rebuilt from the barycentrics (b1, b2) = (bu, bv) of face ``prim`` of mesh ``index`` in double
-    precision; sphere points are projected back onto the sphere.  Normals point outward (by winding for meshes).
+    precision; sphere and rectangle points are projected back onto their surface, so that their error does not grow
+    with the ray's length.  Normals point outward (by winding for meshes).  The error bound is the distance along
+    the geometric normal that a ray leaving the point moves its origin (:func:`ray_offset`).
     """
     if kind == MESH:
         f = s.mesh_face_start[index] + prim
@@ -206,12 +318,42 @@ def surface(s, kind, index, prim, bu, bv, ox, oy, oz, dx, dy, dz, t):
                 ns = ng
         else:
             ns = ng
-        return (px, py, pz), ng, ns, s.mesh_material[index], s.mesh_two_sided[index]
+        error = triangle_error(
+            v[i0, 0], v[i0, 1], v[i0, 2], v[i1, 0], v[i1, 1], v[i1, 2], v[i2, 0], v[i2, 1], v[i2, 2], ng
+        )
+        return (px, py, pz), ng, ns, s.mesh_material[index], s.mesh_two_sided[index], error
     if kind == SPHERE:
         c = s.spheres[index]
         n = normalize(ox + t * dx - c[0], oy + t * dy - c[1], oz + t * dz - c[2])
         p = (c[0] + c[3] * n[0], c[1] + c[3] * n[1], c[2] + c[3] * n[2])
-        return p, n, n, s.sphere_material[index], s.sphere_two_sided[index]
-    r = s.rects[index]
-    n = (r[9], r[10], r[11])
-    return (ox + t * dx, oy + t * dy, oz + t * dz), n, n, s.rect_material[index], s.rect_two_sided[index]
+        error = point_error(ANALYTIC_ERROR, p[0], p[1], p[2], n[0], n[1], n[2], c[3])
+        return p, n, n, s.sphere_material[index], s.sphere_two_sided[index], error
+    r = s.rects
+    a, b = rect_coordinates(r, index, ox + t * dx, oy + t * dy, oz + t * dz)
+    p = (
+        r[index, 0] + a * r[index, 3] + b * r[index, 6],
+        r[index, 1] + a * r[index, 4] + b * r[index, 7],
+        r[index, 2] + a * r[index, 5] + b * r[index, 8],
+    )
+    n = (r[index, 9], r[index, 10], r[index, 11])
+    error = point_error(ANALYTIC_ERROR, p[0], p[1], p[2], n[0], n[1], n[2], rect_extent(r, index))
+    return p, n, n, s.rect_material[index], s.rect_two_sided[index], error
+
+
+@jit_inline
+def rect_extent(rects, i):
+    """The largest coordinate of parallelogram i's two edges (a bound on its size in any coordinate, halved)."""
+    return max(
+        abs(rects[i, 3]), abs(rects[i, 4]), abs(rects[i, 5]), abs(rects[i, 6]), abs(rects[i, 7]), abs(rects[i, 8])
+    )
+
+
+@jit_inline
+def triangle_error(ax, ay, az, bx, by, bz, cx, cy, cz, n):
+    """Error bound along normal n of a point of the float32 triangle (a, b, c) that Embree traces: MESH_ERROR x
+    (sum_i |n_i| max |vertex_i| + the triangle's largest extent in a coordinate)."""
+    mx, my, mz = max(abs(ax), abs(bx), abs(cx)), max(abs(ay), abs(by), abs(cy)), max(abs(az), abs(bz), abs(cz))
+    extent = max(
+        max(ax, bx, cx) - min(ax, bx, cx), max(ay, by, cy) - min(ay, by, cy), max(az, bz, cz) - min(az, bz, cz)
+    )
+    return point_error(MESH_ERROR, mx, my, mz, n[0], n[1], n[2], extent)

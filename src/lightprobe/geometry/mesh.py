@@ -44,16 +44,22 @@ def angle_weighted_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarra
 
 @dataclass(frozen=True)
 class TriangleMesh:
-    """Vertices (V, 3) float64, faces (F, 3) int64, optional unit vertex normals (V, 3)."""
+    """Vertices (V, 3) float64, faces (F, 3) int64, optional unit vertex normals (V, 3), and optional per-face values
+    (F, k) float64 that stay with their faces (a degenerate face dropped takes its row along): the file's face
+    colours, or a scene file's per-face emission."""
 
     vertices: np.ndarray
     faces: np.ndarray
     normals: np.ndarray | None = None
     name: str = "<mesh>"
+    face_values: np.ndarray | None = None
 
     @classmethod
-    def from_arrays(cls, vertices, faces, normals=None, *, smooth: bool = True, name: str = "<mesh>") -> TriangleMesh:
-        """Validate and build; see the module docstring for what is rejected and what is repaired."""
+    def from_arrays(
+        cls, vertices, faces, normals=None, *, smooth: bool = True, name: str = "<mesh>", face_values=None
+    ) -> TriangleMesh:
+        """Validate and build; see the module docstring for what is rejected and what is repaired.  ``face_values``
+        (F,) or (F, k) numbers, one row per face given, are kept for the faces that remain."""
         try:
             v = np.asarray(vertices, dtype=np.float64)
             f = np.asarray(faces)
@@ -68,6 +74,14 @@ class TriangleMesh:
         if not np.all(np.isfinite(v)):
             raise SceneError(f"{name}: {int((~np.isfinite(v)).any(axis=1).sum())} vertices are NaN or infinite")
         f = f.astype(np.int64)
+        values = None
+        if face_values is not None:
+            values = np.asarray(face_values, dtype=np.float64)
+            values = values.reshape(-1, 1) if values.ndim == 1 else values
+            if values.ndim != 2 or values.shape[0] != f.shape[0]:
+                raise SceneError(
+                    f"{name}: per-face values must have one row per face ({f.shape[0]}), got {values.shape}"
+                )
         if f.min() < 0 or f.max() >= v.shape[0]:
             raise SceneError(f"{name}: face indices out of range [0, {v.shape[0] - 1}] (min {f.min()}, max {f.max()})")
         tri = v[f]
@@ -79,6 +93,7 @@ class TriangleMesh:
         if degenerate.any():
             warn_once(f"{name}: dropped {int(degenerate.sum())} degenerate triangles of {f.shape[0]}")
             f = f[~degenerate]
+            values = None if values is None else values[~degenerate]
         n = None
         if normals is not None:
             n = np.asarray(normals, dtype=np.float64)
@@ -97,11 +112,14 @@ class TriangleMesh:
                     n[bad] = angle_weighted_normals(v, f)[bad]
         elif smooth:
             n = angle_weighted_normals(v, f)
-        return cls(np.ascontiguousarray(v), np.ascontiguousarray(f), n, name)
+        values = None if values is None else np.ascontiguousarray(values)
+        return cls(np.ascontiguousarray(v), np.ascontiguousarray(f), n, name, values)
 
     @classmethod
-    def load(cls, path: str | os.PathLike, *, smooth: bool = True) -> TriangleMesh:
-        """Read a mesh file through trimesh (``.ply.gz`` is decompressed first)."""
+    def load(cls, path: str | os.PathLike, *, smooth: bool = True, face_values=None) -> TriangleMesh:
+        """Read a mesh file through trimesh (``.ply.gz`` is decompressed first).  ``face_values``: per-face values
+        (one row per face of the file) to keep with the faces, or ``"colors"`` for the file's face colours (RGB in
+        [0, 1], as stored: 8-bit values / 255)."""
         import trimesh
 
         p = Path(path)
@@ -122,7 +140,16 @@ class TriangleMesh:
         if not isinstance(loaded, trimesh.Trimesh):
             raise SceneError(f"{p}: not a triangle mesh ({type(loaded).__name__})")
         normals = np.asarray(loaded.vertex_normals) if "vertex_normals" in loaded._cache else None
-        return cls.from_arrays(loaded.vertices, loaded.faces, normals if smooth else None, smooth=smooth, name=str(p))
+        if isinstance(face_values, str) and face_values == "colors":
+            face_values = _face_colors(loaded, p)
+        return cls.from_arrays(
+            loaded.vertices,
+            loaded.faces,
+            normals if smooth else None,
+            smooth=smooth,
+            name=str(p),
+            face_values=face_values,
+        )
 
     def transformed(self, matrix) -> TriangleMesh:
         """This mesh under a 4x4 affine transform (normals by the inverse transpose)."""
@@ -134,7 +161,7 @@ class TriangleMesh:
             n = self.normals @ np.linalg.inv(linear)
             n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
         faces = self.faces if np.linalg.det(linear) > 0 else self.faces[:, ::-1].copy()  # keep outward winding
-        return TriangleMesh(np.ascontiguousarray(v), np.ascontiguousarray(faces), n, self.name)
+        return TriangleMesh(np.ascontiguousarray(v), np.ascontiguousarray(faces), n, self.name, self.face_values)
 
     @property
     def bounds(self) -> np.ndarray:
@@ -153,3 +180,11 @@ class TriangleMesh:
         from .proxies import mesh_spheres
 
         return mesh_spheres(self.vertices, self.faces)
+
+
+def _face_colors(loaded, path: Path) -> np.ndarray:
+    """The face colours (F, 3) in [0, 1] of a mesh trimesh loaded, or an error naming the file if it has none."""
+    visual = getattr(loaded, "visual", None)
+    if visual is None or getattr(visual, "kind", None) != "face":
+        raise SceneError(f"{path}: the file has no face colours (a PLY's face element needs red, green, blue)")
+    return np.asarray(visual.face_colors, dtype=np.float64)[:, :3] / 255.0

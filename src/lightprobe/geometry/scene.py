@@ -24,7 +24,9 @@ from ..bsdfs.base import BSDF, PARAM_SIZE
 from ..emitters.envmap import EnvironmentMap
 from ..errors import SceneError
 from .camera import Camera
+from .intersect import RECT_WIDTH, rectangle_rows
 from .mesh import TriangleMesh
+from .shape_bvh import build_shape_tree
 from .shapes import Rectangle, Sphere
 from .transform import make_transform
 
@@ -57,7 +59,7 @@ class SceneArrays(NamedTuple):
     spheres: np.ndarray  # (S, 4) float64: centre, radius
     sphere_material: np.ndarray
     sphere_two_sided: np.ndarray
-    rects: np.ndarray  # (R, 12) float64: origin, edge_u, edge_v, unit normal
+    rects: np.ndarray  # (R, RECT_WIDTH) float64: origin, edge_u, edge_v, unit normal, dual u, dual v
     rect_material: np.ndarray
     rect_two_sided: np.ndarray
     sphere_light: np.ndarray  # (S,) int64: the sphere's row in the light table, -1 if it does not emit
@@ -65,6 +67,14 @@ class SceneArrays(NamedTuple):
     mesh_light_start: np.ndarray  # (M,) int64: the light of face f of mesh g is start[g] + f; -1: no emission
     material_kind: np.ndarray  # (K,) int64
     material_params: np.ndarray  # (K, PARAM_SIZE) float64
+    # a hierarchy over spheres and rectangles when there are many (geometry/shape_bvh.ShapeTree's arrays; a nested
+    # tuple is refused by Numba's parallel kernels, so its fields are flat here): empty arrays otherwise
+    tree_lo: np.ndarray
+    tree_hi: np.ndarray
+    tree_skip: np.ndarray
+    tree_first: np.ndarray
+    tree_count: np.ndarray
+    tree_prims: np.ndarray
 
 
 class Scene:
@@ -184,6 +194,8 @@ class Scene:
                 out.append(row)
                 row += _light_rows(o)
 
+        sphere_rows = np.array([[*o.shape.center, o.shape.radius] for o in spheres]).reshape(-1, 4)
+        rect_rows = _rect_rows([o.shape for o in rects])
         return SceneArrays(
             np.ascontiguousarray(np.concatenate(vertices)) if vertices else np.zeros((0, 3)),
             np.ascontiguousarray(np.concatenate(normals)) if normals else np.zeros((0, 3)),
@@ -194,12 +206,10 @@ class Scene:
             ints([o.two_sided for o in meshes]),
             np.stack(bounds) if bounds else np.zeros((0, 2, 3)),
             np.stack(proxies) if proxies else np.zeros((0, 5)),
-            np.array([[*o.shape.center, o.shape.radius] for o in spheres]).reshape(-1, 4),
+            sphere_rows,
             ints([index[o.material] for o in spheres]),
             ints([o.two_sided for o in spheres]),
-            np.array([[*o.shape.origin, *o.shape.edge_u, *o.shape.edge_v, *o.shape.normal] for o in rects]).reshape(
-                -1, 12
-            ),
+            rect_rows,
             ints([index[o.material] for o in rects]),
             ints([o.two_sided for o in rects]),
             ints(sphere_light),
@@ -207,6 +217,7 @@ class Scene:
             ints(mesh_light),
             kinds,
             np.ascontiguousarray(params),
+            *build_shape_tree(sphere_rows, rect_rows),
         )
 
     @property
@@ -216,34 +227,32 @@ class Scene:
     def light_table(self):
         """The :class:`~lightprobe.emitters.area.LightArrays` of every emissive object (world space): spheres,
         rectangles, then each face of each emissive mesh, in the order :meth:`compile` numbers them."""
-        from ..emitters.area import AreaLight, LightArrays, light_arrays
+        from ..emitters.area import LIGHT_RECT, LIGHT_SPHERE, LightArrays
 
         emitters = self.emitters
-        spheres = [
-            AreaLight.sphere(o.shape.center, o.shape.radius, o.emission, two_sided=o.two_sided)
-            for o in emitters
-            if isinstance(o.shape, Sphere)
-        ]
-        rects = [
-            AreaLight.rectangle(o.shape.origin, o.shape.edge_u, o.shape.edge_v, o.emission, two_sided=o.two_sided)
-            for o in emitters
-            if isinstance(o.shape, Rectangle)
-        ]
+        spheres = [o for o in emitters if isinstance(o.shape, Sphere)]
+        rects = [o for o in emitters if isinstance(o.shape, Rectangle)]
+        sphere_geom = np.zeros((len(spheres), RECT_WIDTH))
+        sphere_geom[:, :4] = np.array([[*o.shape.center, o.shape.radius] for o in spheres]).reshape(-1, 4)
+        rect_geom = _rect_rows([o.shape for o in rects])
+        # built as arrays, not one AreaLight each: a scene file with 100,000 rectangle lights (issue 32)
+        analytic = LightArrays(
+            np.array([LIGHT_SPHERE] * len(spheres) + [LIGHT_RECT] * len(rects), np.int64),
+            np.ascontiguousarray(np.concatenate([sphere_geom, rect_geom])),
+            np.array([o.emission for o in spheres + rects], np.float64).reshape(-1, 3),
+            np.array([o.two_sided for o in spheres + rects], np.int64),
+            np.concatenate(
+                [
+                    4.0 * np.pi * sphere_geom[:, 3] ** 2,
+                    np.linalg.norm(np.cross(rect_geom[:, 3:6], rect_geom[:, 6:9]), axis=1),
+                ]
+            ),
+        )
         meshes = [
             _triangle_lights(o.shape, o.emission, o.two_sided) for o in emitters if isinstance(o.shape, TriangleMesh)
         ]
-        parts = [light_arrays(spheres + rects), *meshes]
+        parts = [analytic, *meshes]
         return LightArrays(*(np.concatenate([getattr(t, f) for t in parts]) for f in LightArrays._fields))
-
-    def environment_power(self) -> float:
-        """pi R^2 x the integral of the map's luminance over the sphere (R: the scene's bounding radius), the
-        environment's share in power-proportional light selection (pbrt-v4's ImageInfiniteLight::Phi); 0 without
-        an environment."""
-        if self.environment is None:
-            return 0.0
-        lo, hi = self.bounds()
-        radius = max(0.5 * float(np.linalg.norm(hi - lo)), 1e-3)
-        return float(np.pi * radius**2 * self.environment.integral())
 
     def summary(self) -> str:
         w, h = self.camera.resolution
@@ -257,6 +266,13 @@ class Scene:
             f"{self.name}: {len(self.objects)} objects ({self.triangle_count} triangles), "
             f"{len(self.materials)} materials, {w}x{h}, light {' + '.join(lights) or 'none'}"
         )
+
+
+def _rect_rows(rects: list[Rectangle]) -> np.ndarray:
+    """The kernels' rows of parallelograms (geometry/intersect.py's rectangle_rows)."""
+    if not rects:
+        return np.zeros((0, RECT_WIDTH))
+    return rectangle_rows(*(np.array([getattr(r, f) for r in rects]) for f in ("origin", "edge_u", "edge_v")))
 
 
 def _light_rows(obj: SceneObject) -> int:
@@ -293,7 +309,9 @@ def _triangle_lights(mesh: TriangleMesh, emission, two_sided: bool):
     f = v.shape[0]
     return LightArrays(
         np.full(f, LIGHT_TRIANGLE, np.int64),
-        np.ascontiguousarray(np.concatenate([v.reshape(-1, 9), cross / length[:, None]], axis=1)),
+        np.ascontiguousarray(
+            np.concatenate([v.reshape(-1, 9), cross / length[:, None], np.zeros((f, RECT_WIDTH - 12))], axis=1)
+        ),
         np.ascontiguousarray(np.broadcast_to(np.asarray(emission, dtype=np.float64), (f, 3))),
         np.full(f, int(two_sided), np.int64),
         0.5 * length,

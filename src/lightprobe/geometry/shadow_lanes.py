@@ -24,7 +24,7 @@ from numba.core import cgutils
 from numba.extending import intrinsic
 
 from ..emitters.envmap_lanes import _F64, _I8, _I32, _I64, _VF64, _VI8, LANES, _Lanes
-from .intersect import OFFSET_SCALE
+from .intersect import RECT_WIDTH
 
 __all__ = ["LANES", "shadow_block"]
 
@@ -138,15 +138,16 @@ def _sphere_blocks(v: _Lanes, o, d, centre, radius):
 
 
 def _rect_t(v: _Lanes, o, d, row, tmax):
-    """intersect.rect_hit(..., tmax) for a row (origin, edge u, edge v, normal) of splatted values: t, else inf."""
+    """intersect.rect_hit(..., tmax) for a row of intersect.rectangle_rows (origin, edges, normal, dual vectors) of
+    splatted values: t, else inf."""
     b = v.b
-    origin, eu, ev, normal = row[0:3], row[3:6], row[6:9], row[9:12]
+    origin, normal, dual_u, dual_v = row[0:3], row[9:12], row[12:15], row[15:18]
     denom = _dot(v, d, normal)
     t = v.div(_dot(v, [v.sub(origin[i], o[i]) for i in range(3)], normal), denom)
     valid = b.and_(b.fcmp_unordered("!=", denom, v.f(0.0)), b.and_(v.gt(t, v.f(0.0)), v.lt(t, tmax)))
-    p = [v.sub(v.add(o[i], v.mul(t, d[i])), origin[i]) for i in range(3)]
-    a = v.div(_dot(v, p, eu), _dot(v, eu, eu))
-    c = v.div(_dot(v, p, ev), _dot(v, ev, ev))
+    p = [v.sub(v.add(o[i], v.mul(t, d[i])), origin[i]) for i in range(3)]  # intersect.rect_coordinates
+    a = _dot(v, p, dual_u)
+    c = _dot(v, p, dual_v)
     outside = b.or_(b.or_(v.lt(a, v.f(0.0)), v.gt(a, v.f(1.0))), b.or_(v.lt(c, v.f(0.0)), v.gt(c, v.f(1.0))))
     return b.select(b.and_(valid, b.not_(outside)), t, v.f(_INF))
 
@@ -182,17 +183,18 @@ def _ball_crossed(v: _Lanes, o, d, centre, radius2):
 
 
 @intrinsic
-def shadow_block(typingctx, flags, point, gnormal, wdir, spheres, rects, bounds, proxies, m, start):
+def shadow_block(typingctx, flags, point, gnormal, point_error, wdir, spheres, rects, bounds, proxies, m, start):
     """For the slots ``start .. start + 7`` of a pass flagged TEST_ANALYTIC: the shadow ray from camera sample
     ``slot // m``'s point along the slot's direction, offset as ``ray_offset`` does, against every sphere and
     rectangle and every closed mesh's inner ball (BLOCKED if one is hit), then every mesh's box and the sphere
     around it (TEST_MESH if both of one mesh are crossed, else VISIBLE).  flags (N,) int8; point, gnormal (K, 3),
-    wdir (N, 3), spheres (S, 4), rects (R, 12) float64; bounds (G, 2, 3) float64; proxies (G, 5) float64
-    (``SceneArrays.mesh_spheres``); all C-contiguous."""
+    point_error (K,), wdir (N, 3), spheres (S, 4), rects (R, RECT_WIDTH) float64; bounds (G, 2, 3) float64;
+    proxies (G, 5) float64 (``SceneArrays.mesh_spheres``); all C-contiguous."""
     f64 = types.float64
     if not (
         _c_array(flags, types.int8, 1)
         and all(_c_array(t, f64, 2) for t in (point, gnormal, wdir, spheres, rects, proxies))
+        and _c_array(point_error, f64, 1)
         and _c_array(bounds, f64, 3)
         and isinstance(m, types.Integer)
         and isinstance(start, types.Integer)
@@ -200,11 +202,11 @@ def shadow_block(typingctx, flags, point, gnormal, wdir, spheres, rects, bounds,
         return None
 
     def codegen(context, builder, signature, args):
-        arrays = _arrays(context, builder, signature, args, 8)
-        flags_a, point_a, normal_a, wdir_a, spheres_a, rects_a, bounds_a, proxies_a = arrays
+        arrays = _arrays(context, builder, signature, args, 9)
+        flags_a, point_a, normal_a, error_a, wdir_a, spheres_a, rects_a, bounds_a, proxies_a = arrays
         v, b = _Lanes(builder), builder
-        m_v = v.splat(context.cast(b, args[8], signature.args[8], types.int64), ir.VectorType(_I64, LANES))
-        start_v = context.cast(b, args[9], signature.args[9], types.int64)
+        m_v = v.splat(context.cast(b, args[9], signature.args[9], types.int64), ir.VectorType(_I64, LANES))
+        start_v = context.cast(b, args[10], signature.args[10], types.int64)
         _, inside, read = v.slots(start_v, cgutils.unpack_tuple(b, flags_a.shape, 1)[0])
         first = b.extract_element(read, _I32(0))
         states = v.load_run(_I8, b.gep(flags_a.data, [first]), inside, 1, 0)
@@ -214,9 +216,8 @@ def shadow_block(typingctx, flags, point, gnormal, wdir, spheres, rects, bounds,
         k = v.quotient(read, m_v)  # the camera sample of each slot
         p = [v.load_f64(point_a, b.add(b.mul(k, v.i(3)), v.i(i))) for i in range(3)]
         n = [v.load_f64(normal_a, b.add(b.mul(k, v.i(3)), v.i(i))) for i in range(3)]
-        # intersect.ray_offset
-        largest = v.fmax(v.fmax(v.fabs(p[0]), v.fabs(p[1])), v.fabs(p[2]))
-        eps = v.mul(v.f(OFFSET_SCALE), v.add(v.f(1.0), largest))
+        # intersect.ray_offset with the point's error bound
+        eps = v.load_f64(error_a, k)
         facing = _dot(v, d, n)
         eps = b.select(v.lt(facing, v.f(0.0)), v.neg(eps), eps)
         o = [v.add(p[i], v.mul(eps, n[i])) for i in range(3)]
@@ -229,7 +230,8 @@ def shadow_block(typingctx, flags, point, gnormal, wdir, spheres, rects, bounds,
             return b.or_(blocked, _sphere_blocks(v, o, d, row[0:3], row[3]))
 
         def rect(i, blocked):
-            return b.or_(blocked, v.lt(_rect_t(v, o, d, _row(v, rects_a, i, 12, range(12)), v.f(_INF)), v.f(_INF)))
+            row = _row(v, rects_a, i, RECT_WIDTH, range(RECT_WIDTH))
+            return b.or_(blocked, v.lt(_rect_t(v, o, d, row, v.f(_INF)), v.f(_INF)))
 
         def mesh(i, carried):
             blocked, crossed = carried
@@ -250,4 +252,4 @@ def shadow_block(typingctx, flags, point, gnormal, wdir, spheres, rects, bounds,
         v.end_skip(skipped)
         return context.get_dummy_value()
 
-    return types.void(flags, point, gnormal, wdir, spheres, rects, bounds, proxies, m, start), codegen
+    return types.void(flags, point, gnormal, point_error, wdir, spheres, rects, bounds, proxies, m, start), codegen

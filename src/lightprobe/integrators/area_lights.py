@@ -32,7 +32,13 @@ from .._memory import fresh_array
 from .._numba import jit, jit_parallel, prange
 from .._worksharing import claim_range
 from ..bsdfs.dispatch import bsdf_eval, bsdf_pdf
-from ..emitters.area import light_intersect, light_pdf, light_radiance, light_sample
+from ..emitters.area import (
+    light_normal,
+    light_pdf_at,
+    light_point_error,
+    light_radiance,
+    light_sample,
+)
 from ..emitters.envmap import env_eval, env_eval_pdf, env_sample
 from ..emitters.selection import select_light, selector_pmf
 from ..geometry.embree import FAR as MESH_FAR
@@ -47,6 +53,7 @@ from ..geometry.intersect import (
     may_hit_mesh,
     occluded_analytic,
     ray_offset,
+    surface,
 )
 from ..sampling.mis import mis_weight_over, mis_weight_share
 from ..sampling.rng import group_slot, sample_state, uniform, uniform_2d
@@ -86,6 +93,32 @@ def emitter_of(s, kind, index, prim):
 
 
 @jit
+def _emitted(s, lights, hit, p, dx, dy, dz):
+    """Radiance a ray in direction d sees at its hit ``hit`` = (kind, index, prim, ...) with point p: the emitter's
+    on the side its normal at p faces (0 for surfaces that do not emit).  From the hit itself, never a second
+    intersection (which from another origin can miss a small light's edge)."""
+    light = emitter_of(s, hit[0], hit[1], hit[2])
+    if light < 0:
+        return 0.0, 0.0, 0.0
+    n = light_normal(lights, light, p[0], p[1], p[2])
+    return light_radiance(lights, light, -(n[0] * dx + n[1] * dy + n[2] * dz))
+
+
+@jit
+def _ray_to_light(lights, light, px, py, pz, qx, qy, qz, wx, wy, wz, dist):
+    """The shadow ray from origin q (p offset by its error bound) to the point x = p + dist w sampled on ``light``,
+    x moved toward p by its own error bound along the light's normal: (origin, unit direction, length)."""
+    x, y, z = px + dist * wx, py + dist * wy, pz + dist * wz
+    n = light_normal(lights, light, x, y, z)
+    eps = light_point_error(lights, light, x, y, z, n)
+    if n[0] * wx + n[1] * wy + n[2] * wz > 0.0:  # p is behind the normal: the end moves against it
+        eps = -eps
+    tx, ty, tz = x + eps * n[0] - qx, y + eps * n[1] - qy, z + eps * n[2] - qz
+    length = math.sqrt(tx * tx + ty * ty + tz * tz)
+    return qx, qy, qz, tx / length, ty / length, tz / length, length
+
+
+@jit
 def _pick_slot(state, n_bsdf, n_per_light, m, strategy, j):
     """The (sample state, slot) whose 1D number picks the light for light slot j: under ``sobol`` the K picks of a
     camera sample are one stratified group (``sampling.rng.group_slot``), under ``independent`` the first slot of
@@ -99,6 +132,7 @@ def _pick_slot(state, n_bsdf, n_per_light, m, strategy, j):
 def _lights_setup(
     s,
     env,
+    compensate,
     has_env,
     lights,
     sel,
@@ -123,6 +157,7 @@ def _lights_setup(
     direct,
     point,
     gnormal,
+    point_error,
     frame,
     wo_local,
     material,
@@ -133,6 +168,7 @@ def _lights_setup(
     bweight,
     radiance,
     seg,
+    slot_light,
     ray_o,
     hit_t,
     hit_kind,
@@ -163,16 +199,11 @@ def _lights_setup(
                     else:
                         direct[k, 0] = direct[k, 1] = direct[k, 2] = 0.0
                     continue
-                direct[k, 0] = direct[k, 1] = direct[k, 2] = 0.0
-                emitter = emitter_of(s, kind[k], index[k], prim[k])
-                if emitter >= 0:  # the camera sees the light itself
-                    tl, cos_light = light_intersect(lights, emitter, ox, oy, oz, dx, dy, dz)
-                    if tl < math.inf:
-                        direct[k, 0], direct[k, 1], direct[k, 2] = light_radiance(lights, emitter, cos_light)
                 hit = (kind[k], index[k], prim[k], b1[k], b2[k], t[k])
-                p, ng, wo = store_shading_frame(
-                    s, k, hit, ox, oy, oz, dx, dy, dz, point, gnormal, frame, wo_local, material
+                p, ng, err, wo = store_shading_frame(
+                    s, k, hit, ox, oy, oz, dx, dy, dz, point, gnormal, point_error, frame, wo_local, material
                 )
+                direct[k, 0], direct[k, 1], direct[k, 2] = _emitted(s, lights, hit, p, dx, dy, dz)
                 if wo[2] <= 0.0:
                     continue
                 ts, tt, ns, wo = load_shading_frame(frame, wo_local, k)
@@ -193,7 +224,7 @@ def _lights_setup(
                         if light < 0 or pmf <= 0.0:
                             continue
                         if light == sel.env_index:
-                            wx, wy, wz, pdf = env_sample(env, False, u0, u1)
+                            wx, wy, wz, pdf = env_sample(env, compensate[material[k]], u0, u1)
                             lr, lg, lb = env_eval(env, wx, wy, wz)
                             dist = math.inf
                         else:
@@ -206,6 +237,7 @@ def _lights_setup(
                         radiance[r, 0], radiance[r, 1], radiance[r, 2] = lr, lg, lb
                         tpdf[r] = pmf * pdf
                         seg[r] = dist
+                        slot_light[r] = light
                         state[r] = SLOT_LIGHT
                         continue
                     st, wi, pdf, w = sample_direction(technique, mk, mp, wo, u0, u1, uniform(rj, 4 + 3 * slot))
@@ -219,7 +251,7 @@ def _lights_setup(
                     wloc[r, 0], wloc[r, 1], wloc[r, 2] = wi
                     tpdf[r] = pdf
                     # the nearest hit along the direction decides what it sees (an emitter, the sky, or nothing)
-                    qx, qy, qz = ray_offset(p[0], p[1], p[2], ng[0], ng[1], ng[2], wx, wy, wz)
+                    qx, qy, qz = ray_offset(p[0], p[1], p[2], ng[0], ng[1], ng[2], err, wx, wy, wz)
                     ray_o[r, 0], ray_o[r, 1], ray_o[r, 2] = qx, qy, qz
                     th, kh, ih = closest_analytic(s, qx, qy, qz, wx, wy, wz, np.inf)
                     hit_t[r], hit_kind[r], hit_index[r] = th, kh, ih
@@ -234,6 +266,7 @@ def _lights_setup(
 def _lights_finish(
     s,
     env,
+    compensate,
     has_env,
     lights,
     sel,
@@ -244,6 +277,7 @@ def _lights_finish(
     beta,
     point,
     gnormal,
+    point_error,
     frame,
     wo_local,
     material,
@@ -254,11 +288,14 @@ def _lights_finish(
     bweight,
     radiance,
     seg,
+    slot_light,
     ray_o,
     hit_t,
     hit_kind,
     hit_index,
     hit_prim,
+    hit_b1,
+    hit_b2,
     contrib,
     flags,
     shadow_o,
@@ -283,6 +320,7 @@ def _lights_finish(
                 mk, mp = s.material_kind[material[k]], s.material_params[material[k]]
                 px, py, pz = point[k, 0], point[k, 1], point[k, 2]
                 nx, ny, nz = gnormal[k, 0], gnormal[k, 1], gnormal[k, 2]
+                err = point_error[k]
                 for j in range(m):
                     r = base + j
                     st = state[r]
@@ -306,17 +344,16 @@ def _lights_finish(
                         )
                         if cr == 0.0 and cg == 0.0 and cb == 0.0:
                             continue
-                        qx, qy, qz = ray_offset(px, py, pz, nx, ny, nz, wx, wy, wz)
+                        qx, qy, qz = ray_offset(px, py, pz, nx, ny, nz, err, wx, wy, wz)
                         tmax = math.inf
                         if seg[r] < math.inf:
-                            # a point on an area light: the shadow ray leaves the offset origin aimed *at that
-                            # point* and stops just short of it (from the offset origin along the original
-                            # direction, a grazing ray would meet the light's plane before the segment ends and
-                            # shadow itself)
-                            tx, ty, tz = px + seg[r] * wx - qx, py + seg[r] * wy - qy, pz + seg[r] * wz - qz
-                            length = math.sqrt(tx * tx + ty * ty + tz * tz)
-                            wx, wy, wz = tx / length, ty / length, tz / length
-                            tmax = length * (1.0 - 1e-5)
+                            # a point x on an area light: the shadow ray leaves the offset origin aimed at x moved
+                            # toward p by x's own error bound, and ends there (pbrt-v4's SpawnRayTo offsets both
+                            # ends; from the offset origin along the original direction, a grazing ray would meet
+                            # the light's plane before the segment ends and shadow itself)
+                            qx, qy, qz, wx, wy, wz, tmax = _ray_to_light(
+                                lights, slot_light[r], px, py, pz, qx, qy, qz, wx, wy, wz, seg[r]
+                            )
                         if occluded_analytic(s, qx, qy, qz, wx, wy, wz, tmax):
                             flags[r] = BLOCKED
                             continue
@@ -335,18 +372,35 @@ def _lights_finish(
                     p_light = 0.0
                     if hit_kind[r] == MISS:
                         if has_env:
-                            (lr, lg, lb), penv = env_eval_pdf(env, False, wx, wy, wz)
+                            (lr, lg, lb), penv = env_eval_pdf(env, compensate[material[k]], wx, wy, wz)
                             light = sel.env_index
                             p_light = penv
                     else:
                         light = emitter_of(s, hit_kind[r], hit_index[r], hit_prim[r])
                         if light >= 0:
-                            tl, cos_light = light_intersect(
-                                lights, light, ray_o[r, 0], ray_o[r, 1], ray_o[r, 2], wx, wy, wz
+                            # the emitter's radiance and light density at the point this ray hit (Mitsuba 3's
+                            # direct: pdf_emitter_direction(si, ds) with ds from the BSDF ray's own hit)
+                            hit = surface(
+                                s,
+                                hit_kind[r],
+                                hit_index[r],
+                                hit_prim[r],
+                                hit_b1[r],
+                                hit_b2[r],
+                                ray_o[r, 0],
+                                ray_o[r, 1],
+                                ray_o[r, 2],
+                                wx,
+                                wy,
+                                wz,
+                                hit_t[r],
                             )
-                            if tl < math.inf:
-                                lr, lg, lb = light_radiance(lights, light, cos_light)
-                            p_light = light_pdf(lights, light, light_strategy, px, py, pz, nx, ny, nz, wx, wy, wz)
+                            x = hit[0]
+                            ln = light_normal(lights, light, x[0], x[1], x[2])
+                            lr, lg, lb = light_radiance(lights, light, -(ln[0] * wx + ln[1] * wy + ln[2] * wz))
+                            p_light = light_pdf_at(
+                                lights, light, light_strategy, px, py, pz, nx, ny, nz, x[0], x[1], x[2]
+                            )
                     if light < 0 or (lr == 0.0 and lg == 0.0 and lb == 0.0):
                         continue
                     if st == SLOT_BSDF:
@@ -447,6 +501,7 @@ def slot_buffers(nm: int) -> dict[str, np.ndarray]:
     """The extra per-slot arrays of this path, keyed by kernel parameter name."""
     return {
         "seg": fresh_array(nm),  # distance to the sampled point on an area light (inf: the environment)
+        "slot_light": fresh_array(nm, np.int64),  # the light a light sample went to
         "ray_o": fresh_array((nm, 3)),  # origin of a BSDF direction's ray (offset from the surface)
         "hit_t": fresh_array(nm),  # its nearest hit
         "hit_kind": fresh_array(nm, np.int64),

@@ -62,19 +62,21 @@ def sample_direction(technique, mk, mp, wo, u0, u1, u2):
 
 
 @jit_inline
-def store_shading_frame(s, k, hit, ox, oy, oz, dx, dy, dz, point, gnormal, frame, wo_local, material):
+def store_shading_frame(s, k, hit, ox, oy, oz, dx, dy, dz, point, gnormal, point_error, frame, wo_local, material):
     """Rebuild camera sample k's hit (``hit`` = kind, index, prim, b1, b2, t), orient a two-sided surface toward
-    the viewer, and store its point, geometric normal, shading frame (s, t, n), local ``wo`` and material.
-    Returns (p, ng, wo), or ``wo[2] <= 0`` when the viewer is below a one-sided surface (nothing to shade)."""
+    the viewer, and store its point, geometric normal, error bound (how far rays leaving it move their origin,
+    ``intersect.ray_offset``), shading frame (s, t, n), local ``wo`` and material.  Returns (p, ng, error, wo), or
+    ``wo[2] <= 0`` when the viewer is below a one-sided surface (nothing to shade)."""
     kind, index, prim, b1, b2, t = hit
-    p, ng, ns, mat, two_sided = surface(s, kind, index, prim, b1, b2, ox, oy, oz, dx, dy, dz, t)
+    p, ng, ns, mat, two_sided, error = surface(s, kind, index, prim, b1, b2, ox, oy, oz, dx, dy, dz, t)
     if two_sided == 1 and -(dx * ng[0] + dy * ng[1] + dz * ng[2]) < 0.0:
         ng = (-ng[0], -ng[1], -ng[2])
         ns = (-ns[0], -ns[1], -ns[2])
     ts, tt = coordinate_system(ns[0], ns[1], ns[2])
     wo = to_local(ts, tt, ns, -dx, -dy, -dz)
     if wo[2] <= 0.0:  # seen from below a one-sided surface: black
-        return p, ng, wo
+        return p, ng, error, wo
+    point_error[k] = error
     for c in range(3):
         point[k, c] = p[c]
         gnormal[k, c] = ng[c]
@@ -83,7 +85,7 @@ def store_shading_frame(s, k, hit, ox, oy, oz, dx, dy, dz, point, gnormal, frame
         frame[k, 6 + c] = ns[c]
         wo_local[k, c] = wo[c]
     material[k] = mat
-    return p, ng, wo
+    return p, ng, error, wo
 
 
 @jit

@@ -439,6 +439,7 @@ def _shade_setup(
     direct,
     point,
     gnormal,
+    point_error,
     frame,
     wo_local,
     material,
@@ -472,8 +473,8 @@ def _shade_setup(
                     continue
                 direct[k, 0] = direct[k, 1] = direct[k, 2] = 0.0
                 hit = (kind[k], index[k], prim[k], b1[k], b2[k], t[k])
-                _, _, wo = store_shading_frame(
-                    s, k, hit, ox, oy, oz, dx, dy, dz, point, gnormal, frame, wo_local, material
+                _, _, _, wo = store_shading_frame(
+                    s, k, hit, ox, oy, oz, dx, dy, dz, point, gnormal, point_error, frame, wo_local, material
                 )
                 if wo[2] <= 0.0:
                     continue
@@ -838,13 +839,13 @@ def _shade_finish(
 
 
 @jit_inline
-def _shadow_ray(m, point, gnormal, wdir, r):
-    """Slot r's shadow ray: its direction, from its camera sample's hit point offset along the geometric normal
-    (intersect.ray_offset).  Returns (origin x, y, z, direction x, y, z)."""
+def _shadow_ray(m, point, gnormal, point_error, wdir, r):
+    """Slot r's shadow ray: its direction, from its camera sample's hit point offset along the geometric normal by
+    the point's error bound (intersect.ray_offset).  Returns (origin x, y, z, direction x, y, z)."""
     k = r // m
     wx, wy, wz = wdir[r, 0], wdir[r, 1], wdir[r, 2]
     qx, qy, qz = ray_offset(
-        point[k, 0], point[k, 1], point[k, 2], gnormal[k, 0], gnormal[k, 1], gnormal[k, 2], wx, wy, wz
+        point[k, 0], point[k, 1], point[k, 2], gnormal[k, 0], gnormal[k, 1], gnormal[k, 2], point_error[k], wx, wy, wz
     )
     return qx, qy, qz, wx, wy, wz
 
@@ -852,7 +853,7 @@ def _shadow_ray(m, point, gnormal, wdir, r):
 # The analytic shapes' shadow tests run 8 slots at a time in vector IR (geometry/shadow_lanes.py): inside the finish
 # stage, one ray at a time with early exits, they were half of its time (decisions.md 49).
 @jit_parallel
-def _analytic_shadow_stage(s, m, point, gnormal, wdir, flags, counter, workers):
+def _analytic_shadow_stage(s, m, point, gnormal, point_error, wdir, flags, counter, workers):
     """Shadow rays of the slots flagged TEST_ANALYTIC against the spheres and rectangles (BLOCKED), then the
     meshes' bounding boxes (TEST_MESH, for :func:`_mesh_shadow_stage`, or VISIBLE), 8 slots at a time."""
     n_work = (flags.shape[0] + LANES - 1) // LANES
@@ -861,13 +862,23 @@ def _analytic_shadow_stage(s, m, point, gnormal, wdir, flags, counter, workers):
         while lo < hi:
             for block in range(lo, hi):
                 shadow_block(
-                    flags, point, gnormal, wdir, s.spheres, s.rects, s.mesh_bounds, s.mesh_spheres, m, block * LANES
+                    flags,
+                    point,
+                    gnormal,
+                    point_error,
+                    wdir,
+                    s.spheres,
+                    s.rects,
+                    s.mesh_bounds,
+                    s.mesh_spheres,
+                    m,
+                    block * LANES,
                 )
             lo, hi = claim_range(counter, n_work)
 
 
 @jit_parallel
-def _analytic_shadow_scalar_stage(s, m, point, gnormal, wdir, flags, counter, workers):
+def _analytic_shadow_scalar_stage(s, m, point, gnormal, point_error, wdir, flags, counter, workers):
     """:func:`_analytic_shadow_stage` one slot at a time: where the vector intrinsics do not compile."""
     n_work = flags.shape[0]
     for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing)
@@ -876,7 +887,7 @@ def _analytic_shadow_scalar_stage(s, m, point, gnormal, wdir, flags, counter, wo
             for r in range(lo, hi):
                 if flags[r] != TEST_ANALYTIC:
                     continue
-                qx, qy, qz, wx, wy, wz = _shadow_ray(m, point, gnormal, wdir, r)
+                qx, qy, qz, wx, wy, wz = _shadow_ray(m, point, gnormal, point_error, wdir, r)
                 if occluded_analytic(s, qx, qy, qz, wx, wy, wz, np.inf) or blocked_by_mesh_core(
                     s, qx, qy, qz, wx, wy, wz
                 ):
@@ -892,7 +903,7 @@ def _analytic_shadow_scalar_stage(s, m, point, gnormal, wdir, flags, counter, wo
 # them: a work list gathered in NumPy before the stage (np.flatnonzero, one thread) cost 4-5 ms a pass
 # (decisions.md 60).  Which rays share a packet changes no answer.
 @jit_parallel
-def _mesh_shadow_stage(m, mesh_scene, scratch, ray_counts, point, gnormal, wdir, flags, counter, workers):
+def _mesh_shadow_stage(m, mesh_scene, scratch, ray_counts, point, gnormal, point_error, wdir, flags, counter, workers):
     """Shadow rays flagged TEST_MESH through Embree 8 at a time (decisions.md 55): each becomes VISIBLE or
     BLOCKED."""
     n_work = flags.shape[0]
@@ -907,7 +918,7 @@ def _mesh_shadow_stage(m, mesh_scene, scratch, ray_counts, point, gnormal, wdir,
                 if r < hi:
                     if flags[r] != TEST_MESH:
                         continue
-                    qx, qy, qz, wx, wy, wz = _shadow_ray(m, point, gnormal, wdir, r)
+                    qx, qy, qz, wx, wy, wz = _shadow_ray(m, point, gnormal, point_error, wdir, r)
                     packet_ray(packet, floats, count, qx, qy, qz, wx, wy, wz, MESH_FAR)
                     lanes[count] = r
                     count += 1
@@ -921,7 +932,9 @@ def _mesh_shadow_stage(m, mesh_scene, scratch, ray_counts, point, gnormal, wdir,
 
 
 @jit_parallel
-def _mesh_shadow_single_stage(m, mesh_scene, scratch, ray_counts, point, gnormal, wdir, flags, counter, workers):
+def _mesh_shadow_single_stage(
+    m, mesh_scene, scratch, ray_counts, point, gnormal, point_error, wdir, flags, counter, workers
+):
     """:func:`_mesh_shadow_stage` one ray at a time: where Embree's 8-ray packets are not native."""
     n_work = flags.shape[0]
     for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing)
@@ -930,7 +943,7 @@ def _mesh_shadow_single_stage(m, mesh_scene, scratch, ray_counts, point, gnormal
             for r in range(lo, hi):
                 if flags[r] != TEST_MESH:
                     continue
-                qx, qy, qz, wx, wy, wz = _shadow_ray(m, point, gnormal, wdir, r)
+                qx, qy, qz, wx, wy, wz = _shadow_ray(m, point, gnormal, point_error, wdir, r)
                 ray_counts[numba.get_thread_id(), 1] += 1
                 flags[r] = BLOCKED if mesh_occluded(mesh_scene, scratch, qx, qy, qz, wx, wy, wz, MESH_FAR) else VISIBLE
             lo, hi = claim_range(counter, n_work)
@@ -1067,6 +1080,7 @@ def _pass_buffers(n: int, m: int, environment_stages: bool = True) -> dict[str, 
         "direct": fresh_array((n, 3)),  # radiance seen directly (the environment, for misses)
         "point": fresh_array((n, 3)),  # hit point
         "gnormal": fresh_array((n, 3)),  # geometric normal
+        "point_error": fresh_array(n),  # the hit point's error bound along it (intersect.ray_offset)
         "frame": fresh_array((n, 9)),  # shading frame s, t, n
         "wo_local": fresh_array((n, 3)),  # direction to the viewer, local
         "material": fresh_array(n, np.int64),  # -1: nothing to shade
@@ -1157,8 +1171,8 @@ def render(
     acc = resume.copy() if resume is not None else Accumulator(n_pixels)
     if area_path and settings.env_candidates > 1:
         raise ParameterError("env_candidates applies to scenes lit by an environment map alone")
-    if area_path and settings.mis_compensation:
-        raise ParameterError("mis_compensation applies to scenes lit by an environment map alone")
+    if settings.mis_compensation and scene.environment is None:
+        raise ParameterError("mis_compensation applies to environment maps: this scene has none")
     compensated = settings.mis_compensation
     if compensated is None:  # on diffuse materials, where it wins (decisions.md 21 and 29)
         compensated = DIFFUSE if settings.strategy == "mis" and not area_path else False
@@ -1192,8 +1206,8 @@ def render(
     }
     largest_pass = max(1, band * spp_pass)
     strategy = STRATEGIES[settings.strategy]
-    camera_pass = _camera_pass_for()
-    stages = (_shade_setup, *_environment_stages(scene, settings), _shade_finish, _analytic_shadow_stage_for())
+    camera_pass = _camera_pass_for(arrays)
+    stages = (_shade_setup, *_environment_stages(scene, settings), _shade_finish, _analytic_shadow_stage_for(arrays))
     if tracer.mesh_scene:
         stages += (_mesh_shadow_stage_for(),)
     worklists = WORKLISTS
@@ -1206,7 +1220,7 @@ def render(
         lights = scene.light_table()
         has_env = scene.environment is not None
         selector = build_selector(
-            settings.light_sampler, lights, env_power=scene.environment_power() if has_env else None
+            settings.light_sampler, lights, env_irradiance=scene.environment.irradiance_terms if has_env else None
         )
         stats["area_lights"] = int(lights.kind.shape[0])
         stages = area_stages(bool(tracer.mesh_scene))
@@ -1398,9 +1412,16 @@ def _environment_stages(scene: Scene, settings: RenderSettings) -> tuple:
     return sample_stage, coords_stage, _env_radiance_stage if in_lanes else _env_radiance_scalar_stage
 
 
-def _analytic_shadow_stage_for():
-    """The analytic shadow stage in lanes where this Numba's LLVM builds the intrinsics, else the scalar one."""
-    return _analytic_shadow_stage if lanes_compile() else _analytic_shadow_scalar_stage
+def _lanes_for(arrays) -> bool:
+    """Whether the analytic shapes' tests run 8 rays at a time: where this Numba's LLVM builds the intrinsics and
+    the scene tests its shapes one by one (the lanes loop over every shape; a scene with many walks its shape
+    hierarchy one ray at a time, geometry/shape_bvh.py)."""
+    return lanes_compile() and arrays.tree_skip.shape[0] == 0
+
+
+def _analytic_shadow_stage_for(arrays):
+    """The analytic shadow stage in lanes where :func:`_lanes_for` allows it, else the scalar one."""
+    return _analytic_shadow_stage if _lanes_for(arrays) else _analytic_shadow_scalar_stage
 
 
 def _mesh_shadow_stage_for():
@@ -1408,10 +1429,9 @@ def _mesh_shadow_stage_for():
     return _mesh_shadow_stage if packets_native() else _mesh_shadow_single_stage
 
 
-def _camera_pass_for():
-    """The camera pass with its analytic hits in lanes where this Numba's LLVM builds the intrinsics, else the
-    scalar one."""
-    return _camera_pass if lanes_compile() else _camera_scalar_pass
+def _camera_pass_for(arrays):
+    """The camera pass with its analytic hits in lanes where :func:`_lanes_for` allows it, else the scalar one."""
+    return _camera_pass if _lanes_for(arrays) else _camera_scalar_pass
 
 
 def kernels_cached(scene: Scene | None = None, settings: RenderSettings | None = None) -> bool:
@@ -1425,6 +1445,7 @@ def kernels_cached(scene: Scene | None = None, settings: RenderSettings | None =
         scene = demo_scene()
     settings = settings or RenderSettings()
     meshes = scene.triangle_count > 0
+    arrays = scene.compile()
     if _takes_area_path(scene, settings):
         from .area_lights import stages as area_stages
 
@@ -1434,10 +1455,10 @@ def kernels_cached(scene: Scene | None = None, settings: RenderSettings | None =
             _shade_setup,
             *_environment_stages(scene, settings_for(scene, settings)),
             _shade_finish,
-            _analytic_shadow_stage_for(),
+            _analytic_shadow_stage_for(arrays),
         )
         shading += (_mesh_shadow_stage_for(),) if meshes else ()
-    return is_cached(_camera_pass_for(), *shading, _accumulate)
+    return is_cached(_camera_pass_for(arrays), *shading, _accumulate)
 
 
 class _Stop(Exception):

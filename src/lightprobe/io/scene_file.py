@@ -66,6 +66,12 @@ Example (every key shown; optional ones have their default)::
     edge_v = [2, 0, 0]
     material = "floor"
 
+    [[objects]]                         # a mesh with one radiance per face: an (F,) or (F, 3) .npy array, or
+    type = "mesh"                       #   "colors" (the file's face colours, 8-bit / 255), times emission_scale
+    file = "panels.ply"
+    face_emission = "panels.npy"
+    emission_scale = 10.0
+
     [[objects]]                         # any object can emit: an area light (a mesh: one light per triangle)
     type = "rectangle"
     origin = [-0.5, 3, -0.5]
@@ -280,17 +286,50 @@ def _material(t: _Table):
     return bsdf
 
 
+def _face_emission(t: _Table, base: Path):
+    """A mesh's ``face_emission``: None, ``"colors"`` (the file's face colours) or an (F,) / (F, 3) array from a
+    ``.npy`` file, one row per face of the mesh file."""
+    value = t.get("face_emission")
+    if value is None:
+        return None
+    if "emission" in t.data:
+        raise SceneError(f"{t.where}: give emission or face_emission, not both")
+    if value == "colors":
+        return value
+    if not isinstance(value, str) or not value.endswith(".npy"):
+        raise SceneError(f'{t.where}: face_emission must be "colors" or a .npy file, got {value!r}')
+    path = _path(base, value, t.where)
+    try:
+        array = np.load(path, allow_pickle=False)
+    except FileNotFoundError:
+        raise SceneError(f"{path}: no such file") from None
+    except (OSError, ValueError) as exc:
+        raise SceneError(f"{path}: not a readable .npy array ({exc})") from None
+    if array.dtype.kind not in "iuf" or array.ndim not in (1, 2) or (array.ndim == 2 and array.shape[1] != 3):
+        raise SceneError(f"{path}: face_emission must be (F,) or (F, 3) numbers, got {array.dtype} {array.shape}")
+    return array
+
+
 def _object(scene: Scene, t: _Table, base: Path) -> None:
     kind = t.string("type", required=True)
     emission = t.rgb("emission")
     if emission is not None:
         emission = emission * t.number("emission_scale", 1.0)
-    material = t.string("material", required=emission is None)
+    material = t.string("material", required=emission is None and "face_emission" not in t.data)
     two_sided = t.boolean("two_sided", False)
     name = t.string("name", t.where)
     extra = {"emission": emission} if emission is not None else {}
     if kind == "mesh":
-        mesh = TriangleMesh.load(_path(base, t.get("file", required=True), t.where), smooth=t.boolean("smooth", True))
+        file = _path(base, t.get("file", required=True), t.where)
+        face_values = _face_emission(t, base)
+        mesh = TriangleMesh.load(file, smooth=t.boolean("smooth", True), face_values=face_values)
+        if face_values is not None:
+            radiance = mesh.face_values
+            if radiance.shape[1] == 1:
+                radiance = np.repeat(radiance, 3, axis=1)
+            if radiance.shape[1] != 3 or not np.all(np.isfinite(radiance)) or np.any(radiance < 0):
+                raise SceneError(f"{t.where}: face_emission must give each face a number >= 0 or [r, g, b] of them")
+            extra = {"emission": radiance * t.number("emission_scale", 1.0)}
         transform = t.get("transform")
         if transform is not None and not isinstance(transform, dict):
             raise SceneError(f"{t.where}: transform must be a table")

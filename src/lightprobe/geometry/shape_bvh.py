@@ -1,0 +1,150 @@
+"""A bounding volume hierarchy over the analytic shapes (spheres and parallelograms), in float64.
+
+A scene with a few spheres and rectangles tests every one for every ray (the loops of
+:func:`lightprobe.geometry.intersect.closest_analytic` and the 8-wide lanes of ``camera_lanes`` / ``shadow_lanes``).
+A scene file with thousands of rectangle lights would pay for all of them on every camera, BSDF and shadow ray
+(about 20x the time of the same quads as one mesh at 2,000, issue 32).  Above :data:`SHAPES_FOR_BVH` shapes the
+scene carries this hierarchy and every analytic ray query walks it instead (decisions.md 68 has the measurements).
+The shapes stay exact: the tree only culls, each candidate is intersected by the same float64 routines.
+
+Layout: nodes in depth-first order with an *escape* index (a threaded BVH, Smits 1998): a ray that misses node i's
+box, or has tested leaf i, continues at ``skip[i]``, one that enters an interior node at i + 1.  No stack, so the
+traversal is a plain loop in a Numba kernel.  Boxes are padded by far more than their float64 rounding, so no ray
+that meets a shape can miss its box.  Built in compiled code by median splits along the axis of largest centroid
+extent (as the light BVH, ``emitters/selection.py``): 100,000 shapes in well under a second.
+
+Primitive numbering: p < S is sphere p, p >= S is rectangle p - S (S spheres).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from .._numba import jit, jit_inline
+
+__all__ = ["LEAF_SIZE", "SHAPES_FOR_BVH", "ShapeTree", "build_shape_tree", "empty_shape_tree"]
+
+#: analytic shapes above which a scene takes the hierarchy (below, testing each shape is as fast: decisions.md 68)
+SHAPES_FOR_BVH = 16
+LEAF_SIZE = 2
+_PAD = 1e-9  # relative to each box's size and coordinates
+
+
+class ShapeTree(NamedTuple):
+    """The hierarchy's arrays (all empty when the scene tests its shapes one by one)."""
+
+    lo: np.ndarray  # (N, 3) float64 box corners
+    hi: np.ndarray  # (N, 3)
+    skip: np.ndarray  # (N,) int64: the next node once this one is missed or done
+    first: np.ndarray  # (N,) int64: a leaf's first entry in ``prims``
+    count: np.ndarray  # (N,) int64: a leaf's number of shapes; 0 for an interior node
+    prims: np.ndarray  # (P,) int64: shape numbers in leaf order
+
+
+def empty_shape_tree() -> ShapeTree:
+    z3 = np.zeros((0, 3))
+    zi = np.zeros(0, np.int64)
+    return ShapeTree(z3, z3.copy(), zi, zi.copy(), zi.copy(), zi.copy())
+
+
+def shape_boxes(spheres: np.ndarray, rects: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi) of every analytic shape, spheres first (rows as in ``SceneArrays``)."""
+    c, r = spheres[:, 0:3], spheres[:, 3:4]
+    o, u, v = rects[:, 0:3], rects[:, 3:6], rects[:, 6:9]
+    corners = np.stack([o, o + u, o + v, o + u + v])
+    lo = np.concatenate([c - r, corners.min(axis=0)])
+    hi = np.concatenate([c + r, corners.max(axis=0)])
+    return np.ascontiguousarray(lo), np.ascontiguousarray(hi)
+
+
+def build_shape_tree(spheres: np.ndarray, rects: np.ndarray) -> ShapeTree:
+    """The hierarchy over ``spheres`` (S, 4) and ``rects`` (R, RECT_WIDTH), or an empty one at or below
+    :data:`SHAPES_FOR_BVH` shapes."""
+    n = spheres.shape[0] + rects.shape[0]
+    if n <= SHAPES_FOR_BVH:
+        return empty_shape_tree()
+    lo, hi = shape_boxes(spheres, rects)
+    pad = _PAD * (np.abs(lo) + np.abs(hi) + (hi - lo).max(axis=1, keepdims=True)) + 1e-300
+    return ShapeTree(*_build(lo - pad, hi + pad, LEAF_SIZE))
+
+
+@jit
+def _subtree_nodes(n, leaf):
+    """Nodes of the tree over n shapes: median splits until at most ``leaf`` remain."""
+    if n <= leaf:
+        return 1
+    half = n // 2
+    return 1 + _subtree_nodes(half, leaf) + _subtree_nodes(n - half, leaf)
+
+
+@jit
+def _build(lo, hi, leaf):
+    n = lo.shape[0]
+    m = _subtree_nodes(n, leaf)
+    node_lo = np.empty((m, 3))
+    node_hi = np.empty((m, 3))
+    skip = np.empty(m, np.int64)
+    first = np.zeros(m, np.int64)
+    count = np.zeros(m, np.int64)
+    prims = np.arange(n)
+    centroid = 0.5 * (lo + hi)
+    # explicit stack of (node, start, end) over ``prims``; a node's subtree takes _subtree_nodes(end - start) slots
+    stack = np.empty((2 * 64 + 2, 3), np.int64)
+    stack[0, 0], stack[0, 1], stack[0, 2] = 0, 0, n
+    top = 1
+    while top > 0:
+        top -= 1
+        node, start, end = stack[top, 0], stack[top, 1], stack[top, 2]
+        for a in range(3):
+            node_lo[node, a] = np.inf
+            node_hi[node, a] = -np.inf
+        for j in range(start, end):
+            p = prims[j]
+            for a in range(3):
+                node_lo[node, a] = min(node_lo[node, a], lo[p, a])
+                node_hi[node, a] = max(node_hi[node, a], hi[p, a])
+        size = end - start
+        skip[node] = node + _subtree_nodes(size, leaf)
+        if size <= leaf:
+            first[node] = start
+            count[node] = size
+            continue
+        axis = 0
+        widest = -1.0
+        for a in range(3):
+            c_lo, c_hi = np.inf, -np.inf
+            for j in range(start, end):
+                c_lo = min(c_lo, centroid[prims[j], a])
+                c_hi = max(c_hi, centroid[prims[j], a])
+            if c_hi - c_lo > widest:
+                widest, axis = c_hi - c_lo, a
+        keys = np.empty(size)
+        for j in range(size):
+            keys[j] = centroid[prims[start + j], axis]
+        order = np.argsort(keys, kind="mergesort")  # stable: the same tree on every machine
+        part = prims[start:end][order].copy()
+        prims[start:end] = part
+        half = size // 2
+        left_nodes = _subtree_nodes(half, leaf)
+        stack[top, 0], stack[top, 1], stack[top, 2] = node + 1 + left_nodes, start + half, end
+        stack[top + 1, 0], stack[top + 1, 1], stack[top + 1, 2] = node + 1, start, start + half
+        top += 2
+    return node_lo, node_hi, skip, first, count, prims
+
+
+@jit_inline
+def box_entered(ox, oy, oz, ix, iy, iz, lo, hi, i, tmax):
+    """Whether the segment [0, tmax] of the ray (o, 1/d = (ix, iy, iz)) meets box i of (lo, hi).  Infinite
+    reciprocals (d_a = 0) give +-inf slabs, or NaN on a face (o_a = lo_a), which min/max below drop, as the padded
+    boxes allow."""
+    a0 = (lo[i, 0] - ox) * ix
+    b0 = (hi[i, 0] - ox) * ix
+    a1 = (lo[i, 1] - oy) * iy
+    b1 = (hi[i, 1] - oy) * iy
+    a2 = (lo[i, 2] - oz) * iz
+    b2 = (hi[i, 2] - oz) * iz
+    near = max(0.0, min(a0, b0), min(a1, b1), min(a2, b2))
+    far = min(tmax, max(a0, b0), max(a1, b1), max(a2, b2))
+    return near <= far

@@ -1,0 +1,114 @@
+"""The analytic shapes' hierarchy (geometry/shape_bvh.py): every nearest hit and every occlusion the same as testing
+each shape in turn, for random rays through thousands of spheres and parallelograms; the tree covers each shape
+once and its boxes hold their shapes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lightprobe._numba import jit_parallel, prange
+from lightprobe.geometry.intersect import closest_analytic, occluded_analytic, rectangle_rows
+from lightprobe.geometry.scene import SceneArrays
+from lightprobe.geometry.shape_bvh import LEAF_SIZE, SHAPES_FOR_BVH, build_shape_tree, empty_shape_tree, shape_boxes
+
+
+def _shapes(n_spheres, n_rects, seed):
+    """Small spheres and slanted parallelograms (oblique edges) scattered in a 10-unit box, some overlapping."""
+    rng = np.random.default_rng(seed)
+    spheres = np.column_stack([rng.uniform(-5, 5, (n_spheres, 3)), rng.uniform(0.02, 0.3, n_spheres)])
+    origin = rng.uniform(-5, 5, (n_rects, 3))
+    u = rng.normal(size=(n_rects, 3)) * 0.3
+    v = rng.normal(size=(n_rects, 3)) * 0.3
+    return np.ascontiguousarray(spheres), rectangle_rows(origin, u, v)
+
+
+def _arrays(spheres, rects, tree):
+    """SceneArrays with these shapes (no meshes, no materials) and ``tree``'s arrays."""
+    empty3 = np.zeros((0, 3))
+    emptyi = np.zeros(0, np.int64)
+    return SceneArrays(
+        empty3,
+        empty3,
+        np.zeros((0, 3), np.int64),
+        np.zeros(1, np.int64),
+        emptyi,
+        emptyi,
+        emptyi,
+        np.zeros((0, 2, 3)),
+        np.zeros((0, 5)),
+        spheres,
+        np.zeros(spheres.shape[0], np.int64),
+        np.zeros(spheres.shape[0], np.int64),
+        rects,
+        np.zeros(rects.shape[0], np.int64),
+        np.zeros(rects.shape[0], np.int64),
+        np.full(spheres.shape[0], -1, np.int64),
+        np.full(rects.shape[0], -1, np.int64),
+        emptyi,
+        emptyi,
+        np.zeros((0, 16)),
+        *tree,
+    )
+
+
+@jit_parallel
+def _trace(s, origins, dirs, tmax):
+    n = origins.shape[0]
+    t = np.empty(n)
+    kind = np.empty(n, np.int64)
+    index = np.empty(n, np.int64)
+    blocked = np.empty(n, np.bool_)
+    for i in prange(n):
+        ox, oy, oz = origins[i, 0], origins[i, 1], origins[i, 2]
+        dx, dy, dz = dirs[i, 0], dirs[i, 1], dirs[i, 2]
+        t[i], kind[i], index[i] = closest_analytic(s, ox, oy, oz, dx, dy, dz, tmax[i])
+        blocked[i] = occluded_analytic(s, ox, oy, oz, dx, dy, dz, tmax[i])
+    return t, kind, index, blocked
+
+
+def _rays(n, seed):
+    """Rays from inside and outside the shapes' box, random and axis-aligned directions (zero components: the slab
+    test's 1 / 0), unbounded and short segments."""
+    rng = np.random.default_rng(seed)
+    origins = rng.uniform(-8, 8, (n, 3))
+    dirs = rng.normal(size=(n, 3))
+    dirs[::5] = np.eye(3)[rng.integers(0, 3, dirs[::5].shape[0])] * rng.choice([-1.0, 1.0], (dirs[::5].shape[0], 1))
+    dirs /= np.linalg.norm(dirs, axis=1)[:, None]
+    tmax = np.where(rng.random(n) < 0.5, np.inf, rng.uniform(0.1, 6.0, n))
+    return origins, dirs, tmax
+
+
+@pytest.mark.parametrize(("n_spheres", "n_rects"), [(300, 2000), (0, 1500), (1200, 0), (10, 7)])
+def test_the_tree_finds_what_testing_every_shape_finds(n_spheres, n_rects):
+    spheres, rects = _shapes(n_spheres, n_rects, seed=n_spheres + n_rects)
+    tree = build_shape_tree(spheres, rects)
+    assert (tree.skip.shape[0] > 0) == (n_spheres + n_rects > SHAPES_FOR_BVH)
+    origins, dirs, tmax = _rays(40_000, seed=7)
+    flat = _trace(_arrays(spheres, rects, empty_shape_tree()), origins, dirs, tmax)
+    walked = _trace(_arrays(spheres, rects, tree), origins, dirs, tmax)
+    for a, b in zip(flat, walked, strict=True):
+        np.testing.assert_array_equal(a, b)
+    hit = flat[0] < tmax  # closest_analytic returns tmax itself when nothing is nearer
+    assert 50 < hit.sum() < 0.98 * hit.size  # rays that hit and rays that miss, both
+    assert np.array_equal(flat[3], hit)
+
+
+def test_the_tree_holds_each_shape_once_in_boxes_that_contain_it():
+    spheres, rects = _shapes(500, 3000, seed=3)
+    tree = build_shape_tree(spheres, rects)
+    n = spheres.shape[0] + rects.shape[0]
+    assert np.array_equal(np.sort(tree.prims), np.arange(n))
+    leaves = np.flatnonzero(tree.count > 0)
+    assert tree.count[leaves].sum() == n and tree.count.max() <= LEAF_SIZE
+    lo, hi = shape_boxes(spheres, rects)
+    for leaf in leaves:
+        members = tree.prims[tree.first[leaf] : tree.first[leaf] + tree.count[leaf]]
+        assert np.all(tree.lo[leaf] <= lo[members]) and np.all(hi[members] <= tree.hi[leaf])
+    # depth-first order: a node's subtree is the range (node, skip[node]), inside its parent's, and every node's box
+    # holds the boxes of its subtree
+    for node in range(tree.skip.shape[0]):
+        inner = slice(node + 1, tree.skip[node])
+        assert tree.skip[node] <= tree.skip.shape[0]
+        assert np.all(tree.lo[inner] >= tree.lo[node]) and np.all(tree.hi[inner] <= tree.hi[node])
+    assert tree.skip[0] == tree.skip.shape[0]  # the root's subtree is the whole tree
