@@ -152,13 +152,21 @@ def test_an_environment_only_scene_is_bit_identical_to_before():
     assert hashlib.sha256(result.image.tobytes()).hexdigest() == ENV_ONLY_SHA256
 
 
-@pytest.mark.parametrize(
-    ("option", "message"),
-    [({"env_candidates": 2}, "env_candidates applies"), ({"mis_compensation": True}, "mis_compensation applies")],
-)
-def test_environment_only_options_are_refused_with_area_lights(option, message):
-    with pytest.raises(ParameterError, match=message):
-        render(mixed_scene((4, 4), n_panels=3), RenderSettings(spp=1, **option))
+def test_environment_only_options_are_refused_with_area_lights():
+    with pytest.raises(ParameterError, match="env_candidates applies"):
+        render(mixed_scene((4, 4), n_panels=3), RenderSettings(spp=1, env_candidates=2))
+
+
+def test_mis_compensation_needs_an_environment():
+    """The compensated density is the environment's: accepted with area lights and a map (the closed-form
+    furnaces of test_closed_forms.py check it there), refused by a scene without a map."""
+    assert render(mixed_scene((4, 4), n_panels=3), RenderSettings(spp=1, mis_compensation=True)).stats[
+        "mis_compensation"
+    ]
+    scene = mixed_scene((4, 4), n_panels=3)
+    scene.environment = None
+    with pytest.raises(ParameterError, match="mis_compensation applies to environment maps"):
+        render(scene, RenderSettings(spp=1, mis_compensation=True))
 
 
 def test_compensation_is_on_by_default_for_environment_maps_alone_and_off_with_area_lights():
