@@ -1,0 +1,185 @@
+#!/usr/bin/env python3
+"""Render the suite's independent references with Mitsuba 3: ``tests/data/mitsuba_<name>.npz``.
+
+    pip install -e '.[peers]'                 # Mitsuba 3.9.1 and Dr.Jit 1.5 (Debian: apt-get install libllvm19)
+    python benchmarks/mitsuba_references.py   # every scene of lightprobe.reference_scenes, ~5 minutes on 2 cores
+    python benchmarks/mitsuba_references.py --scenes area --passes 8
+
+Each scene of :mod:`lightprobe.reference_scenes` is built in Mitsuba from the same renderer-neutral description
+that lightprobe's builder reads, and rendered by Mitsuba's ``direct`` integrator (1 emitter + 1 BSDF sample, the
+``multijitter`` sampler) in ``--passes`` independent passes of ``--spp`` samples per pixel.  The file holds the
+mean image (H, W, 3), the variance of that mean (the passes' sample variance / passes), the total samples per pixel
+and the command's settings, float32; the tests z-test lightprobe against it (tests/integrators/test_references.py).
+The reference's own noise must stay far below what it judges: the script prints its relMSE floor,
+mean(var / (mean^2 + 0.01)).
+"""
+
+from __future__ import annotations
+
+import argparse
+import glob
+import json
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _prefer_llvm19() -> None:
+    """Dr.Jit 1.5 aborts with Debian 12's LLVM 15; point it at libLLVM 19 when installed (as the peer kit does)."""
+    if "DRJIT_LIBLLVM_PATH" in os.environ:
+        return
+    for folder in ("/usr/lib/x86_64-linux-gnu", "/usr/lib/aarch64-linux-gnu", "/usr/lib64", "/usr/lib"):
+        for pattern in ("libLLVM-19.so", "libLLVM.so.19*", "libLLVM-19*.so*"):
+            hits = sorted(glob.glob(os.path.join(folder, pattern)))
+            if hits:
+                os.environ["DRJIT_LIBLLVM_PATH"] = hits[0]
+                return
+
+
+def _rgb(value) -> dict:
+    return {"type": "rgb", "value": [float(x) for x in np.broadcast_to(np.asarray(value, dtype=np.float64), 3)]}
+
+
+def _bsdf(material: dict) -> dict:
+    if material["model"] == "lambertian":
+        return {"type": "diffuse", "reflectance": _rgb(material["reflectance"])}
+    return {
+        "type": "roughconductor",
+        "distribution": "ggx",
+        "alpha": float(material["alpha"]),
+        "eta": _rgb(material["eta"]),
+        "k": _rgb(material["k"]),
+    }
+
+
+def _black() -> dict:
+    return {"type": "diffuse", "reflectance": _rgb(0.0)}
+
+
+def scene_dict(mi, desc: dict, env_file: str | None, spp: int, folder: str) -> dict:
+    """Mitsuba's scene dictionary for a description of lightprobe.reference_scenes (meshes written to ``folder``)."""
+    from lightprobe.reference_scenes import RESOLUTION
+
+    transform = mi.ScalarTransform4f
+    cam = desc["camera"]
+    width, height = RESOLUTION
+    d = {
+        "type": "scene",
+        "integrator": {"type": "direct", "emitter_samples": 1, "bsdf_samples": 1},
+        "sensor": {
+            "type": "perspective",
+            "fov": float(cam["fov"]),
+            "fov_axis": "x",
+            "to_world": transform().look_at(origin=cam["origin"], target=cam["target"], up=[0, 1, 0]),
+            "sampler": {"type": "multijitter", "sample_count": spp},
+            "film": {
+                "type": "hdrfilm",
+                "width": width,
+                "height": height,
+                "rfilter": {"type": "box"},
+                "pixel_format": "rgb",
+                "component_format": "float32",
+            },
+        },
+    }
+    if env_file is not None:
+        d["environment"] = {"type": "envmap", "filename": env_file}
+    for i, o in enumerate(desc["objects"]):
+        bsdf = _bsdf(desc["materials"][o["material"]]) if "material" in o else _black()
+        if o["shape"] == "rectangle":
+            origin, u, v = (np.asarray(o[k], dtype=np.float64) for k in ("origin", "edge_u", "edge_v"))
+            n = np.cross(u, v)
+            n /= np.linalg.norm(n)
+            # Mitsuba's rectangle is [-1, 1]^2 in z = 0 with normal +Z
+            m = np.eye(4)
+            m[:3, 0], m[:3, 1], m[:3, 2], m[:3, 3] = u / 2, v / 2, n, origin + (u + v) / 2
+            shape = {"type": "rectangle", "to_world": transform(m.tolist()), "bsdf": bsdf}
+        elif o["shape"] == "sphere":
+            shape = {
+                "type": "sphere",
+                "center": list(map(float, o["center"])),
+                "radius": float(o["radius"]),
+                "bsdf": bsdf,
+            }
+        else:
+            # a triangle mesh goes through a PLY file (Mitsuba's mesh emitters are attached when a shape is loaded)
+            vertices, faces = np.asarray(o["vertices"], np.float32), np.asarray(o["faces"], np.uint32)
+            mesh = mi.Mesh(
+                f"mesh{i}",
+                vertices.shape[0],
+                faces.shape[0],
+                has_vertex_normals="normals" in o,
+                has_vertex_texcoords=False,
+            )
+            params = mi.traverse(mesh)
+            params["vertex_positions"] = mi.Float(vertices.ravel())
+            params["faces"] = mi.UInt32(faces.ravel())
+            if "normals" in o:
+                params["vertex_normals"] = mi.Float(np.asarray(o["normals"], np.float32).ravel())
+            params.update()
+            ply = str(Path(folder) / f"mesh{i}.ply")
+            mesh.write_ply(ply)
+            shape = {"type": "ply", "filename": ply, "bsdf": bsdf, "face_normals": "normals" not in o}
+        if "emission" in o:
+            shape["emitter"] = {"type": "area", "radiance": _rgb(o["emission"])}
+        d[f"object{i}"] = shape
+    return d
+
+
+def render(name: str, spp: int, passes: int, out: Path) -> dict:
+    _prefer_llvm19()
+    import mitsuba as mi
+
+    mi.set_variant("llvm_ad_rgb")
+    from lightprobe.io.images import write_image
+    from lightprobe.reference_scenes import describe, environment_image
+
+    desc = describe(name)
+    with tempfile.TemporaryDirectory() as tmp:
+        image = environment_image(desc)
+        env_file = None
+        if image is not None:
+            env_file = str(Path(tmp) / "env.exr")
+            write_image(env_file, image)
+        scene = mi.load_dict(scene_dict(mi, desc, env_file, spp, tmp))
+        start = time.perf_counter()
+        total = total2 = 0.0
+        for k in range(passes):
+            x = np.array(mi.render(scene, spp=spp, seed=1_000_003 * (k + 1)), dtype=np.float64)
+            total = total + x
+            total2 = total2 + x * x
+        seconds = time.perf_counter() - start
+    mean = total / passes
+    variance = np.maximum(total2 / passes - mean**2, 0.0) * passes / (passes - 1) / passes
+    floor = float(np.mean(variance / (mean**2 + 0.01)))
+    settings = {"scene": name, "spp": spp * passes, "passes": passes, "sampler": "multijitter", "integrator": "direct"}
+    out.parent.mkdir(parents=True, exist_ok=True)
+    np.savez_compressed(
+        out, mean=mean.astype(np.float32), variance=variance.astype(np.float32), settings=json.dumps(settings)
+    )
+    return {**settings, "seconds": round(seconds, 1), "relmse_floor": floor, "out": str(out)}
+
+
+def main() -> int:
+    sys.path.insert(0, str(ROOT / "src"))
+    from lightprobe.reference_scenes import NAMES
+
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--scenes", nargs="*", default=list(NAMES), choices=NAMES)
+    parser.add_argument("--spp", type=int, default=1024, help="samples per pixel per pass")
+    parser.add_argument("--passes", type=int, default=64, help="independent passes (the variance comes from them)")
+    parser.add_argument("--out", default=str(ROOT / "tests" / "data"), help="folder for mitsuba_<name>.npz")
+    args = parser.parse_args()
+    for name in args.scenes:
+        print(json.dumps(render(name, args.spp, args.passes, Path(args.out) / f"mitsuba_{name}.npz")), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
