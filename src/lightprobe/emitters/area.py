@@ -49,7 +49,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .._numba import jit, jit_parallel, prange
+from .._numba import jit, jit_inline, jit_parallel, prange
 from ..errors import ParameterError
 from ..geometry.frame import coordinate_system, normalize, to_world
 from ..geometry.intersect import (
@@ -176,7 +176,7 @@ def light_intersect(lights, l, ox, oy, oz, dx, dy, dz):
     return t, -_dot(g[9], g[10], g[11], dx, dy, dz)
 
 
-@jit
+@jit_inline
 def light_normal(lights, l, x, y, z):
     """Unit normal of light l at its point (x, y, z): outward for a sphere, the row's normal for a planar light."""
     g = lights.geom[l]
@@ -185,7 +185,7 @@ def light_normal(lights, l, x, y, z):
     return g[9], g[10], g[11]
 
 
-@jit
+@jit_inline
 def light_point_error(lights, l, x, y, z, n):
     """Error bound along normal n of light l's point (x, y, z) (geometry/intersect.py): a triangle's is a mesh face's
     (Embree traces it in float32), a rectangle's and a sphere's are their float64 bounds.  A shadow ray to a sampled
