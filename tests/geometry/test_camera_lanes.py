@@ -106,7 +106,7 @@ def test_a_render_is_the_same_with_the_scalar_camera_pass(monkeypatch):
     scene = _scene(resolution=(40, 30))
     settings = RenderSettings(spp=4)
     lanes = render(scene, settings)
-    monkeypatch.setattr(wavefront, "_camera_pass_for", lambda arrays: wavefront._camera_scalar_pass)
+    monkeypatch.setattr(wavefront, "_camera_pass_for", lambda: wavefront._camera_scalar_pass)
     scalar = render(scene, settings)
     assert np.array_equal(lanes.image, scalar.image) and np.array_equal(lanes.variance, scalar.variance)
 

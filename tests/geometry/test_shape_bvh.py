@@ -1,25 +1,31 @@
 """The analytic shapes' hierarchy (geometry/shape_bvh.py): every nearest hit and every occlusion the same as testing
-each shape in turn, for random rays through thousands of spheres and parallelograms; the tree covers each shape
-once and its boxes hold their shapes."""
+each shape in turn, for random rays through thousands of spheres and parallelograms (with a ground and a large
+sphere kept out of the tree, or not); the tree covers each shape once and its boxes hold their shapes."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from lightprobe._numba import jit_parallel, prange
-from lightprobe.geometry.intersect import closest_analytic, occluded_analytic, rectangle_rows
+from lightprobe.geometry.intersect import rectangle_rows
+from lightprobe.geometry.raytracer import _closest_analytic_batch, _occluded_analytic_batch
 from lightprobe.geometry.scene import SceneArrays
 from lightprobe.geometry.shape_bvh import LEAF_SIZE, SHAPES_FOR_BVH, build_shape_tree, empty_shape_tree, shape_boxes
 
 
-def _shapes(n_spheres, n_rects, seed):
-    """Small spheres and slanted parallelograms (oblique edges) scattered in a 10-unit box, some overlapping."""
+def _shapes(n_spheres, n_rects, seed, large=False):
+    """Small spheres and slanted parallelograms (oblique edges) scattered in a 10-unit box, some overlapping; with
+    ``large``, a 40-unit ground and a sphere of radius 8 too (tested before the tree)."""
     rng = np.random.default_rng(seed)
     spheres = np.column_stack([rng.uniform(-5, 5, (n_spheres, 3)), rng.uniform(0.02, 0.3, n_spheres)])
     origin = rng.uniform(-5, 5, (n_rects, 3))
     u = rng.normal(size=(n_rects, 3)) * 0.3
     v = rng.normal(size=(n_rects, 3)) * 0.3
+    if large:
+        spheres = np.concatenate([spheres, [[2.0, -12.0, 1.0, 8.0]]])
+        origin, u, v = (
+            np.concatenate([a, [b]]) for a, b in ((origin, [-20, -6, -20]), (u, [0, 0, 40]), (v, [40, 0, 0]))
+        )
     return np.ascontiguousarray(spheres), rectangle_rows(origin, u, v)
 
 
@@ -52,18 +58,10 @@ def _arrays(spheres, rects, tree):
     )
 
 
-@jit_parallel
 def _trace(s, origins, dirs, tmax):
-    n = origins.shape[0]
-    t = np.empty(n)
-    kind = np.empty(n, np.int64)
-    index = np.empty(n, np.int64)
-    blocked = np.empty(n, np.bool_)
-    for i in prange(n):
-        ox, oy, oz = origins[i, 0], origins[i, 1], origins[i, 2]
-        dx, dy, dz = dirs[i, 0], dirs[i, 1], dirs[i, 2]
-        t[i], kind[i], index[i] = closest_analytic(s, ox, oy, oz, dx, dy, dz, tmax[i])
-        blocked[i] = occluded_analytic(s, ox, oy, oz, dx, dy, dz, tmax[i])
+    """Nearest hits (unbounded) and occlusion of the segments (0, tmax), through the ray tracer's batch kernels."""
+    t, kind, index, _ = _closest_analytic_batch(s, origins, dirs)
+    blocked, _ = _occluded_analytic_batch(s, origins, dirs, tmax)
     return t, kind, index, blocked
 
 
@@ -79,28 +77,32 @@ def _rays(n, seed):
     return origins, dirs, tmax
 
 
-@pytest.mark.parametrize(("n_spheres", "n_rects"), [(300, 2000), (0, 1500), (1200, 0), (10, 7)])
-def test_the_tree_finds_what_testing_every_shape_finds(n_spheres, n_rects):
-    spheres, rects = _shapes(n_spheres, n_rects, seed=n_spheres + n_rects)
+@pytest.mark.parametrize(
+    ("n_spheres", "n_rects", "large"), [(300, 2000, True), (0, 1500, False), (1200, 0, True), (10, 7, False)]
+)
+def test_the_tree_finds_what_testing_every_shape_finds(n_spheres, n_rects, large):
+    spheres, rects = _shapes(n_spheres, n_rects, seed=n_spheres + n_rects, large=large)
     tree = build_shape_tree(spheres, rects)
-    assert (tree.skip.shape[0] > 0) == (n_spheres + n_rects > SHAPES_FOR_BVH)
-    origins, dirs, tmax = _rays(40_000, seed=7)
+    assert (tree.skip.shape[0] > 0) == (spheres.shape[0] + rects.shape[0] > SHAPES_FOR_BVH)
+    assert tree.loose.size == (2 if large else 0)
+    origins, dirs, tmax = _rays(10_000, seed=7)
     flat = _trace(_arrays(spheres, rects, empty_shape_tree()), origins, dirs, tmax)
     walked = _trace(_arrays(spheres, rects, tree), origins, dirs, tmax)
     for a, b in zip(flat, walked, strict=True):
         np.testing.assert_array_equal(a, b)
-    hit = flat[0] < tmax  # closest_analytic returns tmax itself when nothing is nearer
-    assert 50 < hit.sum() < 0.98 * hit.size  # rays that hit and rays that miss, both
-    assert np.array_equal(flat[3], hit)
+    hit = np.isfinite(flat[0])
+    assert 10 < hit.sum() < 0.98 * hit.size  # rays that hit and rays that miss, both
+    assert np.array_equal(flat[3], flat[0] < tmax)  # blocked: the nearest hit lies within the segment
 
 
 def test_the_tree_holds_each_shape_once_in_boxes_that_contain_it():
-    spheres, rects = _shapes(500, 3000, seed=3)
+    spheres, rects = _shapes(500, 3000, seed=3, large=True)
     tree = build_shape_tree(spheres, rects)
     n = spheres.shape[0] + rects.shape[0]
-    assert np.array_equal(np.sort(tree.prims), np.arange(n))
+    assert np.array_equal(np.sort(np.concatenate([tree.prims, tree.loose])), np.arange(n))
+    np.testing.assert_array_equal(tree.loose, [500, n - 1])  # the large sphere and the ground
     leaves = np.flatnonzero(tree.count > 0)
-    assert tree.count[leaves].sum() == n and tree.count.max() <= LEAF_SIZE
+    assert tree.count[leaves].sum() == n - 2 and tree.count.max() <= LEAF_SIZE
     lo, hi = shape_boxes(spheres, rects)
     for leaf in leaves:
         members = tree.prims[tree.first[leaf] : tree.first[leaf] + tree.count[leaf]]

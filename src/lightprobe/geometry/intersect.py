@@ -28,16 +28,21 @@ from .frame import normalize
 from .shape_bvh import box_entered
 
 __all__ = [
+    "ANALYTIC_ERROR",
     "MESH",
+    "MESH_ERROR",
     "MISS",
     "RECT",
     "RECT_WIDTH",
     "SPHERE",
     "closest_analytic",
     "occluded_analytic",
+    "point_error",
     "ray_offset",
+    "rect_hit",
     "rectangle_rows",
     "surface",
+    "triangle_error",
 ]
 
 MISS, MESH, SPHERE, RECT = 0, 1, 2, 3
@@ -46,9 +51,9 @@ RECT_WIDTH = 18  # a rectangle's row: corner 0-2, edge u 3-5, edge v 6-8, unit n
 # Error bounds of hit points, relative to the magnitudes of the coordinates they come from (the distance a spawned
 # ray's origin moves along the normal, see ray_offset).  Meshes: Embree holds vertices and ray origins in float32
 # (half an ulp each, 2^-24 relative) and its Pluecker test subtracts the origin from the vertices (errors of the
-# triangle's size times 2^-24); 2^-20 is 8-16 float32 ulps, a margin of 4-8 over those sums (the self-intersection
-# test in tests/geometry/test_intersect.py measures where it starts).  Analytic shapes: float64 throughout (points
-# projected back onto their surface), 2^-40 = 4096 float64 ulps.
+# triangle's size times 2^-24); 2^-20 is 8-16 float32 ulps, a margin of 4-8 over those sums (measured in
+# tests/geometry/test_offsets.py: self-hits start between a quarter and a sixteenth of it).  Analytic shapes:
+# float64 throughout (points projected back onto their surface), 2^-40 = 4096 float64 ulps.
 MESH_ERROR = 2.0**-20
 ANALYTIC_ERROR = 2.0**-40
 
@@ -93,9 +98,9 @@ def rect_coordinates(rects, i, px, py, pz):
     """(a, b) with p = corner + a edge_u + b edge_v for a point p in the plane of parallelogram i of ``rects``
     (rows of :func:`rectangle_rows`): the offset from the corner against the dual vectors."""
     qx, qy, qz = px - rects[i, 0], py - rects[i, 1], pz - rects[i, 2]
-    return qx * rects[i, 12] + qy * rects[i, 13] + qz * rects[i, 14], qx * rects[i, 15] + qy * rects[
-        i, 16
-    ] + qz * rects[i, 17]
+    a = qx * rects[i, 12] + qy * rects[i, 13] + qz * rects[i, 14]
+    b = qx * rects[i, 15] + qy * rects[i, 16] + qz * rects[i, 17]
+    return a, b
 
 
 @jit_inline
@@ -183,8 +188,14 @@ def closest_analytic(s, ox, oy, oz, dx, dy, dz, tmax):
             if t < best:
                 best, kind, index = t, RECT, i
         return best, kind, index
-    ix, iy, iz = _reciprocal(dx), _reciprocal(dy), _reciprocal(dz)
     n_spheres = s.spheres.shape[0]
+    for j in range(s.tree_loose.shape[0]):
+        p = s.tree_loose[j]
+        t = _shape_t(s, p, ox, oy, oz, dx, dy, dz, best)
+        if t < best:
+            best = t
+            kind, index = (SPHERE, p) if p < n_spheres else (RECT, p - n_spheres)
+    ix, iy, iz = _reciprocal(dx), _reciprocal(dy), _reciprocal(dz)
     i = 0
     while i < s.tree_skip.shape[0]:
         if box_entered(ox, oy, oz, ix, iy, iz, s.tree_lo, s.tree_hi, i, best):
@@ -217,6 +228,9 @@ def occluded_analytic(s, ox, oy, oz, dx, dy, dz, tmax):
             if rect_hit(ox, oy, oz, dx, dy, dz, s.rects, i, tmax) < tmax:
                 return True
         return False
+    for j in range(s.tree_loose.shape[0]):
+        if _shape_t(s, s.tree_loose[j], ox, oy, oz, dx, dy, dz, tmax) < tmax:
+            return True
     ix, iy, iz = _reciprocal(dx), _reciprocal(dy), _reciprocal(dz)
     i = 0
     while i < s.tree_skip.shape[0]:
@@ -342,7 +356,7 @@ def surface(s, kind, index, prim, bu, bv, ox, oy, oz, dx, dy, dz, t):
 
 @jit_inline
 def rect_extent(rects, i):
-    """The largest coordinate of parallelogram i's two edges (a bound on its size in any coordinate, halved)."""
+    """The largest component of parallelogram i's two edges: at least half its extent along any axis."""
     return max(
         abs(rects[i, 3]), abs(rects[i, 4]), abs(rects[i, 5]), abs(rects[i, 6]), abs(rects[i, 7]), abs(rects[i, 8])
     )

@@ -75,6 +75,7 @@ class SceneArrays(NamedTuple):
     tree_first: np.ndarray
     tree_count: np.ndarray
     tree_prims: np.ndarray
+    tree_loose: np.ndarray
 
 
 class Scene:

@@ -4,7 +4,7 @@ A scene with a few spheres and rectangles tests every one for every ray (the loo
 :func:`lightprobe.geometry.intersect.closest_analytic` and the 8-wide lanes of ``camera_lanes`` / ``shadow_lanes``).
 A scene file with thousands of rectangle lights would pay for all of them on every camera, BSDF and shadow ray
 (about 20x the time of the same quads as one mesh at 2,000, issue 32).  Above :data:`SHAPES_FOR_BVH` shapes the
-scene carries this hierarchy and every analytic ray query walks it instead (decisions.md 68 has the measurements).
+scene carries this hierarchy and every analytic ray query walks it instead (decisions.md 70 has the measurements).
 The shapes stay exact: the tree only culls, each candidate is intersected by the same float64 routines.
 
 Layout: nodes in depth-first order with an *escape* index (a threaded BVH, Smits 1998): a ray that misses node i's
@@ -12,6 +12,9 @@ box, or has tested leaf i, continues at ``skip[i]``, one that enters an interior
 traversal is a plain loop in a Numba kernel.  Boxes are padded by far more than their float64 rounding, so no ray
 that meets a shape can miss its box.  Built in compiled code by median splits along the axis of largest centroid
 extent (as the light BVH, ``emitters/selection.py``): 100,000 shapes in well under a second.
+
+The few largest shapes (at most ``MAX_LOOSE``, each more than a quarter of the scene's extent: a ground, a dome)
+stay out of the tree and are tested first: in it, their boxes would be part of every node above them.
 
 Primitive numbering: p < S is sphere p, p >= S is rectangle p - S (S spheres).
 """
@@ -26,9 +29,10 @@ from .._numba import jit, jit_inline
 
 __all__ = ["LEAF_SIZE", "SHAPES_FOR_BVH", "ShapeTree", "build_shape_tree", "empty_shape_tree"]
 
-#: analytic shapes above which a scene takes the hierarchy (below, testing each shape is as fast: decisions.md 68)
+#: analytic shapes above which a scene takes the hierarchy (below, testing each shape is as fast: decisions.md 70)
 SHAPES_FOR_BVH = 16
 LEAF_SIZE = 2
+MAX_LOOSE = 4  # large shapes kept out of the tree at most
 _PAD = 1e-9  # relative to each box's size and coordinates
 
 
@@ -41,12 +45,13 @@ class ShapeTree(NamedTuple):
     first: np.ndarray  # (N,) int64: a leaf's first entry in ``prims``
     count: np.ndarray  # (N,) int64: a leaf's number of shapes; 0 for an interior node
     prims: np.ndarray  # (P,) int64: shape numbers in leaf order
+    loose: np.ndarray  # (K,) int64: large shapes tested one by one before the tree (a ground, a dome)
 
 
 def empty_shape_tree() -> ShapeTree:
     z3 = np.zeros((0, 3))
     zi = np.zeros(0, np.int64)
-    return ShapeTree(z3, z3.copy(), zi, zi.copy(), zi.copy(), zi.copy())
+    return ShapeTree(z3, z3.copy(), zi, zi.copy(), zi.copy(), zi.copy(), zi.copy())
 
 
 def shape_boxes(spheres: np.ndarray, rects: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -67,7 +72,17 @@ def build_shape_tree(spheres: np.ndarray, rects: np.ndarray) -> ShapeTree:
         return empty_shape_tree()
     lo, hi = shape_boxes(spheres, rects)
     pad = _PAD * (np.abs(lo) + np.abs(hi) + (hi - lo).max(axis=1, keepdims=True)) + 1e-300
-    return ShapeTree(*_build(lo - pad, hi + pad, LEAF_SIZE))
+    # a shape as large as a quarter of the scene (a ground under thousands of small lights) would put its box in
+    # every node above it, which nearly every ray then enters: the few largest are tested before the tree instead
+    extent = (hi - lo).max(axis=1)
+    scene = float((hi.max(axis=0) - lo.min(axis=0)).max())
+    large = np.flatnonzero(extent > scene / 4)
+    loose = large[np.argsort(-extent[large], kind="stable")][:MAX_LOOSE]
+    if loose.size == n:
+        loose = loose[:0]
+    rest = np.setdiff1d(np.arange(n), loose)
+    node_lo, node_hi, skip, first, count, prims = _build(lo[rest] - pad[rest], hi[rest] + pad[rest], LEAF_SIZE)
+    return ShapeTree(node_lo, node_hi, skip, first, count, np.ascontiguousarray(rest[prims]), np.sort(loose))
 
 
 @jit

@@ -346,8 +346,9 @@ def _camera_pass(
     counter,
     workers,
 ):
-    """Camera rays and their nearest hits: analytic shapes, 8 rays at a time, then meshes through Embree where a
-    ray may reach a mesh's bounds before its analytic hit."""
+    """Camera rays and their nearest hits: analytic shapes, 8 rays at a time (one at a time through the shapes'
+    hierarchy when the scene has one), then meshes through Embree where a ray may reach a mesh's bounds before its
+    analytic hit."""
     n = dirs.shape[0]
     n_work = (n + LANES - 1) // LANES
     for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing)
@@ -367,7 +368,13 @@ def _camera_pass(
                 else:
                     for k in range(start, stop):
                         _camera_ray_into(cam, sampler, seed, pixels, spp_pass, sample_start, dirs, k)
-                nearest_block(dirs, t, kind, index, cam, s.spheres, s.rects, start)
+                if s.tree_skip.shape[0] == 0:
+                    nearest_block(dirs, t, kind, index, cam, s.spheres, s.rects, start)
+                else:  # many shapes: each ray walks their hierarchy (geometry/shape_bvh.py)
+                    for k in range(start, stop):
+                        t[k], kind[k], index[k] = closest_analytic(
+                            s, cam[0], cam[1], cam[2], dirs[k, 0], dirs[k, 1], dirs[k, 2], np.inf
+                        )
                 for k in range(start, stop):
                     _mesh_hit_into(s, cam, mesh_scene, scratch, ray_counts, dirs, t, kind, index, prim, b1, b2, k)
             lo, hi = claim_range(counter, n_work)
@@ -856,6 +863,9 @@ def _shadow_ray(m, point, gnormal, point_error, wdir, r):
 def _analytic_shadow_stage(s, m, point, gnormal, point_error, wdir, flags, counter, workers):
     """Shadow rays of the slots flagged TEST_ANALYTIC against the spheres and rectangles (BLOCKED), then the
     meshes' bounding boxes (TEST_MESH, for :func:`_mesh_shadow_stage`, or VISIBLE), 8 slots at a time."""
+    if s.tree_skip.shape[0] > 0:  # many shapes: each ray walks their hierarchy, as the scalar stage does
+        _analytic_shadow_slots(s, m, point, gnormal, point_error, wdir, flags, counter, workers)
+        return
     n_work = (flags.shape[0] + LANES - 1) // LANES
     for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing)
         lo, hi = claim_range(counter, n_work)
@@ -880,6 +890,13 @@ def _analytic_shadow_stage(s, m, point, gnormal, point_error, wdir, flags, count
 @jit_parallel
 def _analytic_shadow_scalar_stage(s, m, point, gnormal, point_error, wdir, flags, counter, workers):
     """:func:`_analytic_shadow_stage` one slot at a time: where the vector intrinsics do not compile."""
+    _analytic_shadow_slots(s, m, point, gnormal, point_error, wdir, flags, counter, workers)
+
+
+@jit_inline
+def _analytic_shadow_slots(s, m, point, gnormal, point_error, wdir, flags, counter, workers):
+    """The analytic shadow tests one slot at a time (the scalar stage's body, and the lanes stage's with a shape
+    hierarchy)."""
     n_work = flags.shape[0]
     for worker in prange(workers):  # noqa: B007 - one per thread, claiming chunks (_worksharing)
         lo, hi = claim_range(counter, n_work)
@@ -1206,8 +1223,8 @@ def render(
     }
     largest_pass = max(1, band * spp_pass)
     strategy = STRATEGIES[settings.strategy]
-    camera_pass = _camera_pass_for(arrays)
-    stages = (_shade_setup, *_environment_stages(scene, settings), _shade_finish, _analytic_shadow_stage_for(arrays))
+    camera_pass = _camera_pass_for()
+    stages = (_shade_setup, *_environment_stages(scene, settings), _shade_finish, _analytic_shadow_stage_for())
     if tracer.mesh_scene:
         stages += (_mesh_shadow_stage_for(),)
     worklists = WORKLISTS
@@ -1412,16 +1429,9 @@ def _environment_stages(scene: Scene, settings: RenderSettings) -> tuple:
     return sample_stage, coords_stage, _env_radiance_stage if in_lanes else _env_radiance_scalar_stage
 
 
-def _lanes_for(arrays) -> bool:
-    """Whether the analytic shapes' tests run 8 rays at a time: where this Numba's LLVM builds the intrinsics and
-    the scene tests its shapes one by one (the lanes loop over every shape; a scene with many walks its shape
-    hierarchy one ray at a time, geometry/shape_bvh.py)."""
-    return lanes_compile() and arrays.tree_skip.shape[0] == 0
-
-
-def _analytic_shadow_stage_for(arrays):
-    """The analytic shadow stage in lanes where :func:`_lanes_for` allows it, else the scalar one."""
-    return _analytic_shadow_stage if _lanes_for(arrays) else _analytic_shadow_scalar_stage
+def _analytic_shadow_stage_for():
+    """The analytic shadow stage in lanes where this Numba's LLVM builds the intrinsics, else the scalar one."""
+    return _analytic_shadow_stage if lanes_compile() else _analytic_shadow_scalar_stage
 
 
 def _mesh_shadow_stage_for():
@@ -1429,9 +1439,10 @@ def _mesh_shadow_stage_for():
     return _mesh_shadow_stage if packets_native() else _mesh_shadow_single_stage
 
 
-def _camera_pass_for(arrays):
-    """The camera pass with its analytic hits in lanes where :func:`_lanes_for` allows it, else the scalar one."""
-    return _camera_pass if _lanes_for(arrays) else _camera_scalar_pass
+def _camera_pass_for():
+    """The camera pass with its analytic hits in lanes where this Numba's LLVM builds the intrinsics, else the
+    scalar one."""
+    return _camera_pass if lanes_compile() else _camera_scalar_pass
 
 
 def kernels_cached(scene: Scene | None = None, settings: RenderSettings | None = None) -> bool:
@@ -1445,7 +1456,6 @@ def kernels_cached(scene: Scene | None = None, settings: RenderSettings | None =
         scene = demo_scene()
     settings = settings or RenderSettings()
     meshes = scene.triangle_count > 0
-    arrays = scene.compile()
     if _takes_area_path(scene, settings):
         from .area_lights import stages as area_stages
 
@@ -1455,10 +1465,10 @@ def kernels_cached(scene: Scene | None = None, settings: RenderSettings | None =
             _shade_setup,
             *_environment_stages(scene, settings_for(scene, settings)),
             _shade_finish,
-            _analytic_shadow_stage_for(arrays),
+            _analytic_shadow_stage_for(),
         )
         shading += (_mesh_shadow_stage_for(),) if meshes else ()
-    return is_cached(_camera_pass_for(arrays), *shading, _accumulate)
+    return is_cached(_camera_pass_for(), *shading, _accumulate)
 
 
 class _Stop(Exception):
