@@ -240,7 +240,7 @@ def _panels_file(folder, colors=None):
 
 
 def _mesh_scene(folder, extra):
-    text = SCENE.split("[[objects]]")[0].replace('file = "sky.exr"', 'constant = [0.1, 0.1, 0.1]')
+    text = SCENE.split("[[objects]]")[0].replace('file = "sky.exr"', "constant = [0.1, 0.1, 0.1]")
     (folder / "m.toml").write_text(text + f'[[objects]]\ntype = "mesh"\nfile = "panels.ply"\n{extra}\n')
     return folder / "m.toml"
 

@@ -27,7 +27,7 @@ irradiance, pbrt-v4's ``LightBounds::Importance``) and I_env = pi E_env(n), E_en
 environment's irradiance to first order (its radiance's constant and linear terms: a = pi c0, b = 2 pi / 3 c1),
 floored at a / 4.  A global share by power (pi R^2 of the scene's bounding sphere x the map's integral, pbrt-v4's
 ``ImageInfiniteLight::Phi``) gave a dim sky 89 % of the picks in a scene with a 16 m ground, where uniform selection
-was more efficient (issue 32; decisions.md 69).  The area lights' ``power`` CDF and the BVH are then over the area
+was more efficient (issue 32; decisions.md 71).  The area lights' ``power`` CDF and the BVH are then over the area
 lights alone.  ``uniform`` keeps the environment as one of its L equally likely lights.
 """
 
