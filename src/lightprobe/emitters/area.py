@@ -470,13 +470,19 @@ def light_sample(lights, l, strategy, px, py, pz, nx, ny, nz, u0, u1):
 
 
 @jit
+def _hemisphere_pdf(strategy, nx, ny, nz, wx, wy, wz):
+    """Density of direction w under the ``hemisphere`` (1 / 2 pi) or ``cosine`` (cos / pi) strategy about n."""
+    c = _dot(nx, ny, nz, wx, wy, wz)
+    if c <= 0.0:
+        return 0.0
+    return INV_2PI if strategy == HEMISPHERE else c * INV_PI
+
+
+@jit
 def light_pdf(lights, l, strategy, px, py, pz, nx, ny, nz, wx, wy, wz):
     """Density per steradian with which ``light_sample(..., strategy, ...)`` produces unit direction w."""
     if strategy == HEMISPHERE or strategy == COSINE:
-        c = _dot(nx, ny, nz, wx, wy, wz)
-        if c <= 0.0:
-            return 0.0
-        return INV_2PI if strategy == HEMISPHERE else c * INV_PI
+        return _hemisphere_pdf(strategy, nx, ny, nz, wx, wy, wz)
     if _behind(lights, l, px, py, pz):
         return 0.0
     t, _ = light_intersect(lights, l, px, py, pz, wx, wy, wz)
@@ -497,10 +503,7 @@ def light_pdf_at(lights, l, strategy, px, py, pz, nx, ny, nz, x, y, z):
         return 0.0
     wx, wy, wz = dx / dist, dy / dist, dz / dist
     if strategy == HEMISPHERE or strategy == COSINE:
-        c = _dot(nx, ny, nz, wx, wy, wz)
-        if c <= 0.0:
-            return 0.0
-        return INV_2PI if strategy == HEMISPHERE else c * INV_PI
+        return _hemisphere_pdf(strategy, nx, ny, nz, wx, wy, wz)
     if _behind(lights, l, px, py, pz):
         return 0.0
     if strategy == SOLID_ANGLE:

@@ -41,6 +41,7 @@ import numpy as np
 from .._numba import jit, jit_parallel, prange
 from ..color import luminance
 from ..errors import ParameterError
+from ..geometry.shape_bvh import sort_along_widest_axis
 from .area import LIGHT_RECT, LIGHT_SPHERE, LIGHT_TRIANGLE, LightArrays
 
 __all__ = [
@@ -217,19 +218,7 @@ def _build_tree(
             n_cos_o[node] = cos_o[light]
             trail[light] = bits
             continue
-        axis = 0
-        widest = -1.0
-        for a in range(3):
-            c_lo, c_hi = np.inf, -np.inf
-            for j in range(start, end):
-                c_lo = min(c_lo, centroid[order[j], a])
-                c_hi = max(c_hi, centroid[order[j], a])
-            if c_hi - c_lo > widest:
-                widest, axis = c_hi - c_lo, a
-        keys = np.empty(end - start)
-        for j in range(start, end):
-            keys[j - start] = centroid[order[j], axis]
-        order[start:end] = order[start:end][np.argsort(keys, kind="mergesort")]
+        sort_along_widest_axis(centroid, order, start, end)
         half = (end - start) // 2
         second[node] = node + 2 * half
         stack[top, 0], stack[top, 1], stack[top, 2], stack[top, 3], stack[top, 4] = (

@@ -170,31 +170,33 @@ def _reciprocal(d):
 
 
 @jit_inline
-def closest_analytic(s, ox, oy, oz, dx, dy, dz, tmax):
-    """(t, kind, index) of the nearest sphere or rectangle hit before tmax: every shape in turn, or through the
-    scene's shape hierarchy when it has one (geometry/shape_bvh.py)."""
-    best = tmax
-    kind = MISS
-    index = -1
-    if s.tree_skip.shape[0] == 0:
-        for i in range(s.spheres.shape[0]):
-            t = sphere_hit(
-                ox, oy, oz, dx, dy, dz, s.spheres[i, 0], s.spheres[i, 1], s.spheres[i, 2], s.spheres[i, 3], best
-            )
-            if t < best:
-                best, kind, index = t, SPHERE, i
-        for i in range(s.rects.shape[0]):
-            t = rect_hit(ox, oy, oz, dx, dy, dz, s.rects, i, best)
-            if t < best:
-                best, kind, index = t, RECT, i
-        return best, kind, index
+def _closer(s, p, ox, oy, oz, dx, dy, dz, best, kind, index):
+    """(best, kind, index, hit) after testing analytic shape p: its hit if nearer than ``best``, else unchanged."""
+    t = _shape_t(s, p, ox, oy, oz, dx, dy, dz, best)
+    if not t < best:
+        return best, kind, index, False
     n_spheres = s.spheres.shape[0]
+    if p < n_spheres:
+        return t, SPHERE, p, True
+    return t, RECT, p - n_spheres, True
+
+
+@jit_inline
+def _first_hit(s, ox, oy, oz, dx, dy, dz, tmax, any_hit):
+    """(t, kind, index) of the nearest sphere or rectangle hit before tmax (with ``any_hit``, of the first one found;
+    (tmax, MISS, -1) when there is none): every shape in turn, or through the scene's shape hierarchy when it has
+    one (geometry/shape_bvh.py): its large shapes first, then the tree's leaves whose boxes the segment enters."""
+    best, kind, index = tmax, MISS, -1
+    if s.tree_skip.shape[0] == 0:
+        for p in range(s.spheres.shape[0] + s.rects.shape[0]):
+            best, kind, index, hit = _closer(s, p, ox, oy, oz, dx, dy, dz, best, kind, index)
+            if hit and any_hit:
+                break
+        return best, kind, index
     for j in range(s.tree_loose.shape[0]):
-        p = s.tree_loose[j]
-        t = _shape_t(s, p, ox, oy, oz, dx, dy, dz, best)
-        if t < best:
-            best = t
-            kind, index = (SPHERE, p) if p < n_spheres else (RECT, p - n_spheres)
+        best, kind, index, hit = _closer(s, s.tree_loose[j], ox, oy, oz, dx, dy, dz, best, kind, index)
+        if hit and any_hit:
+            return best, kind, index
     ix, iy, iz = _reciprocal(dx), _reciprocal(dy), _reciprocal(dz)
     i = 0
     while i < s.tree_skip.shape[0]:
@@ -203,46 +205,23 @@ def closest_analytic(s, ox, oy, oz, dx, dy, dz, tmax):
                 i += 1
                 continue
             for j in range(s.tree_first[i], s.tree_first[i] + s.tree_count[i]):
-                p = s.tree_prims[j]
-                t = _shape_t(s, p, ox, oy, oz, dx, dy, dz, best)
-                if t < best:
-                    best = t
-                    kind, index = (SPHERE, p) if p < n_spheres else (RECT, p - n_spheres)
+                best, kind, index, hit = _closer(s, s.tree_prims[j], ox, oy, oz, dx, dy, dz, best, kind, index)
+                if hit and any_hit:
+                    return best, kind, index
         i = s.tree_skip[i]
     return best, kind, index
 
 
 @jit_inline
+def closest_analytic(s, ox, oy, oz, dx, dy, dz, tmax):
+    """(t, kind, index) of the nearest sphere or rectangle hit before tmax; (tmax, MISS, -1) if none."""
+    return _first_hit(s, ox, oy, oz, dx, dy, dz, tmax, False)
+
+
+@jit_inline
 def occluded_analytic(s, ox, oy, oz, dx, dy, dz, tmax):
-    """Whether a sphere or rectangle lies on the segment (0, tmax) (through the shape hierarchy when there is one)."""
-    if s.tree_skip.shape[0] == 0:
-        for i in range(s.spheres.shape[0]):
-            if (
-                sphere_hit(
-                    ox, oy, oz, dx, dy, dz, s.spheres[i, 0], s.spheres[i, 1], s.spheres[i, 2], s.spheres[i, 3], tmax
-                )
-                < tmax
-            ):
-                return True
-        for i in range(s.rects.shape[0]):
-            if rect_hit(ox, oy, oz, dx, dy, dz, s.rects, i, tmax) < tmax:
-                return True
-        return False
-    for j in range(s.tree_loose.shape[0]):
-        if _shape_t(s, s.tree_loose[j], ox, oy, oz, dx, dy, dz, tmax) < tmax:
-            return True
-    ix, iy, iz = _reciprocal(dx), _reciprocal(dy), _reciprocal(dz)
-    i = 0
-    while i < s.tree_skip.shape[0]:
-        if box_entered(ox, oy, oz, ix, iy, iz, s.tree_lo, s.tree_hi, i, tmax):
-            if s.tree_count[i] == 0:
-                i += 1
-                continue
-            for j in range(s.tree_first[i], s.tree_first[i] + s.tree_count[i]):
-                if _shape_t(s, s.tree_prims[j], ox, oy, oz, dx, dy, dz, tmax) < tmax:
-                    return True
-        i = s.tree_skip[i]
-    return False
+    """Whether a sphere or rectangle lies on the segment (0, tmax)."""
+    return _first_hit(s, ox, oy, oz, dx, dy, dz, tmax, True)[0] < tmax
 
 
 @jit_inline

@@ -95,6 +95,25 @@ def _subtree_nodes(n, leaf):
 
 
 @jit
+def sort_along_widest_axis(centroid, items, start, end):
+    """Sort ``items[start:end]`` (rows of ``centroid``) along the axis where their centroids spread the most: the
+    median split of this tree and of the light BVH (emitters/selection.py).  Stable, so the same tree everywhere."""
+    axis = 0
+    widest = -1.0
+    for a in range(3):
+        c_lo, c_hi = np.inf, -np.inf
+        for j in range(start, end):
+            c_lo = min(c_lo, centroid[items[j], a])
+            c_hi = max(c_hi, centroid[items[j], a])
+        if c_hi - c_lo > widest:
+            widest, axis = c_hi - c_lo, a
+    keys = np.empty(end - start)
+    for j in range(start, end):
+        keys[j - start] = centroid[items[j], axis]
+    items[start:end] = items[start:end][np.argsort(keys, kind="mergesort")].copy()
+
+
+@jit
 def _build(lo, hi, leaf):
     n = lo.shape[0]
     m = _subtree_nodes(n, leaf)
@@ -126,21 +145,7 @@ def _build(lo, hi, leaf):
             first[node] = start
             count[node] = size
             continue
-        axis = 0
-        widest = -1.0
-        for a in range(3):
-            c_lo, c_hi = np.inf, -np.inf
-            for j in range(start, end):
-                c_lo = min(c_lo, centroid[prims[j], a])
-                c_hi = max(c_hi, centroid[prims[j], a])
-            if c_hi - c_lo > widest:
-                widest, axis = c_hi - c_lo, a
-        keys = np.empty(size)
-        for j in range(size):
-            keys[j] = centroid[prims[start + j], axis]
-        order = np.argsort(keys, kind="mergesort")  # stable: the same tree on every machine
-        part = prims[start:end][order].copy()
-        prims[start:end] = part
+        sort_along_widest_axis(centroid, prims, start, end)
         half = size // 2
         left_nodes = _subtree_nodes(half, leaf)
         stack[top, 0], stack[top, 1], stack[top, 2] = node + 1 + left_nodes, start + half, end
