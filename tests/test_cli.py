@@ -99,6 +99,20 @@ def test_console_entry_point_and_usage_errors():
     assert bad.returncode == 2 and "Traceback" not in bad.stderr
 
 
+@pytest.mark.parametrize(
+    ("command", "expected"),
+    [("render", "Random seed [0]."), ("reference", "Random seed [scene or 0]."), ("compare", "[default: spp]")],
+)
+def test_help_texts_keep_their_bracketed_defaults(command, expected):
+    """Defaults are written in brackets ("Random seed [0]."); rendered as Rich markup they vanished ("Random seed
+    .")."""
+    out = subprocess.run([sys.executable, "-m", "lightprobe", command, "--help"], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert expected in out.stdout, out.stdout
+    lines = [line.rstrip() for line in out.stdout.splitlines()]
+    assert not [line for line in lines if line.endswith(" .") or " . " in line], out.stdout
+
+
 def test_render_demo_with_variance_png_and_sidecar(tmp_path):
     out = tmp_path / "demo.exr"
     preview = tmp_path / "demo.png"

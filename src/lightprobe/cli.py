@@ -17,14 +17,23 @@ import typer
 
 from .errors import LightprobeError
 
+# Help texts are plain text: they give defaults in brackets ("Random seed [0]."), which Rich markup would take for
+# tags and drop ("Random seed .").
+PLAIN_HELP = None
+
 app = typer.Typer(
+    rich_markup_mode=PLAIN_HELP,
     add_completion=False,
     no_args_is_help=True,
     pretty_exceptions_enable=False,
     help="Monte Carlo image-based lighting with verified importance sampling.",
 )
-experiment_app = typer.Typer(no_args_is_help=True, help="Reproduce the measurements behind the README's claims.")
-envmap_app = typer.Typer(no_args_is_help=True, help="Inspect and convert environment maps.")
+experiment_app = typer.Typer(
+    rich_markup_mode=PLAIN_HELP, no_args_is_help=True, help="Reproduce the measurements behind the README's claims."
+)
+envmap_app = typer.Typer(
+    rich_markup_mode=PLAIN_HELP, no_args_is_help=True, help="Inspect and convert environment maps."
+)
 app.add_typer(experiment_app, name="experiment")
 app.add_typer(envmap_app, name="envmap")
 
@@ -215,6 +224,9 @@ def reference_command(
         str | None, typer.Option(help="Render the chunks on this Dask scheduler (tcp://host:8786).")
     ] = None,
     workers: WorkersOption = 2,
+    quiet: Annotated[
+        bool, typer.Option("--quiet", "-q", help="No line per checkpoint (errors and the result only).")
+    ] = False,
 ) -> None:
     """Render a high-sample reference in checkpointed chunks.  Run the same command again to resume after Ctrl-C,
     a crash or a time limit (bit for bit the same image as an uninterrupted run), or with a larger --spp to extend."""
@@ -230,11 +242,13 @@ def reference_command(
     # a reference is resumable and mergeable by sample range, which per-pixel counts are not
     settings = _render_settings(defaults, {**chosen, "threads": threads, "adaptive": False})
     check_output(output, variance=True, resolution=scene.camera.resolution)
-    typer.echo(scene.summary(), err=True)
+    if not quiet:
+        typer.echo(scene.summary(), err=True)
     start = time.perf_counter()
 
     def chunk_done(done: int, total: int) -> None:
-        _echo_err(f"{done}/{total} spp, checkpoint written ({time.perf_counter() - start:.1f} s)")
+        if not quiet:
+            _echo_err(f"{done}/{total} spp, checkpoint written ({time.perf_counter() - start:.1f} s)")
 
     if workers < 1:
         raise LightprobeError(f"--workers must be >= 1, got {workers}")

@@ -92,6 +92,16 @@ def test_killed_mid_run_then_resumed_is_bit_identical(scene_file, tmp_path):
     np.testing.assert_array_equal(image[:, :, 3:6], whole.variance)
 
 
+def test_reference_quiet_prints_only_the_result(scene_file, tmp_path, capsys):
+    args = ["reference", str(scene_file), "-o", str(tmp_path / "r.exr"), "--spp", "4", "--chunk", "2"]
+    assert main(args) == 0
+    loud = capsys.readouterr().err
+    assert "checkpoint written" in loud
+    assert main([*args[:3], str(tmp_path / "q.exr"), *args[4:], "-q"]) == 0
+    quiet = capsys.readouterr().err
+    assert "checkpoint written" not in quiet and quiet.count("\n") == 1 and quiet.startswith("wrote "), quiet
+
+
 def test_reference_command_errors_are_one_line(scene_file, tmp_path, capsys):
     assert main(["reference", str(scene_file), "-o", str(tmp_path / "r.png")]) != 0
     assert "a reference is written as .exr" in capsys.readouterr().err
