@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import re
 import shutil
 import subprocess
@@ -58,3 +59,40 @@ def test_the_report_in_headless_chromium(report, tmp_path):
     assert image.shape[:2] == (1400, 1200)
     background = np.all(np.abs(image - image[5, 5]) < 0.02, axis=2)
     assert background.mean() < 0.9 and image.std() > 0.05  # text, images and plots, not an empty page
+
+
+def _x_labels(fig):
+    """(text, window extent) of the x tick labels drawn inside the axes, left to right."""
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    ax = fig.axes[0]
+    drawn = []
+    for label in ax.get_xticklabels(which="both"):
+        if not (label.get_text() and label.get_visible()):
+            continue
+        box = label.get_window_extent(renderer)
+        if ax.bbox.x0 - 2 <= (box.x0 + box.x1) / 2 <= ax.bbox.x1 + 2:
+            drawn.append((label.get_text(), box))
+    return sorted(drawn, key=lambda item: item[1].x0)
+
+
+@pytest.mark.parametrize("span", [1.5, 2.0, 5.0, 12.0, 20.0, 35.0, 300.0, 1e5])
+def test_convergence_axes_labels_never_overlap(span):
+    """The seconds of a report's rounds can span any range; matplotlib's default log labels collided on some (e.g.
+    0.0316-0.047 s, 0.018-0.36 s)."""
+    from types import SimpleNamespace
+
+    import matplotlib.pyplot as plt
+
+    from lightprobe.analysis.report import _convergence_figure
+
+    for lo in np.geomspace(0.01, 10.0, 9):
+        rounds = [{"seconds": x, "spp": x, "mse": 0.1 / x} for x in np.geomspace(lo, lo * span, 4)]
+        runs = [SimpleNamespace(label="mis", rounds=rounds, metrics={"efficiency": 1.0})]
+        fig = _convergence_figure(runs, "seconds", "seconds")
+        labels = _x_labels(fig)
+        plt.close(fig)
+        texts = [text for text, _ in labels]
+        collisions = [(a[0], b[0]) for a, b in itertools.pairwise(labels) if a[1].x1 > b[1].x0]
+        assert not collisions, (lo, span, collisions)
+        assert len(labels) >= (2 if span >= 2 else 1), (lo, span, texts)

@@ -14,6 +14,7 @@ import base64
 import html
 import io
 import json
+import math
 import os
 from pathlib import Path
 
@@ -51,29 +52,63 @@ def _figure_uri(fig) -> str:
     return "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode("ascii")
 
 
-def _convergence_plots(runs) -> tuple[str, str]:
+def _log_ticks(axis, lo: float, hi: float) -> None:
+    """Labelled ticks of a log axis over [lo, hi] that never overlap: plain numbers at 1, 2, 5 x 10^k (every decade
+    over wide ranges, finer steps over narrow ones), no labels on minor ticks.  Matplotlib's default labels minor ticks
+    (2x10^-2, 3x10^-2, ...) whenever the range spans less than about 1.5 decades, and those collided."""
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+
+    decades = math.log10(hi / lo) if hi > lo > 0 else 0.0
+    # the widest gap between ticks (in decades) stays under the range, so that at least two are labelled, and the
+    # narrowest stays wide enough on a 5.6-inch figure for labels such as "0.006"
+    if decades > 2.5:
+        subs = (1.0,)
+    elif decades > 0.8:
+        subs = (1.0, 2.0, 5.0)
+    elif decades > 0.5:
+        subs = (1.0, 2.0, 3.0, 5.0)
+    else:
+        subs = (1.0, 1.5, 2.0, 3.0, 4.0, 5.0, 6.0, 8.0)
+    axis.set_major_locator(LogLocator(base=10.0, subs=subs, numticks=24))
+    axis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    axis.set_minor_locator(LogLocator(base=10.0, subs=tuple(float(k) for k in range(2, 10)), numticks=24))
+    axis.set_minor_formatter(NullFormatter())
+
+
+def _convergence_figure(runs, axis: str, xlabel: str):
+    """MSE against ``axis`` (spp or seconds) of every run's rounds, log-log, with the 1/N slope."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    fig, ax = plt.subplots(figsize=(5.6, 4.0))
+    for r in runs:
+        xs = [row[axis] for row in r.rounds]
+        ys = [max(row["mse"], 1e-30) for row in r.rounds]
+        ax.loglog(xs, ys, "o-", ms=3, label=r.label)
+    first = max(runs, key=lambda r: r.metrics["efficiency"]).rounds
+    if len(first) > 1:  # the Monte Carlo slope through the best strategy's first point
+        x0, y0 = first[0][axis], first[0]["mse"]
+        x1 = first[-1][axis]
+        ax.loglog([x0, x1], [y0, y0 * x0 / x1], "k--", lw=1, label="1/N")
+    lo, hi = ax.get_xlim()
+    _log_ticks(ax.xaxis, lo, hi)
+    ax.set_xlim(lo, hi)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel("MSE against the reference")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    return fig
+
+
+def _convergence_plots(runs) -> tuple[str, str]:
+    import matplotlib.pyplot as plt
+
     uris = []
     for axis, xlabel in (("spp", "samples per pixel"), ("seconds", "seconds")):
-        fig, ax = plt.subplots(figsize=(5.6, 4.0))
-        for r in runs:
-            xs = [row[axis] for row in r.rounds]
-            ys = [max(row["mse"], 1e-30) for row in r.rounds]
-            ax.loglog(xs, ys, "o-", ms=3, label=r.label)
-        first = max(runs, key=lambda r: r.metrics["efficiency"]).rounds
-        if len(first) > 1:  # the Monte Carlo slope through the best strategy's first point
-            x0, y0 = first[0][axis], first[0]["mse"]
-            x1 = first[-1][axis]
-            ax.loglog([x0, x1], [y0, y0 * x0 / x1], "k--", lw=1, label="1/N")
-        ax.set_xlabel(xlabel)
-        ax.set_ylabel("MSE against the reference")
-        ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=7)
-        fig.tight_layout()
+        fig = _convergence_figure(runs, axis, xlabel)
         uris.append(_figure_uri(fig))
         plt.close(fig)
     return uris[0], uris[1]
