@@ -75,13 +75,19 @@ def _log_ticks(axis, lo: float, hi: float) -> None:
     axis.set_minor_formatter(NullFormatter())
 
 
-def _convergence_figure(runs, axis: str, xlabel: str):
-    """MSE against ``axis`` (spp or seconds) of every run's rounds, log-log, with the 1/N slope."""
+def _pyplot():
+    """matplotlib.pyplot on the file-only Agg backend (reports are written on machines without a display)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    return plt
+
+
+def _convergence_figure(runs, axis: str, xlabel: str):
+    """MSE against ``axis`` (spp or seconds) of every run's rounds, log-log, with the 1/N slope."""
+    plt = _pyplot()
     fig, ax = plt.subplots(figsize=(5.6, 4.0))
     for r in runs:
         xs = [row[axis] for row in r.rounds]
@@ -104,8 +110,7 @@ def _convergence_figure(runs, axis: str, xlabel: str):
 
 
 def _convergence_plots(runs) -> tuple[str, str]:
-    import matplotlib.pyplot as plt
-
+    plt = _pyplot()
     uris = []
     for axis, xlabel in (("spp", "samples per pixel"), ("seconds", "seconds")):
         fig = _convergence_figure(runs, axis, xlabel)
