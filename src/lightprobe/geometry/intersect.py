@@ -189,7 +189,7 @@ def _first_hit(s, ox, oy, oz, dx, dy, dz, tmax, any_hit):
 
     One loop with one call of ``_closer`` for all three sources of candidates (every shape, the loose shapes, a
     leaf's shapes): the helpers are inlined into the kernels, and each call site is a copy that Numba compiles
-    (three sites made the area-light path's kernels compile in 208 s instead of 132 s, decisions.md 73)."""
+    (with three sites the area-light path compiled in 208 s, with one in 178 s: decisions.md 73)."""
     best, kind, index = tmax, MISS, -1
     n_nodes = s.tree_skip.shape[0]
     # source of candidates: 0 every shape (no tree), 1 the loose shapes, 2 the current leaf's shapes
