@@ -422,6 +422,39 @@ def test_light_option_errors_are_one_line(capsys, tmp_path, args, message):
     assert len(err) == 1 and err[0].startswith("lightprobe: error:") and message in err[0], err
 
 
+def test_render_adds_point_and_spot_lights(tmp_path, capsys):
+    # a scene file without any light, lit from the command line: a point light over a Lambert ground
+    path = tmp_path / "dark.toml"
+    path.write_text(
+        "[camera]\norigin = [0, 2, 4]\ntarget = [0, 0, 0]\nresolution = [12, 8]\n"
+        '[materials.grey]\ntype = "lambert"\n[[objects]]\ntype = "ground"\nmaterial = "grey"\n'
+    )
+    out = tmp_path / "lamp.pfm"
+    args = ["render", str(path), "-o", str(out), "--spp", "2", "-q"]
+    assert main([*args, "--light", "point:0,1,0:4", "--light", "spot:1,2,0:0,0,0:5,5,4:25:20"]) == 0
+    assert "1 point light + 1 spot light" in capsys.readouterr().err
+    meta = json.loads((tmp_path / "lamp.pfm.json").read_text())
+    assert meta["area_lights"] == 2  # rows of the light table
+    assert read_image(out).min() > 0  # the point light reaches every visible point of the ground
+
+
+@pytest.mark.parametrize(
+    ("spec", "message"),
+    [
+        ("lamp:0,1,0:4", "expected 'point:X,Y,Z:I'"),
+        ("point:0,1:4", "the position must be 3 numbers"),
+        ("point:0,1,0:-4", "intensity must be"),
+        ("spot:0,1,0:0,1,0:4", "target must differ"),
+        ("spot:0,1,0:0,0,0:4:120", "cone_angle"),
+        ("spot:0,1,0:0,0,0:4:wide", "an angle must be a number"),
+    ],
+)
+def test_light_specs_are_checked(capsys, tmp_path, spec, message):
+    assert main(["render", "--demo", "--light", spec, "-o", str(tmp_path / "x.exr"), "-q"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("lightprobe: error: --light") and message in err[0], err
+
+
 def test_a_scene_without_any_light_is_an_error(tmp_path, capsys):
     path = tmp_path / "dark.toml"
     path.write_text(

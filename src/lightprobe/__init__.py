@@ -2,7 +2,8 @@
 
 The public API (see the README and each module's docstring):
 
-* lights: :class:`EnvironmentMap` (``load``, ``from_array``, ``eval``, ``sample``, ``pdf``);
+* lights: :class:`EnvironmentMap` (``load``, ``from_array``, ``eval``, ``sample``, ``pdf``), :class:`PointLight`,
+  :class:`SpotLight` (``Scene.add_light``; area lights are objects with an emission);
 * materials: :class:`Lambert`, :class:`Phong`, :class:`GGXConductor`, :class:`RoughPlastic` (``eval``,
   ``sample``, ``pdf``);
 * estimators at one shading point: :func:`estimate`;
@@ -14,6 +15,7 @@ The public API (see the README and each module's docstring):
 
 from .bsdfs import BSDF, GGXConductor, Lambert, Phong, RoughPlastic
 from .emitters.envmap import EnvironmentMap
+from .emitters.punctual import PointLight, SpotLight
 from .errors import ImageError, LightprobeError, LightprobeWarning, ParameterError, SceneError
 from .geometry import Camera, Rectangle, Scene, Sphere, TriangleMesh
 from .integrators import Estimate, RenderResult, RenderSettings, estimate, render
@@ -32,6 +34,7 @@ __all__ = [
     "LightprobeWarning",
     "ParameterError",
     "Phong",
+    "PointLight",
     "Rectangle",
     "RenderResult",
     "RenderSettings",
@@ -39,6 +42,7 @@ __all__ = [
     "Scene",
     "SceneError",
     "Sphere",
+    "SpotLight",
     "TriangleMesh",
     "__version__",
     "estimate",

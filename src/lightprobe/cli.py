@@ -62,6 +62,41 @@ def _split(text: str) -> list[str]:
     return [t.strip() for t in text.split(",") if t.strip()]
 
 
+def _parse_light(spec: str):
+    """A PointLight or SpotLight from ``--light``'s 'point:X,Y,Z:I' or 'spot:X,Y,Z:TX,TY,TZ:I[:ANGLE[:START]]'."""
+    from .emitters.punctual import PointLight, SpotLight
+
+    fields = spec.split(":")
+
+    def numbers(text, count, what):
+        try:
+            values = [float(x) for x in text.split(",")]
+        except ValueError:
+            values = []
+        if len(values) not in count:
+            wanted = {(3,): "3 numbers", (1,): "a number", (1, 3): "a number or 3 numbers"}[count]
+            raise LightprobeError(f"--light {spec!r}: {what} must be {wanted}")
+        return values if len(values) > 1 else values[0]
+
+    kind = fields[0]
+    try:
+        if kind == "point" and len(fields) == 3:
+            return PointLight(numbers(fields[1], (3,), "the position"), numbers(fields[2], (1, 3), "the intensity"))
+        if kind == "spot" and 4 <= len(fields) <= 6:
+            angles = [numbers(f, (1,), "an angle") for f in fields[4:]]
+            return SpotLight(
+                numbers(fields[1], (3,), "the position"),
+                numbers(fields[2], (3,), "the target"),
+                numbers(fields[3], (1, 3), "the intensity"),
+                cone_angle=angles[0] if angles else 30.0,
+                falloff_start=angles[1] if len(angles) > 1 else None,
+            )
+    except LightprobeError as exc:
+        message = str(exc)
+        raise LightprobeError(message if message.startswith("--light") else f"--light {spec!r}: {message}") from None
+    raise LightprobeError(f"--light {spec!r}: expected 'point:X,Y,Z:I' or 'spot:X,Y,Z:TX,TY,TZ:I[:ANGLE[:START]]'")
+
+
 @app.command("render")
 def render_command(
     scene_file: Annotated[Path | None, typer.Argument(metavar="SCENE", help="Scene file (TOML).")] = None,
@@ -108,13 +143,22 @@ def render_command(
         ),
     ] = None,
     light_sampler: Annotated[
-        str | None, typer.Option(help="How a light is picked: uniform, power or bvh [power].")
+        str | None, typer.Option(help="How a light is picked: uniform, power or bvh [bvh].")
     ] = None,
     lights_per_sample: Annotated[
         int | None, typer.Option(help="Lights picked per camera sample, K (each gets --env-samples samples) [1].")
     ] = None,
     light_strategy: Annotated[
         str | None, typer.Option(help="How an area light is sampled: area, solid-angle, hemisphere, cosine.")
+    ] = None,
+    light: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--light",
+            metavar="SPEC",
+            help="Add a point light 'point:X,Y,Z:I' or a spot light 'spot:X,Y,Z:TX,TY,TZ:I[:ANGLE[:START]]' aimed "
+            "at (TX, TY, TZ) (I a number or R,G,B in W/sr; angles in degrees, ANGLE 30, START ANGLE - 5); repeatable.",
+        ),
     ] = None,
     time_limit: Annotated[float | None, typer.Option(help="Stop after this many seconds (keeps the result).")] = None,
     adaptive: Annotated[
@@ -142,6 +186,7 @@ def render_command(
 
     if not demo and scene_file is None:
         raise LightprobeError("give a SCENE file or --demo [NAME]")
+    lamps = [_parse_light(spec) for spec in light or []]
     check_output(output, variance=variance, png=png)
     if object_ids is not None and object_ids.suffix.lower() != ".exr":
         raise LightprobeError(f"{object_ids}: the object-id pass is written as .exr")
@@ -155,7 +200,9 @@ def render_command(
     else:
         from .io.scene_file import load_scene
 
-        scene, defaults = load_scene(scene_file)
+        scene, defaults = load_scene(scene_file, require_light=not lamps)
+    for lamp in lamps:
+        scene.add_light(lamp)
     if width is not None:
         if width < 1:
             raise LightprobeError(f"--width must be >= 1, got {width}")

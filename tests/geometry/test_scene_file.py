@@ -150,6 +150,60 @@ STRING_KEYS = {
 WRONG_VALUES = ['"x"', '[1, "a"]', "true", "{ a = 1 }", "-1", "nan"]
 
 
+LIGHTS = """
+[[lights]]
+type = "point"
+position = [2.0, 3.0, 1.0]
+intensity = 40.0
+intensity_scale = 1.5
+
+[[lights]]
+type = "spot"
+position = [0.0, 4.0, 2.0]
+target = [0.0, 0.0, 0.0]
+intensity = [60.0, 55.0, 50.0]
+cone_angle = 25.0
+falloff_start = 20.0
+"""
+
+
+def test_point_and_spot_lights(scene_dir):
+    from lightprobe.emitters.punctual import PointLight, SpotLight
+
+    path = scene_dir / "scene.toml"
+    path.write_text(SCENE + LIGHTS)
+    scene, _ = load_scene(path)
+    point, spot = scene.lights
+    assert type(point) is PointLight and np.allclose(point.radiance, 60.0) and np.allclose(point.position, [2, 3, 1])
+    assert type(spot) is SpotLight and spot.cone_angle == 25.0 and spot.falloff_start == 20.0
+    np.testing.assert_allclose(spot.axis, -np.array([0.0, 4.0, 2.0]) / np.sqrt(20.0))
+    assert scene.light_table().kind.shape == (2,) and "1 point light + 1 spot light" in scene.summary()
+    # a scene lit by a lamp alone needs no environment
+    path.write_text(SCENE.replace('[environment]\nfile = "sky.exr"\nscale = 2.0\nrotation = 30.0\n', "") + LIGHTS)
+    assert load_scene(path)[0].environment is None
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "message"),
+    [
+        ('type = "point"', 'type = "area"', "lights[0]: unknown light type 'area'"),
+        ("intensity = 40.0\n", "", "lights[0]: missing required key 'intensity'"),
+        ("target = [0.0, 0.0, 0.0]", "target = [0.0, 4.0, 2.0]", "lights[1]: spot light: target must differ"),
+        ("cone_angle = 25.0", "cone_angle = 95.0", "lights[1]: cone_angle"),
+        ("falloff_start = 20.0", "falloff_start = 30.0", "lights[1]: falloff_start"),
+        ("position = [2.0, 3.0, 1.0]", 'position = "up"', "lights[0]: position must be 3 finite numbers"),
+    ],
+)
+def test_light_mistakes_are_one_error_naming_the_light(scene_dir, old, new, message):
+    path = scene_dir / "scene.toml"
+    assert old in LIGHTS
+    path.write_text(SCENE + LIGHTS.replace(old, new, 1))
+    with pytest.raises(SceneError) as info:
+        load_scene(path)
+    text = str(info.value)
+    assert message in text and "scene.toml" in text and "\n" not in text, text
+
+
 def _key_lines(text):
     """(line index, key, value) of every `key = value`, including the keys of one-line inline tables."""
     import re
@@ -183,6 +237,7 @@ def _scene_texts():
         + '[materials.metal]\ntype = "conductor"\nalpha = 0.2\neta = [0.2, 0.9, 1.1]\nk = [3.9, 2.4, 2.2]\n'
         "specular_reflectance = 0.9\nfresnel = true\n"
         + '[[objects]]\ntype = "mesh"\nfile = "meshes/panels.ply"\nface_emission = "meshes/panels.npy"\n'
+        + LIGHTS
     )
     sky = full.replace('[environment]\nfile = "sky.exr"\n', SKY)
     white = full.replace('[environment]\nfile = "sky.exr"\n', "[environment]\nconstant = [1.0, 0.5, 0.25]\n")

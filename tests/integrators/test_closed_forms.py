@@ -138,3 +138,75 @@ def test_white_furnace_with_the_environment_among_area_lights(options):
     standard_error = math.sqrt(var[on].sum()) / on.sum()
     assert standard_error < 1e-2 * albedo * radiance  # a density 5 % off shows at 5 sigma or more
     assert abs(img[on].mean() - albedo * radiance) < 4 * standard_error + 1e-6, (img[on].mean(), standard_error)
+
+
+# --- point and spot lights: delta lights, exact from one sample ---------------------------------------------------
+LAMP = np.array([0.3, 1.2, -0.4])
+
+
+def _lamp_scene(light, *, sky=None, blocker=False):
+    """The Lambert ground point at the origin (albedo 0.6) seen alone, lit by ``light`` (and a constant sky)."""
+    from lightprobe.emitters.envmap import EnvironmentMap
+
+    env = EnvironmentMap.from_array(constant(sky)) if sky is not None else None
+    scene = Scene(Camera([0.1, 1.2, 0.1], [0.0, 0.0, 0.0], fov=0.05, resolution=(1, 1)), env)
+    scene.add(Rectangle.ground(size=40), Lambert(0.6))
+    if blocker:
+        scene.add(Sphere(0.5 * LAMP, 0.1), Lambert(0.5))
+    scene.add_light(light)
+    return scene
+
+
+def _lamp_irradiance(intensity, position=LAMP):
+    d = np.asarray(position)
+    return intensity * d[1] / np.linalg.norm(d) / (d @ d)  # I cos(theta) / d^2
+
+
+@pytest.mark.parametrize("options", [{}, {"strategy": "env"}, {"light_strategy": "area", "light_sampler": "bvh"}])
+def test_a_point_light_gives_the_inverse_square_law_exactly(options):
+    from lightprobe.emitters.punctual import PointLight
+
+    result = render(_lamp_scene(PointLight(LAMP, 5.0)), RenderSettings(spp=16, seed=1, **options))
+    expected = 0.6 / math.pi * _lamp_irradiance(5.0)
+    np.testing.assert_allclose(result.image[0, 0], expected, rtol=1e-4)  # float32, and the pixel is ~1 mm wide
+    # BSDF sampling alone never meets a delta light
+    dark = render(_lamp_scene(PointLight(LAMP, 5.0)), RenderSettings(spp=16, seed=1, strategy="brdf"))
+    assert np.all(dark.image == 0.0)
+    blocked = render(_lamp_scene(PointLight(LAMP, 5.0), blocker=True), RenderSettings(spp=16, seed=1, **options))
+    assert np.all(blocked.image == 0.0)
+
+
+def test_a_spot_light_lights_inside_its_cone_only():
+    from lightprobe.emitters.punctual import SpotLight
+
+    def pixel(target, cone, start):
+        spot = SpotLight(LAMP, target, 5.0, cone_angle=cone, falloff_start=start)
+        return render(_lamp_scene(spot), RenderSettings(spp=4, seed=1)).image[0, 0, 0]
+
+    full = 0.6 / math.pi * _lamp_irradiance(5.0)
+    assert pixel([0, 0, 0], 30.0, 20.0) == pytest.approx(full, rel=1e-4)  # aimed at the point
+    off = np.degrees(
+        np.arccos(
+            (-LAMP)
+            @ (np.array([1.0, 0, 0]) - LAMP)
+            / np.linalg.norm(LAMP)
+            / np.linalg.norm(np.array([1.0, 0, 0]) - LAMP)
+        )
+    )
+    assert pixel([1.0, 0, 0], off - 1.0, off - 5.0) == 0.0  # the point just outside the cone
+    c, c_total, c_start = (math.cos(math.radians(a)) for a in (off, off + 5.0, off - 5.0))
+    t = (c - c_total) / (c_start - c_total)  # pbrt-v4's smoothstep in the cosine, about 1/2 here
+    assert pixel([1.0, 0, 0], off + 5.0, off - 5.0) == pytest.approx(full * t * t * (3 - 2 * t), rel=1e-4)
+
+
+@pytest.mark.parametrize("options", [{}, {"heuristic": "balance", "n_bsdf": 2}, {"light_sampler": "uniform"}])
+def test_a_point_light_takes_mis_weight_one_beside_the_sky(options):
+    """rho / pi (pi L + I cos / d^2) within 4 standard errors: weighing the lamp's samples against the BSDF's
+    density (which never produces its direction) would take about a fifth of its light away."""
+    from lightprobe.emitters.punctual import PointLight
+
+    result = render(_lamp_scene(PointLight(LAMP, 5.0), sky=0.5), RenderSettings(spp=16384, seed=4, **options))
+    expected = 0.6 / math.pi * (math.pi * 0.5 + _lamp_irradiance(5.0))
+    mean, se = result.image[0, 0, 0], math.sqrt(result.variance[0, 0, 0])
+    assert se < 6e-3 * expected
+    assert abs(mean - expected) < 4 * se + 1e-6, (mean, expected, se)

@@ -139,22 +139,39 @@ def test_the_renderer_takes_each_groups_numbers(path):
 
 
 def test_a_camera_samples_light_picks_are_stratified():
-    # the area-light path: K = 16 picks per camera sample (MIS, 1 BSDF slot, one sample per light) fall one in each
-    # sixteenth of [0, 1) under sobol; under independent, slot j's own number (the layout before groups)
-    from lightprobe.integrators.area_lights import _pick_slot
+    # the area-light path: K = 16 light slots per camera sample (MIS, 1 BSDF slot, one sample per light) pick with
+    # the first number of their own 2D pair, which the group's stratification puts one in each sixteenth of [0, 1)
+    # under sobol (the selector hands back what is left of it, so each light's samples keep the pair's net); under
+    # independent, slot j's own pair.  With two samples per light the group's slots share the 1D number.
+    from lightprobe.integrators.area_lights import _pick_number, _pick_slot
 
     k, n_bsdf = 16, 1
 
     @numba.njit
-    def pick_number(sampler, sample, j):
-        rp, picker = _pick_slot(sample_state(sampler, 3, 7, sample), n_bsdf, 1, n_bsdf + k, MIS, j)
+    def pick_number(sampler, sample, j, n_per_light):
+        rs = sample_state(sampler, 3, 7, sample)
+        rj, slot = technique_slot(rs, MIS, n_bsdf, k, j)
+        u0, _ = uniform_2d(rj, 2 + 3 * slot)
+        return _pick_number(rs, n_bsdf, n_per_light, n_bsdf + k, MIS, j, u0), u0
+
+    @numba.njit
+    def shared_number(sampler, sample, j, n_per_light):
+        rp, picker = _pick_slot(sample_state(sampler, 3, 7, sample), n_bsdf, n_per_light, n_bsdf + k, MIS, j)
         return uniform(rp, 4 + 3 * picker)
 
-    def picks(sampler, sample):
-        return np.array([pick_number(SAMPLERS[sampler], sample, j) for j in range(n_bsdf, n_bsdf + k)])
+    def picks(sampler, sample, n_per_light=1):
+        return np.array([pick_number(SAMPLERS[sampler], sample, j, n_per_light) for j in range(n_bsdf, n_bsdf + k)])
 
     for sample in (0, 1, 5):
-        assert np.array_equal(np.sort((picks("sobol", sample) * k).astype(int)), np.arange(k))
-    own = [_own_number(SAMPLERS["independent"], 3, 7, 0, 4 + 3 * j) for j in range(n_bsdf, n_bsdf + k)]
-    assert np.array_equal(picks("independent", 0), own)
-    assert not np.array_equal(np.sort((picks("independent", 0) * k).astype(int)), np.arange(k))
+        chosen, u0 = picks("sobol", sample).T
+        assert np.array_equal(chosen, u0)
+        assert np.array_equal(np.sort((chosen * k).astype(int)), np.arange(k))
+    chosen, u0 = picks("independent", 0).T
+    own = [_own_pair(SAMPLERS["independent"], 3, 7, 0, 2 + 3 * j)[0] for j in range(n_bsdf, n_bsdf + k)]
+    assert np.array_equal(chosen, own)
+    assert not np.array_equal(np.sort((chosen * k).astype(int)), np.arange(k))
+    for sampler in ("sobol", "independent"):
+        chosen, u0 = picks(sampler, 3, n_per_light=2).T
+        assert np.array_equal(chosen[0::2], chosen[1::2]) and not np.array_equal(chosen, u0)
+        shared = [shared_number(SAMPLERS[sampler], 3, j, 2) for j in range(n_bsdf, n_bsdf + k)]
+        assert np.array_equal(chosen, shared)

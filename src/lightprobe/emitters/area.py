@@ -15,8 +15,10 @@ pdf_direction / eval``: for a reference point ``p`` with normal ``n`` and two ra
   the light's normal and the reversed ray (the camera and BSDF samples use it).
 
 Lights live in one table (:class:`LightArrays`), a row per emitter: rectangles, spheres and triangles (an
-emissive mesh contributes one row per triangle, as pbrt-v4 does).  Emission is uniform RGB radiance per row; a
-later textured emission replaces ``radiance[l]`` by a lookup at the sampled point and changes nothing else.
+emissive mesh contributes one row per triangle, as pbrt-v4 does), and point and spot lights, delta lights whose
+one direction :mod:`lightprobe.emitters.punctual` samples (the strategies below are the area lights').
+Emission is uniform RGB radiance per row; a later textured emission replaces ``radiance[l]`` by a lookup at the
+sampled point and changes nothing else.
 
 Strategies (``STRATEGIES``), each with its density per steradian:
 
@@ -70,6 +72,7 @@ from ..sampling.kernels import (
     square_to_uniform_hemisphere,
     square_to_uniform_triangle,
 )
+from .punctual import punctual_sample
 
 __all__ = [
     "KINDS",
@@ -87,7 +90,14 @@ __all__ = [
 ]
 
 LIGHT_RECT, LIGHT_SPHERE, LIGHT_TRIANGLE = 0, 1, 2
-KINDS = {"rectangle": LIGHT_RECT, "sphere": LIGHT_SPHERE, "triangle": LIGHT_TRIANGLE}
+LIGHT_POINT, LIGHT_SPOT = 3, 4  # delta lights (emitters/punctual.py): every kind >= LIGHT_POINT is one
+KINDS = {
+    "rectangle": LIGHT_RECT,
+    "sphere": LIGHT_SPHERE,
+    "triangle": LIGHT_TRIANGLE,
+    "point": LIGHT_POINT,
+    "spot": LIGHT_SPOT,
+}
 AREA, SOLID_ANGLE, HEMISPHERE, COSINE = 0, 1, 2, 3
 STRATEGIES = {"area": AREA, "solid-angle": SOLID_ANGLE, "hemisphere": HEMISPHERE, "cosine": COSINE}
 MIN_SOLID_ANGLE = 3e-4  # sr: below, spherical sampling falls back to area sampling (pbrt-v4)
@@ -97,11 +107,11 @@ MAX_SOLID_ANGLE = 6.22  # sr: above, likewise (pbrt-v4's MaxSphericalSampleArea)
 class LightArrays(NamedTuple):
     """The light table the kernels read: row l is one emitter."""
 
-    kind: np.ndarray  # (L,) int64: LIGHT_RECT / LIGHT_SPHERE / LIGHT_TRIANGLE
+    kind: np.ndarray  # (L,) int64: LIGHT_RECT / LIGHT_SPHERE / LIGHT_TRIANGLE / LIGHT_POINT / LIGHT_SPOT
     geom: np.ndarray  # (L, RECT_WIDTH) float64: a rectangle's row of geometry/intersect.rectangle_rows (origin,
     #                   edge_u, edge_v, unit normal, dual vectors) | sphere centre, radius | triangle v0, v1, v2,
-    #                   unit normal (unused columns 0)
-    radiance: np.ndarray  # (L, 3) float64
+    #                   unit normal | point position | spot position, axis, cos total, cos start (unused columns 0)
+    radiance: np.ndarray  # (L, 3) float64: radiance; a point or spot light's intensity
     two_sided: np.ndarray  # (L,) int64
     area: np.ndarray  # (L,) float64
 
@@ -163,6 +173,8 @@ def light_intersect(lights, l, ox, oy, oz, dx, dy, dz):
     between the light's normal at the hit and -d (> 0: the front)."""
     g = lights.geom[l]
     kind = lights.kind[l]
+    if kind >= LIGHT_POINT:  # a delta light: no ray meets it
+        return math.inf, 0.0
     if kind == LIGHT_SPHERE:
         t = sphere_hit(ox, oy, oz, dx, dy, dz, g[0], g[1], g[2], g[3], math.inf)
         if t == math.inf:
@@ -198,7 +210,7 @@ def light_point_error(lights, l, x, y, z, n):
     return point_error(ANALYTIC_ERROR, x, y, z, n[0], n[1], n[2], extent)
 
 
-@jit
+@jit_inline
 def light_radiance(lights, l, cos_light):
     """Radiance leaving light l toward a viewer at cosine ``cos_light`` from its normal (0 behind a one-sided
     light)."""
@@ -408,7 +420,10 @@ def _behind(lights, l, px, py, pz):
 
 @jit
 def light_sample(lights, l, strategy, px, py, pz, nx, ny, nz, u0, u1):
-    """Sample a direction toward light l from point p (normal n): (wx, wy, wz, distance, r, g, b, pdf per sr)."""
+    """Sample a direction toward light l from point p (normal n): (wx, wy, wz, distance, r, g, b, pdf per sr).  A
+    point or spot light has one direction whatever the strategy, with pdf 1 (a delta: emitters/punctual.py)."""
+    if lights.kind[l] >= LIGHT_POINT:
+        return punctual_sample(lights.kind[l] == LIGHT_SPOT, lights.geom[l], lights.radiance[l], px, py, pz)
     if strategy == HEMISPHERE or strategy == COSINE:
         ts, tt = coordinate_system(nx, ny, nz)
         if strategy == HEMISPHERE:
@@ -480,7 +495,10 @@ def _hemisphere_pdf(strategy, nx, ny, nz, wx, wy, wz):
 
 @jit
 def light_pdf(lights, l, strategy, px, py, pz, nx, ny, nz, wx, wy, wz):
-    """Density per steradian with which ``light_sample(..., strategy, ...)`` produces unit direction w."""
+    """Density per steradian with which ``light_sample(..., strategy, ...)`` produces unit direction w (0 for a
+    delta light: no given direction is ever its)."""
+    if lights.kind[l] >= LIGHT_POINT:
+        return 0.0
     if strategy == HEMISPHERE or strategy == COSINE:
         return _hemisphere_pdf(strategy, nx, ny, nz, wx, wy, wz)
     if _behind(lights, l, px, py, pz):
@@ -497,6 +515,8 @@ def light_pdf_at(lights, l, strategy, px, py, pz, nx, ny, nz, x, y, z):
     point (x, y, z) of light l, a point a ray is known to have hit: the density of *that* point, with no second
     intersection (a BSDF ray leaves an offset origin, and from p itself its twin may miss a small light's edge;
     weighing it with a density of 0 there counted that band twice under MIS)."""
+    if lights.kind[l] >= LIGHT_POINT:
+        return 0.0
     dx, dy, dz = x - px, y - py, z - pz
     dist = math.sqrt(dx * dx + dy * dy + dz * dz)
     if dist == 0.0:
@@ -704,6 +724,8 @@ def _geom_row(kind: str, geom) -> np.ndarray:
 
 
 def _area(kind: str, g: np.ndarray) -> float:
+    if kind in ("point", "spot"):
+        return 0.0
     if kind == "rectangle":
         return float(np.linalg.norm(np.cross(g[3:6], g[6:9])))
     if kind == "triangle":
@@ -712,7 +734,8 @@ def _area(kind: str, g: np.ndarray) -> float:
 
 
 def light_arrays(lights) -> LightArrays:
-    """The kernels' table of ``lights`` (a sequence of :class:`AreaLight`)."""
+    """The kernels' table of ``lights``: a sequence of :class:`AreaLight`,
+    :class:`~lightprobe.emitters.punctual.PointLight` and :class:`~lightprobe.emitters.punctual.SpotLight`."""
     n = len(lights)
     return LightArrays(
         np.array([KINDS[x.kind] for x in lights], dtype=np.int64).reshape(n),

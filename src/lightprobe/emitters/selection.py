@@ -1,8 +1,10 @@
 """Choosing which light to sample: uniform, in proportion to power, or with a light BVH.
 
 The lecture's many-light estimator picks light l with probability p_l and divides by it (1/(KN) sum f / (p_l p)),
-so every selector offers ``select(p, n, u) -> (light, pmf)`` and ``pmf(p, n, light)`` for MIS (pbrt-v4's
-``LightSampler::Sample / PMF``).  Lights are numbered as in the scene's light table; when the scene has an
+so every selector offers ``select(p, n, u) -> (light, pmf, u')`` and ``pmf(p, n, light)`` for MIS (pbrt-v4's
+``LightSampler::Sample / PMF``); u' is what is left of u after it chose the light, uniform on [0, 1) again, which the
+renderer gives the light as the first number of its sample (decisions.md 74).  Lights are numbered as in the scene's
+light table; when the scene has an
 environment map it is one more light, the last index.
 
 ``uniform``
@@ -15,7 +17,10 @@ environment map it is one more light, the last index.
     a light BVH (Conty Estevez & Kulla 2018, pbrt-v4's ``BVHLightSampler``): every node bounds its lights'
     positions (a box), power, and emission directions (a cone of normals plus the spread of emission about them);
     a pick descends from the root choosing each child in proportion to its importance for the shading point,
-    phi cos(theta') / d^2 times the bound on the cosine at the receiver (pbrt-v4's ``LightBounds::Importance``).
+    phi cos(theta') / d^2 times the bound on the cosine at the receiver (pbrt-v4's ``LightBounds::Importance``),
+    pi x the irradiance of a flat light of power phi facing the receiver.  So a sphere's phi is a quarter of its
+    power (it faces every receiver with a disc, a quarter of its area) and a point or spot light's is pi I
+    (decisions.md 75); pbrt-v4 takes their whole power and over-picks them 4x beside flat lights.
     O(depth) per pick and per pmf.  Nodes split at the median centroid along the axis of largest extent (pbrt-v4
     uses a surface-area-orientation cost; the median split is simpler and keeps the tree balanced: depth
     ceil(log2 L)).
@@ -38,11 +43,11 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .._numba import jit, jit_parallel, prange
+from .._numba import jit, jit_inline, jit_parallel, prange
 from ..color import luminance
 from ..errors import ParameterError
 from ..geometry.shape_bvh import sort_along_widest_axis
-from .area import LIGHT_RECT, LIGHT_SPHERE, LIGHT_TRIANGLE, LightArrays
+from .area import LIGHT_POINT, LIGHT_RECT, LIGHT_SPHERE, LIGHT_SPOT, LIGHT_TRIANGLE, LightArrays
 
 __all__ = [
     "SELECTORS",
@@ -71,11 +76,12 @@ class LightSelector(NamedTuple):
     cdf: np.ndarray  # (area lights + 1,) power CDF over the area lights (POWER), empty otherwise
     # the light bounds: a tree (BVH) or its root alone (POWER: for the environment's share), empty without area
     # lights or in UNIFORM mode; node 0 is the root
-    node_lo: np.ndarray  # (M, 3) bounds of each node
-    node_hi: np.ndarray
-    node_phi: np.ndarray  # (M,) power
+    node_center: np.ndarray  # (M, 3) centre of each node's box
+    node_radius: np.ndarray  # (M,) half the box's diagonal: the radius of the box's bounding sphere
+    node_phi: np.ndarray  # (M,) power (a sphere's a quarter of it: _light_bounds)
     node_w: np.ndarray  # (M, 3) axis of the normal cone
     node_cos_o: np.ndarray  # (M,) cos of the normal cone's spread
+    node_sin_o: np.ndarray  # (M,) its sine
     node_cos_e: np.ndarray  # (M,) cos of the emission spread about any normal
     node_two_sided: np.ndarray  # (M,) int64
     node_second: np.ndarray  # (M,) index of the second child (the first is node + 1); -1 for a leaf
@@ -109,13 +115,35 @@ def _light_bounds(lights: LightArrays):
         lo[sph], hi[sph] = c - r, c + r
         w[sph] = (0.0, 0.0, 1.0)
         cos_o[sph] = -1.0  # normals point everywhere
+    # delta lights (pbrt-v4's PointLight/SpotLight::Bounds): a point; a spot's cone of full intensity about its axis
+    # and the falloff beyond it as the emission spread
+    point, spot = lights.kind == LIGHT_POINT, lights.kind == LIGHT_SPOT
+    lo[point | spot] = hi[point | spot] = g[point | spot, 0:3]
+    w[point] = (0.0, 0.0, 1.0)
+    cos_o[point] = -1.0
+    w[spot], cos_o[spot] = g[spot, 3:6], g[spot, 7]
+    cos_e[spot] = np.cos(np.maximum(np.arccos(np.clip(g[spot, 6], -1, 1)) - np.arccos(np.clip(g[spot, 7], -1, 1)), 0.0))
     phi = power_of_lights(lights)
+    # The importance phi cos(theta') / d^2 is pi times the irradiance of a flat light of power phi facing the
+    # receiver.  A sphere faces every receiver with its disc, pi r^2, a quarter of its area 4 pi r^2: with its whole
+    # power (pbrt-v4's bound, a cone of all normals) it took 4x its share (on the area-light reference scene a
+    # sphere got 0.83 of the picks on ground it lit less than the ring beside it; decisions.md 75).
+    phi[sph] *= 0.25
+    # likewise a point or spot light of intensity I lights a receiver facing it with I / d^2: phi = pi I
+    phi[point | spot] = math.pi * luminance(lights.radiance[point | spot])
     return lo, hi, phi, w, cos_o, cos_e, lights.two_sided.astype(np.int64)
 
 
 def power_of_lights(lights: LightArrays) -> np.ndarray:
-    """Emitted power (of the luminance) of each area light: pi A L, doubled for two-sided lights."""
-    return math.pi * lights.area * luminance(lights.radiance) * np.where(lights.two_sided == 1, 2.0, 1.0)
+    """Emitted power (of the luminance) of each light: pi A L for an area light, doubled for two-sided ones; 4 pi I
+    for a point light, 2 pi I (1 - (cos_start + cos_total) / 2) for a spot (pbrt-v4's ``Phi``)."""
+    lum = luminance(lights.radiance)
+    power = math.pi * lights.area * lum * np.where(lights.two_sided == 1, 2.0, 1.0)
+    point, spot = lights.kind == LIGHT_POINT, lights.kind == LIGHT_SPOT
+    power[point] = 4.0 * math.pi * lum[point]
+    g = lights.geom
+    power[spot] = 2.0 * math.pi * lum[spot] * (1.0 - 0.5 * (g[spot, 7] + g[spot, 6]))
+    return power
 
 
 @jit
@@ -264,13 +292,14 @@ def _sin_sub_clamped(sin_a, cos_a, sin_b, cos_b):
 @jit
 def node_importance(sel, i, px, py, pz, nx, ny, nz):
     """pbrt-v4 LightBounds::Importance of node i for a receiver at p with normal n."""
-    lo, hi = sel.node_lo[i], sel.node_hi[i]
-    cx, cy, cz = 0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), 0.5 * (lo[2] + hi[2])
-    dx, dy, dz = px - cx, py - cy, pz - cz
+    # the box's centre, its bounding sphere's radius and the cone's sine are the node's own (build_selector): three
+    # of the seven square roots this took per call, at two calls per level of every descent
+    c = sel.node_center[i]
+    radius = sel.node_radius[i]
+    dx, dy, dz = px - c[0], py - c[1], pz - c[2]
     d2 = dx * dx + dy * dy + dz * dz
-    diag = math.sqrt((hi[0] - lo[0]) ** 2 + (hi[1] - lo[1]) ** 2 + (hi[2] - lo[2]) ** 2)
-    d2 = max(d2, 0.5 * diag)
-    dist = math.sqrt(dx * dx + dy * dy + dz * dz)
+    dist = math.sqrt(d2)
+    d2 = max(d2, radius)  # pbrt-v4: max(d2, Length(diagonal) / 2)
     if dist > 0.0:
         wx, wy, wz = dx / dist, dy / dist, dz / dist
     else:
@@ -280,15 +309,14 @@ def node_importance(sel, i, px, py, pz, nx, ny, nz):
     if sel.node_two_sided[i] == 1:
         cos_w = abs(cos_w)
     sin_w = math.sqrt(max(0.0, 1.0 - cos_w * cos_w))
-    # directions subtended by the box's bounding sphere
-    radius = 0.5 * diag
-    if dist * dist <= radius * radius:
-        cos_b = -1.0
+    # directions subtended by the box's bounding sphere: sin(theta_b) = radius / dist
+    if dist <= radius:
+        cos_b, sin_b = -1.0, 0.0
     else:
-        cos_b = math.sqrt(max(0.0, 1.0 - radius * radius / (dist * dist)))
-    sin_b = math.sqrt(max(0.0, 1.0 - cos_b * cos_b))
+        sin_b = radius / dist
+        cos_b = math.sqrt(max(0.0, 1.0 - sin_b * sin_b))
     cos_o = sel.node_cos_o[i]
-    sin_o = math.sqrt(max(0.0, 1.0 - cos_o * cos_o))
+    sin_o = sel.node_sin_o[i]
     cos_x = _cos_sub_clamped(sin_w, cos_w, sin_o, cos_o)
     sin_x = _sin_sub_clamped(sin_w, cos_w, sin_o, cos_o)
     cos_p = _cos_sub_clamped(sin_x, cos_x, sin_b, cos_b)
@@ -330,22 +358,38 @@ def env_probability(sel, px, py, pz, nx, ny, nz):
     return i_env / (i_env + i_area)
 
 
-@jit
+ONE_MINUS_EPSILON = 1.0 - 2.0**-53  # the largest double below 1
+
+
+@jit_inline
+def _rescaled(u, lo, width):
+    """u's position inside the interval [lo, lo + width) it fell in, as a number in [0, 1): what is left of u after
+    it chose that interval (pbrt-v4's BVHLightSampler, Mitsuba 3's ``sample_reuse``)."""
+    return min(max((u - lo) / width, 0.0), ONE_MINUS_EPSILON)
+
+
+@jit_inline
 def select_light(sel, px, py, pz, nx, ny, nz, u):
-    """(light index, probability) for a receiver at p with normal n; (-1, 0) when no light can be picked."""
+    """(light index, probability, u rescaled) for a receiver at p with normal n; (-1, 0, u) when no light can be
+    picked.  The third value is u's position inside the sub-interval of [0, 1) that chose the light, a fresh
+    uniform number: the renderer picks with the first number of the light sample's 2D pair and gives the pair back
+    to the light with this number in its place, so each light's samples keep the pair's stratification (a separate
+    pick number leaves each light a scattered subset of the pair's net)."""
     if sel.n_lights == 0:
-        return -1, 0.0
+        return -1, 0.0, u
     if sel.mode == UNIFORM:
-        return min(int(u * sel.n_lights), sel.n_lights - 1), 1.0 / sel.n_lights
+        x = u * sel.n_lights
+        light = min(int(x), sel.n_lights - 1)
+        return light, 1.0 / sel.n_lights, _rescaled(x, float(light), 1.0)
     pmf = 1.0
     if sel.env_index >= 0:
         p_env = env_probability(sel, px, py, pz, nx, ny, nz)
         if u < p_env:
-            return sel.env_index, p_env
+            return sel.env_index, p_env, _rescaled(u, 0.0, p_env)
         if p_env >= 1.0:
-            return -1, 0.0
+            return -1, 0.0, u
         pmf = 1.0 - p_env
-        u = min((u - p_env) / pmf, 1.0 - 1e-16)
+        u = _rescaled(u, p_env, pmf)
     if sel.mode == POWER:
         cdf = sel.cdf
         lo, hi = 0, cdf.shape[0] - 2
@@ -355,10 +399,11 @@ def select_light(sel, px, py, pz, nx, ny, nz, u):
                 lo = mid + 1
             else:
                 hi = mid
-        return lo, pmf * (cdf[lo + 1] - cdf[lo])
+        width = cdf[lo + 1] - cdf[lo]
+        return lo, pmf * width, _rescaled(u, cdf[lo], width)
     # BVH
     if sel.node_phi.shape[0] == 0 or sel.node_phi[0] <= 0.0:
-        return -1, 0.0
+        return -1, 0.0, u
     node = 0
     while sel.node_second[node] >= 0:
         a = node + 1
@@ -368,15 +413,15 @@ def select_light(sel, px, py, pz, nx, ny, nz, u):
         if u < pa:
             node = a
             pmf *= pa
-            u = min(u / pa, 1.0 - 1e-16)
+            u = _rescaled(u, 0.0, pa)
         else:
             node = b
             pmf *= ib / (ia + ib)  # the very expression selector_pmf uses, so both report the same bits
-            u = min((u - pa) / (1.0 - pa), 1.0 - 1e-16)
-    return sel.node_light[node], pmf
+            u = _rescaled(u, pa, 1.0 - pa)
+    return sel.node_light[node], pmf, u
 
 
-@jit
+@jit_inline
 def selector_pmf(sel, px, py, pz, nx, ny, nz, light):
     """Probability that :func:`select_light` picks ``light`` for this receiver."""
     if light < 0 or light >= sel.n_lights:
@@ -415,11 +460,12 @@ def _select_batch(sel, points, normals, u):
     n = u.shape[0]
     light = np.empty(n, np.int64)
     pmf = np.empty(n)
+    rest = np.empty(n)
     for i in prange(n):
-        light[i], pmf[i] = select_light(
+        light[i], pmf[i], rest[i] = select_light(
             sel, points[i, 0], points[i, 1], points[i, 2], normals[i, 0], normals[i, 1], normals[i, 2], u[i]
         )
-    return light, pmf
+    return light, pmf, rest
 
 
 @jit_parallel
@@ -463,11 +509,12 @@ def build_selector(mode: str, lights: LightArrays, *, env_irradiance=None) -> Li
         float(env[0]),
         np.ascontiguousarray(env[1:]),
         cdf,
-        nodes["lo"],
-        nodes["hi"],
+        np.ascontiguousarray(0.5 * (nodes["lo"] + nodes["hi"])),
+        0.5 * np.linalg.norm(nodes["hi"] - nodes["lo"], axis=1),
         nodes["phi"],
         nodes["w"],
         nodes["cos_o"],
+        np.sqrt(np.maximum(0.0, 1.0 - nodes["cos_o"] ** 2)),
         nodes["cos_e"],
         nodes["two"],
         nodes["second"],
@@ -522,18 +569,20 @@ def _root_only(lights: LightArrays) -> dict:
 
 
 class LightSampler:
-    """A selector usable from Python: ``select(points, normals, u) -> (lights, pmf)``, ``pmf(point, normal)`` (the
-    probability of every light for one receiver)."""
+    """A selector usable from Python: ``select(points, normals, u) -> (lights, pmf)`` (with ``rescaled=True`` also
+    each u rescaled to [0, 1) within the interval that chose its light), ``pmf(point, normal)`` (the probability of
+    every light for one receiver)."""
 
     def __init__(self, mode: str, lights: LightArrays, *, env_irradiance=None):
         self.mode = mode
         self.arrays = build_selector(mode, lights, env_irradiance=env_irradiance)
 
-    def select(self, points, normals, u):
+    def select(self, points, normals, u, *, rescaled: bool = False):
         u = np.ascontiguousarray(np.asarray(u, dtype=np.float64).reshape(-1))
         points = np.ascontiguousarray(np.broadcast_to(np.asarray(points, dtype=np.float64), (u.size, 3)))
         normals = np.ascontiguousarray(np.broadcast_to(np.asarray(normals, dtype=np.float64), (u.size, 3)))
-        return _select_batch(self.arrays, points, normals, u)
+        light, pmf, rest = _select_batch(self.arrays, points, normals, u)
+        return (light, pmf, rest) if rescaled else (light, pmf)
 
     def pmf(self, point, normal) -> np.ndarray:
         return _pmf_all(self.arrays, np.asarray(point, dtype=np.float64), np.asarray(normal, dtype=np.float64))

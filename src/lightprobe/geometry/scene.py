@@ -1,4 +1,4 @@
-"""A scene: camera, environment light, materials and objects (meshes, spheres, rectangles).
+"""A scene: camera, environment light, materials, objects (meshes, spheres, rectangles) and point and spot lights.
 
 Build one from Python::
 
@@ -7,6 +7,7 @@ Build one from Python::
     scene.add(TriangleMesh.load("bunny.obj"), "red", transform={"scale": 5, "translate": [0, 1, 0]})
     scene.add(Sphere([1, 0.5, 0], 0.5), GGXConductor(0.05, material="Al"))
     scene.add(Rectangle.ground(size=100), Lambert(0.5))
+    scene.add_light(SpotLight([0, 4, 2], target=[0, 0, 0], intensity=50, cone_angle=25))
 
 or from a TOML file with :func:`lightprobe.io.scene_file.load_scene` (``Scene.load``).  :meth:`Scene.compile`
 flattens everything into the plain arrays the Numba kernels read (:class:`SceneArrays`).
@@ -91,6 +92,7 @@ class Scene:
         self.name = name
         self.materials: dict[str, BSDF] = {}
         self.objects: list[SceneObject] = []
+        self.lights: list = []  # point and spot lights (emitters/punctual.py), after the emitting objects' rows
 
     def add_material(self, name: str, bsdf: BSDF) -> str:
         if not isinstance(bsdf, BSDF):
@@ -140,6 +142,16 @@ class Scene:
         obj = SceneObject(shape, material, bool(two_sided), label, emission)
         self.objects.append(obj)
         return obj
+
+    def add_light(self, light):
+        """Add a :class:`~lightprobe.emitters.punctual.PointLight` or
+        :class:`~lightprobe.emitters.punctual.SpotLight` (an emitter without a surface)."""
+        from ..emitters.punctual import PointLight
+
+        if not isinstance(light, PointLight):
+            raise SceneError(f"add_light takes a PointLight or SpotLight, got {type(light).__name__}")
+        self.lights.append(light)
+        return light
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> Scene:
@@ -227,7 +239,8 @@ class Scene:
 
     def light_table(self):
         """The :class:`~lightprobe.emitters.area.LightArrays` of every emissive object (world space): spheres,
-        rectangles, then each face of each emissive mesh, in the order :meth:`compile` numbers them."""
+        rectangles, then each face of each emissive mesh, in the order :meth:`compile` numbers them; then the point
+        and spot lights."""
         from ..emitters.area import LIGHT_RECT, LIGHT_SPHERE, LightArrays
 
         emitters = self.emitters
@@ -253,6 +266,10 @@ class Scene:
             _triangle_lights(o.shape, o.emission, o.two_sided) for o in emitters if isinstance(o.shape, TriangleMesh)
         ]
         parts = [analytic, *meshes]
+        if self.lights:  # after every surface's rows, so compile()'s numbering of those holds
+            from ..emitters.area import light_arrays
+
+            parts.append(light_arrays(self.lights))
         return LightArrays(*(np.concatenate([getattr(t, f) for t in parts]) for f in LightArrays._fields))
 
     def summary(self) -> str:
@@ -263,6 +280,10 @@ class Scene:
         if self.emitters:
             n = sum(_light_rows(o) for o in self.emitters)
             lights.append(f"{n} area lights")
+        for kind in ("point", "spot"):
+            n = sum(light.kind == kind for light in self.lights)
+            if n:
+                lights.append(f"{n} {kind} light{'s' if n > 1 else ''}")
         return (
             f"{self.name}: {len(self.objects)} objects ({self.triangle_count} triangles), "
             f"{len(self.materials)} materials, {w}x{h}, light {' + '.join(lights) or 'none'}"

@@ -144,7 +144,7 @@ class RenderSettings:
     sampler: str = "sobol"
     env_candidates: int = 1  # > 1: resampled environment samples (RIS, Talbot et al. 2005) from this many candidates
     mis_compensation: bool | None = None  # None: on diffuse materials for MIS in scenes lit by an environment map alone
-    light_sampler: str = "power"
+    light_sampler: str = "bvh"
     lights_per_sample: int = 1
     light_strategy: str = "solid-angle"
     time_limit: float | None = None
@@ -1065,7 +1065,7 @@ def _placeholder_environment():
 
 
 def _takes_area_path(scene: Scene, settings: RenderSettings) -> bool:
-    return bool(scene.emitters) or scene.environment is None or settings.lights_per_sample > 1
+    return bool(scene.emitters or scene.lights) or scene.environment is None or settings.lights_per_sample > 1
 
 
 def settings_for(scene: Scene, settings: RenderSettings) -> RenderSettings:

@@ -80,6 +80,20 @@ Example (every key shown; optional ones have their default)::
     emission = [1.0, 0.9, 0.8]          # radiance, RGB or a number; `material` is optional for emitters
     emission_scale = 20.0
 
+    [[lights]]                          # a point light: intensity in W/sr (RGB or a number), in every direction
+    type = "point"
+    position = [2.0, 3.0, 1.0]
+    intensity = 40.0
+    intensity_scale = 1.0               # optional, multiplies intensity
+
+    [[lights]]                          # a spot light: full intensity within falloff_start degrees of its axis,
+    type = "spot"                       #   none beyond cone_angle (default falloff_start: cone_angle - 5)
+    position = [0.0, 4.0, 2.0]
+    target = [0.0, 0.0, 0.0]
+    intensity = [60.0, 55.0, 50.0]
+    cone_angle = 25.0
+    falloff_start = 20.0
+
     [render]                            # optional defaults for `lightprobe render` (options override them)
     spp = 64
     strategy = "mis"
@@ -89,7 +103,7 @@ Example (every key shown; optional ones have their default)::
     seed = 0
     sampler = "sobol"                   # sobol (Owen-scrambled Sobol') | independent
     env_candidates = 1                  # > 1: resampled environment samples (RIS) from this many candidates
-    light_sampler = "power"             # uniform | power | bvh
+    light_sampler = "bvh"               # uniform | power | bvh
     lights_per_sample = 1               # lights chosen per camera sample (K)
     light_strategy = "solid-angle"      # area | solid-angle | hemisphere | cosine
 
@@ -108,6 +122,7 @@ import numpy as np
 from ..bsdfs import GGXConductor, Lambert, Phong, RoughPlastic
 from ..emitters.envmap import EnvironmentMap
 from ..emitters.procedural import constant, sky_with_sun
+from ..emitters.punctual import PointLight, SpotLight
 from ..errors import LightprobeError, SceneError, numeric_array
 from ..geometry.camera import Camera
 from ..geometry.mesh import TriangleMesh
@@ -350,8 +365,33 @@ def _object(scene: Scene, t: _Table, base: Path) -> None:
     scene.add(shape, material, two_sided=two_sided, name=name, **extra)
 
 
-def load_scene(path: str | os.PathLike) -> tuple[Scene, dict]:
-    """Read a scene file: returns the scene and its ``[render]`` defaults (possibly empty)."""
+def _light(scene: Scene, t: _Table) -> None:
+    kind = t.string("type", required=True)
+    if kind not in ("point", "spot"):
+        raise SceneError(f"{t.where}: unknown light type {kind!r}; use point or spot (area lights are objects)")
+    position = t.get("position", required=True)
+    t.get("intensity", required=True)
+    scale = t.number("intensity_scale", 1.0)
+    if scale < 0:
+        raise SceneError(f"{t.where}: intensity_scale must be >= 0, got {scale!r}")
+    intensity = t.rgb("intensity") * scale
+    if kind == "point":
+        light = PointLight(position, intensity)
+    else:
+        light = SpotLight(
+            position,
+            t.get("target", required=True),
+            intensity,
+            cone_angle=t.number("cone_angle", 30.0),
+            falloff_start=t.number("falloff_start"),
+        )
+    t.done()
+    scene.add_light(light)
+
+
+def load_scene(path: str | os.PathLike, *, require_light: bool = True) -> tuple[Scene, dict]:
+    """Read a scene file: returns the scene and its ``[render]`` defaults (possibly empty).  ``require_light=False``
+    accepts a scene without lights (the caller adds some: ``lightprobe render --light``)."""
     p = Path(path)
     if not p.exists():
         raise SceneError(f"{p}: no such file")
@@ -379,8 +419,15 @@ def load_scene(path: str | os.PathLike) -> tuple[Scene, dict]:
         raise SceneError(f"{p}: the scene needs at least one [[objects]] entry")
     for i, spec in enumerate(objects):
         _within(f"{p}: objects[{i}]", lambda w, spec=spec: _object(scene, _Table(spec, w), base))
-    if env is None and not scene.emitters:
-        raise SceneError(f"{p}: the scene has no light: add an [environment] table or an object with emission")
+    lights = root.get("lights", [])
+    if not isinstance(lights, list):
+        raise SceneError(f"{p}: lights must be an array of tables ([[lights]])")
+    for i, spec in enumerate(lights):
+        _within(f"{p}: lights[{i}]", lambda w, spec=spec: _light(scene, _Table(spec, w)))
+    if require_light and env is None and not scene.emitters and not scene.lights:
+        raise SceneError(
+            f"{p}: the scene has no light: add an [environment] table, an object with emission or a [[lights]] entry"
+        )
     defaults = _render_defaults(_Table(root.get("render", {}), f"{p}: [render]"))
     root.done()
     return scene, defaults

@@ -1,0 +1,190 @@
+#!/usr/bin/env python3
+"""Benchmark: area lights and many lights, lightprobe's light selectors against Mitsuba 3's best configuration.
+
+    pip install -e '.[peers]'                          # Mitsuba 3.9.1 (Debian: apt-get install libllvm19)
+    python benchmarks/lights_vs_mitsuba.py             # scenes area and many, 320x240, 64 spp, 4 seeds, 2 reps
+    python benchmarks/lights_vs_mitsuba.py --scenes area --selectors bvh --reps 1
+
+The scenes are :mod:`lightprobe.reference_scenes` ``area`` (a rectangle, a sphere and a 16-triangle ring light
+over a 16 m ground under a dim sky) and ``many`` (600 small rectangle lights over three decades of power, no sky),
+at ``--resolution``.  The reference of each is Mitsuba's own (``direct``, ``multijitter``, 1 + 1, ``--ref-passes``
+passes of 64 spp), made once and cached in ``--cache``; its relMSE floor, mean(var / (ref^2 + 0.01)), is printed
+and subtracted for ``true_efficiency``.  Each configuration renders ``--seeds`` images at ``--spp``; relMSE is their
+mean, seconds their median (the renderer's own timing, kernels compiled first).  Mitsuba runs every sampler at
+1 + 1 and 4 + 4 emitter + BSDF samples (its ``direct`` integrator); lightprobe every selector with its defaults.
+Renderers run in alternating subprocesses (A B A B) so that drifting machine load hits both alike.  One JSON line
+per configuration, then the best of each renderer per scene and their ratio.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+MITSUBA_SAMPLERS = ("independent", "stratified", "multijitter", "ldsampler")
+
+
+def _relmse(image, ref) -> float:
+    return float(np.mean((image - ref) ** 2 / (ref**2 + 0.01)))
+
+
+def _row(who, scene, config, errors, seconds, floor) -> dict:
+    e, t = float(np.mean(errors)), float(np.median(seconds))
+    return {
+        "renderer": who,
+        "scene": scene,
+        "config": config,
+        "relmse": e,
+        "seconds": round(t, 3),
+        "efficiency": 1.0 / (e * t),
+        "true_efficiency": 1.0 / (max(e - floor, 1e-30) * t),
+        "floor": floor,
+    }
+
+
+def _mitsuba_worker(args) -> None:
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    import mitsuba_references as mr
+
+    mr._prefer_llvm19()
+    import mitsuba as mi
+
+    mi.set_variant("llvm_ad_rgb")
+    import lightprobe.reference_scenes as rs
+    from lightprobe.io.images import write_image
+
+    rs.RESOLUTION = tuple(args.resolution)
+    desc = rs.describe(args.scene)
+    ref_file = Path(args.cache) / f"{args.scene}_{args.resolution[0]}x{args.resolution[1]}_mitsuba.npz"
+    with tempfile.TemporaryDirectory() as tmp:
+        env_file = None
+        image = rs.environment_image(desc)
+        if image is not None:
+            env_file = str(Path(tmp) / "env.exr")
+            write_image(env_file, image)
+        if args.reference:
+            print(json.dumps(mr.render(args.scene, 64, args.ref_passes, ref_file)), flush=True)
+            return
+        ref = np.load(ref_file)
+        floor = float(np.mean(ref["variance"] / (ref["mean"].astype(np.float64) ** 2 + 0.01)))
+        for sampler in MITSUBA_SAMPLERS:
+            for n in (1, 4):
+                d = mr.scene_dict(mi, desc, env_file, args.spp, tmp)
+                d["integrator"] = {"type": "direct", "emitter_samples": n, "bsdf_samples": n}
+                d["sensor"]["sampler"] = {"type": sampler, "sample_count": args.spp}
+                scene = mi.load_dict(d)
+                mi.render(scene, spp=args.spp, seed=10_000)  # compile
+                errors, seconds = [], []
+                for s in range(args.seeds):
+                    start = time.perf_counter()
+                    x = np.array(mi.render(scene, spp=args.spp, seed=s + 1), dtype=np.float64)
+                    seconds.append(time.perf_counter() - start)
+                    errors.append(_relmse(x, ref["mean"]))
+                row = _row("mitsuba", args.scene, f"{sampler} {n}+{n}", errors, seconds, floor)
+                print(json.dumps(row), flush=True)
+
+
+def _lightprobe_worker(args) -> None:
+    sys.path.insert(0, str(ROOT / "src"))
+    from lightprobe.integrators.wavefront import RenderSettings, render
+    from lightprobe.reference_scenes import build
+
+    ref = np.load(Path(args.cache) / f"{args.scene}_{args.resolution[0]}x{args.resolution[1]}_mitsuba.npz")
+    floor = float(np.mean(ref["variance"] / (ref["mean"].astype(np.float64) ** 2 + 0.01)))
+    render(build(args.scene, resolution=(32, 24)), RenderSettings(spp=4))  # compile
+    for selector in args.selectors:
+        errors, seconds = [], []
+        for s in range(args.seeds):
+            scene = build(args.scene, resolution=tuple(args.resolution))
+            r = render(scene, RenderSettings(spp=args.spp, seed=s + 20, light_sampler=selector))
+            errors.append(_relmse(r.image.astype(np.float64), ref["mean"]))
+            seconds.append(r.stats["seconds"])
+        print(json.dumps(_row("lightprobe", args.scene, selector, errors, seconds, floor)), flush=True)
+
+
+def _run(args, worker: str, scene: str, *extra: str) -> list[dict]:
+    cmd = [
+        sys.executable,
+        __file__,
+        "--worker",
+        worker,
+        "--scene",
+        scene,
+        "--spp",
+        str(args.spp),
+        "--seeds",
+        str(args.seeds),
+        "--resolution",
+        *map(str, args.resolution),
+        "--cache",
+        args.cache,
+        "--ref-passes",
+        str(args.ref_passes),
+        "--selectors",
+        *args.selectors,
+        *extra,
+    ]
+    out = subprocess.run(cmd, capture_output=True, text=True, env=os.environ.copy())
+    if out.returncode != 0:
+        raise SystemExit(f"{worker} failed:\n{out.stderr[-2000:]}")
+    rows = [json.loads(line) for line in out.stdout.splitlines() if line.startswith("{")]
+    for row in rows:
+        print(json.dumps(row), flush=True)
+    return rows
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--scenes", nargs="*", default=["area", "many"], choices=["area", "many"])
+    parser.add_argument("--selectors", nargs="*", default=["power", "bvh"])
+    parser.add_argument("--spp", type=int, default=64)
+    parser.add_argument("--seeds", type=int, default=4, help="images per configuration (relMSE: their mean)")
+    parser.add_argument("--reps", type=int, default=2, help="repetitions of the A B sequence")
+    parser.add_argument("--resolution", type=int, nargs=2, default=[320, 240])
+    parser.add_argument("--ref-passes", type=int, default=64, help="the reference's passes of 64 spp")
+    parser.add_argument("--cache", default=str(Path.home() / ".cache" / "lightprobe" / "lights_vs_mitsuba"))
+    parser.add_argument("--worker", choices=["mitsuba", "lightprobe"], help=argparse.SUPPRESS)
+    parser.add_argument("--scene", help=argparse.SUPPRESS)
+    parser.add_argument("--reference", action="store_true", help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.worker == "mitsuba":
+        _mitsuba_worker(args)
+        return 0
+    if args.worker == "lightprobe":
+        _lightprobe_worker(args)
+        return 0
+    Path(args.cache).mkdir(parents=True, exist_ok=True)
+    print(json.dumps({"cores": os.cpu_count(), "spp": args.spp, "resolution": args.resolution}), flush=True)
+    for scene in args.scenes:
+        w, h = args.resolution
+        if not (Path(args.cache) / f"{scene}_{w}x{h}_mitsuba.npz").exists():
+            _run(args, "mitsuba", scene, "--reference")
+        rows = []
+        for _ in range(args.reps):
+            rows += _run(args, "mitsuba", scene) + _run(args, "lightprobe", scene)
+        best = {}
+        for who in ("mitsuba", "lightprobe"):
+            mine = [r for r in rows if r["renderer"] == who]
+            best[who] = max(mine, key=lambda r: r["efficiency"])
+        ratio = best["lightprobe"]["efficiency"] / best["mitsuba"]["efficiency"]
+        print(
+            f"{scene}: lightprobe best {best['lightprobe']['config']} efficiency {best['lightprobe']['efficiency']:.0f}"
+            f" (relMSE {best['lightprobe']['relmse']:.3g}, {best['lightprobe']['seconds']} s); Mitsuba best "
+            f"{best['mitsuba']['config']} {best['mitsuba']['efficiency']:.0f} (relMSE {best['mitsuba']['relmse']:.3g},"
+            f" {best['mitsuba']['seconds']} s): {ratio:.2f}x",
+            flush=True,
+        )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
