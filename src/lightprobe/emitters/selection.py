@@ -4,8 +4,7 @@ The lecture's many-light estimator picks light l with probability p_l and divide
 so every selector offers ``select(p, n, u) -> (light, pmf, u')`` and ``pmf(p, n, light)`` for MIS (pbrt-v4's
 ``LightSampler::Sample / PMF``); u' is what is left of u after it chose the light, uniform on [0, 1) again, which the
 renderer gives the light as the first number of its sample (decisions.md 74).  Lights are numbered as in the scene's
-light table; when the scene has an
-environment map it is one more light, the last index.
+light table; when the scene has an environment map it is one more light, the last index.
 
 ``uniform``
     p_l = 1 / L.
