@@ -112,14 +112,18 @@ def test_full_scene(scene_dir):
     ],
 )
 def test_errors_name_file_and_place(scene_dir, old, new, message):
-    path = scene_dir / "scene.toml"
     assert old in SCENE
-    path.write_text(SCENE.replace(old, new, 1))
+    _assert_one_error(scene_dir / "scene.toml", SCENE.replace(old, new, 1), message)
+
+
+def _assert_one_error(path, text, message):
+    """Loading ``text`` written to ``path`` is one SceneError line naming the file and containing ``message``."""
+    path.write_text(text)
     with pytest.raises(SceneError) as info:
         load_scene(path)
-    text = str(info.value)
-    assert message in text and "scene.toml" in text, text
-    assert "\n" not in text
+    error = str(info.value)
+    assert message in error and "scene.toml" in error, error
+    assert "\n" not in error
 
 
 def test_missing_file(tmp_path):
@@ -195,13 +199,8 @@ def test_point_and_spot_lights(scene_dir):
     ],
 )
 def test_light_mistakes_are_one_error_naming_the_light(scene_dir, old, new, message):
-    path = scene_dir / "scene.toml"
     assert old in LIGHTS
-    path.write_text(SCENE + LIGHTS.replace(old, new, 1))
-    with pytest.raises(SceneError) as info:
-        load_scene(path)
-    text = str(info.value)
-    assert message in text and "scene.toml" in text and "\n" not in text, text
+    _assert_one_error(scene_dir / "scene.toml", SCENE + LIGHTS.replace(old, new, 1), message)
 
 
 def _key_lines(text):
