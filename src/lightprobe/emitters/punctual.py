@@ -103,9 +103,11 @@ class PointLight:
 
     @property
     def power(self) -> float:
-        from .selection import luminance
+        """The emitted power of the luminance, as the ``power`` selector weighs it (``power_of_lights``)."""
+        from .area import light_arrays
+        from .selection import power_of_lights
 
-        return float(4.0 * math.pi * luminance(self.radiance[None])[0])
+        return float(power_of_lights(light_arrays([self]))[0])
 
     def __repr__(self) -> str:
         return f"PointLight(position={self.position.tolist()}, intensity={self.radiance.tolist()})"
@@ -146,10 +148,6 @@ class SpotLight(PointLight):
         g[3:6] = self.axis
         g[6], g[7] = self.cos_total, self.cos_start
         return g
-
-    @property
-    def power(self) -> float:
-        return float(super().power / 2.0 * (1.0 - 0.5 * (self.cos_start + self.cos_total)))
 
     def __repr__(self) -> str:
         return (
