@@ -10,11 +10,10 @@ functions a kernel calls (``uniform_2d``, ``bsdf_eval``, libm's ``atan2``, Embre
 loop.  Needs Linux ``perf`` (Debian: ``apt install linux-perf``); ``cpu-clock`` sampling works in a VM without
 hardware counters.
 
-How: a child process compiles the kernels in an empty Numba cache (so that each kernel's LLVM IR, which names the
-parallel loop it outlines, can be read: about a minute), waits while ``perf record -p`` attaches, renders, and
-after perf has stopped writes ``/tmp/perf-PID.map`` (the address and size of every JIT symbol, which perf reads
-for JIT code) before it exits.  Each parallel loop (``__numba_parfor_gufunc_...``) is reported under its kernel's
-name, other JIT functions under their Python names.
+How: a child process compiles the stages in an empty Numba cache (so that their symbols are known: about a minute
+and a half), waits while ``perf record -p`` attaches, renders, and after perf has stopped writes
+``/tmp/perf-PID.map`` (the address and size of every JIT symbol, which perf reads for JIT code) before it exits.
+Each stage body and every function it calls (not inlined) is reported under its Python name.
 """
 
 from __future__ import annotations
@@ -49,7 +48,6 @@ def child(args) -> None:
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
     import numba
 
-    from lightprobe.integrators import area_lights, wavefront
     from lightprobe.integrators.wavefront import RenderSettings, render
 
     if args.scene == "peer":
@@ -57,6 +55,11 @@ def child(args) -> None:
 
         scene = peer_scene()
         warm = peer_scene(resolution=(32, 32))
+    elif args.scene in ("area", "many"):
+        from lightprobe.reference_scenes import build
+
+        scene = build(args.scene, resolution=(320, 240))
+        warm = build(args.scene, resolution=(32, 24))
     else:
         from lightprobe.demo import demo_scene
 
@@ -77,22 +80,13 @@ def child(args) -> None:
     with open(f"/tmp/perf-{os.getpid()}.map", "w") as out:
         for (address, name), (following, _) in zip(symbols, [*symbols[1:], (symbols[-1][0] + 4096, "")], strict=True):
             out.write(f"{address:x} {min(following - address, 1 << 20):x} {name}\n")
-    loops = {}
-    for module in (wavefront, area_lights):
-        for name, value in vars(module).items():
-            for result in getattr(value, "overloads", {}).values():
-                try:
-                    ir = result.library.get_llvm_str()
-                except Exception:
-                    continue
-                for loop in re.findall(r"define[^@\n]*@\"?(_ZN13_3cdynamic_3e36__numba_parfor_gufunc_0x[0-9a-f]+)", ir):
-                    loops[loop] = name
-    (work / "loops.json").write_text(json.dumps(loops))
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--scene", choices=["peer", "demo"], help="default: peer if ../shared/peers is found")
+    parser.add_argument(
+        "--scene", choices=["peer", "demo", "area", "many"], help="default: peer if ../shared/peers is found"
+    )
     parser.add_argument("--spp", type=int, default=16)
     parser.add_argument("--top", type=int, default=30, help="functions to list")
     parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
@@ -136,7 +130,6 @@ def main() -> None:
         if perf.returncode not in (0, -signal.SIGINT) or not Path(data).exists():
             sys.exit(f"perf_profile.py: perf record failed: {err.decode().strip().splitlines()[-1:]}")
         seconds = json.loads(Path(work, "done").read_text())["seconds"]
-        loops = json.loads(Path(work, "loops.json").read_text())
         script = subprocess.run(
             ["perf", "script", "-i", data, "-F", "ip,sym,dso"], capture_output=True, text=True, check=True
         ).stdout
@@ -149,9 +142,7 @@ def main() -> None:
         _, _, rest = line.partition(" ")  # "ip symbol (dso)"
         symbol, _, dso = rest.strip().rpartition(" ")
         symbol = symbol.strip() or "[unknown]"
-        if "numba_parfor_gufunc" in symbol:
-            key = next((f"kernel {name}" for loop, name in loops.items() if loop in symbol), "a parallel loop")
-        elif symbol.startswith("_ZN"):
+        if symbol.startswith("_ZN"):
             key = _demangle(symbol)
         elif "embree" in dso:
             key = "Embree (libembree4, called from the kernels)" if symbol == "[unknown]" else f"Embree {symbol}"

@@ -24,7 +24,7 @@ import time
 import numpy as np
 from numba import njit, prange
 
-from lightprobe.emitters.envmap_lanes import LANES, radiance_block
+from lightprobe.integrators.stages.environment_lanes import LANES, radiance_block
 
 
 @njit(parallel=True)

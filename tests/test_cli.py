@@ -101,7 +101,7 @@ def test_console_entry_point_and_usage_errors():
 
 @pytest.mark.parametrize(
     ("command", "expected"),
-    [("render", "Random seed [0]."), ("reference", "Random seed [scene or 0]."), ("compare", "[default: spp]")],
+    [("render", "Random seed [0]."), ("reference", "Random seed [0]."), ("compare", "[default: spp]")],
 )
 def test_help_texts_keep_their_bracketed_defaults(command, expected):
     """Defaults are written in brackets ("Random seed [0]."); rendered as Rich markup they vanished ("Random seed
@@ -447,6 +447,11 @@ def test_render_adds_point_and_spot_lights(tmp_path, capsys):
         ("spot:0,1,0:0,1,0:4", "target must differ"),
         ("spot:0,1,0:0,0,0:4:120", "cone_angle"),
         ("spot:0,1,0:0,0,0:4:wide", "an angle must be a number"),
+        ("directional:0,-1:3", "the direction must be 3 numbers"),
+        ("directional:0,0,0:3", "direction must not be zero"),
+        ("directional:0,-1,0:-3", "irradiance must be"),
+        ("directional:0,-1,0:3:200", "angle must be"),
+        ("directional:0,-1,0:3:0.5:9", "expected 'point:X,Y,Z:I'"),
     ],
 )
 def test_light_specs_are_checked(capsys, tmp_path, spec, message):

@@ -8,7 +8,8 @@ or ``~/.cache/...``): any edit starts a fresh cache, and older ones are removed.
 the location yourself.
 
 Scalar kernels (one sample, returning tuples) are plain ``njit`` functions; batch kernels loop over samples and
-are the only ones marked ``parallel``.
+are the only ones marked ``parallel``.  The renderer's stages are plain functions over a claimed range of a pass
+(``jit_body``: compiled without reference counting) that one parallel loop calls (``integrators/pipeline.py``).
 """
 
 from __future__ import annotations
@@ -58,7 +59,7 @@ from numba import njit, prange  # noqa: E402
 
 _config.CACHE_DIR = os.environ["NUMBA_CACHE_DIR"]  # in case Numba was imported (and configured) before us
 
-__all__ = ["FASTMATH", "is_cached", "jit", "jit_inline", "jit_parallel", "prange"]
+__all__ = ["FASTMATH", "is_cached", "jit", "jit_body", "jit_inline", "jit_parallel", "prange"]
 
 # Fast-math flags that keep IEEE semantics for NaN and infinities: contraction into FMA, reciprocal approximations
 # and approximate library functions.  'nnan'/'ninf' are left out on purpose: the renderer tests isfinite() to keep
@@ -69,6 +70,26 @@ FASTMATH = {"contract", "arcp", "afn"}
 def jit(func):
     """Compile a scalar or serial kernel (cached on disk)."""
     return njit(cache=True, nogil=True, error_model="numpy", fastmath=FASTMATH)(func)
+
+
+def jit_body(func):
+    """Compile a stage body: the work of one claimed chunk of a pass, called by the pipeline's parallel loop.
+
+    Without Numba's reference counting (``_nrt=False``): a body reads its arrays through the pass records, and each
+    field it takes from a record would otherwise be an atomic increment and decrement of that array's count, which
+    both threads make on the same counters; such a body ran 2x slower than the same code inlined into the parallel
+    loop (decisions.md 73, 77).  A body allocates nothing and returns nothing.  Compiled as a plain function, not
+    inside the parallel loop, it skips Numba's parfor passes: the area-light path compiled in 124 s instead of 225 s
+    (decisions.md 77)."""
+    return njit(
+        cache=True,
+        nogil=True,
+        error_model="numpy",
+        fastmath=FASTMATH,
+        _nrt=False,
+        no_cpython_wrapper=True,
+        no_cfunc_wrapper=True,
+    )(func)
 
 
 def jit_inline(func):

@@ -62,8 +62,78 @@ def _split(text: str) -> list[str]:
     return [t.strip() for t in text.split(",") if t.strip()]
 
 
+_OPTION_TYPES = {"integer": int, "number": float, "string": str, "true or false": bool}
+
+
+def render_options(*names: str):
+    """Give a command the options of :class:`~lightprobe.integrators.settings.RenderSettings` fields ``names``,
+    each from its one declaration (flags, type, help with its default), as ``None`` when not given; the command
+    receives them as a dict, ``render_options`` (field name -> value)."""
+    import functools
+    import inspect
+
+    from .integrators.settings import RenderSettings, options
+
+    declared = options()
+    defaults = RenderSettings()
+
+    def parameter(name: str) -> inspect.Parameter:
+        o = declared[name]
+        default = o.auto if o.auto is not None else getattr(defaults, name)
+        shown = str(default).lower() if isinstance(default, bool) else default
+        annotation = Annotated[
+            _OPTION_TYPES[o.kind] | None, typer.Option(*o.flags, help=f"{o.help} [{shown}].", show_default=False)
+        ]
+        return inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, default=None, annotation=annotation)
+
+    def decorate(command):
+        import typing
+
+        signature = inspect.signature(command)
+        hints = typing.get_type_hints(command, include_extras=True)  # this module's annotations are strings
+        own = [
+            p.replace(annotation=hints.get(p.name, p.annotation))
+            for p in signature.parameters.values()
+            if p.name != "render_options"
+        ]
+
+        @functools.wraps(command)
+        def wrapper(**kwargs):
+            chosen = {name: kwargs.pop(name) for name in names}
+            return command(**kwargs, render_options=chosen)
+
+        wrapper.__signature__ = signature.replace(parameters=[*own, *(parameter(n) for n in names)])
+        return wrapper
+
+    return decorate
+
+
+#: the options of `lightprobe render`, as RenderSettings declares them
+RENDER_COMMAND_OPTIONS = (
+    "spp",
+    "strategy",
+    "heuristic",
+    "n_bsdf",
+    "n_env",
+    "seed",
+    "sampler",
+    "env_candidates",
+    "mis_compensation",
+    "light_sampler",
+    "lights_per_sample",
+    "light_strategy",
+    "time_limit",
+    "adaptive",
+    "threads",
+)
+
+
+LIGHT_SPECS = "'point:X,Y,Z:I', 'spot:X,Y,Z:TX,TY,TZ:I[:ANGLE[:START]]' or 'directional:DX,DY,DZ:E[:ANGLE]'"
+
+
 def _parse_light(spec: str):
-    """A PointLight or SpotLight from ``--light``'s 'point:X,Y,Z:I' or 'spot:X,Y,Z:TX,TY,TZ:I[:ANGLE[:START]]'."""
+    """A PointLight, SpotLight or DirectionalLight from ``--light``'s :data:`LIGHT_SPECS`."""
+    from .emitters.directional import DirectionalLight
     from .emitters.punctual import PointLight, SpotLight
 
     fields = spec.split(":")
@@ -82,6 +152,12 @@ def _parse_light(spec: str):
     try:
         if kind == "point" and len(fields) == 3:
             return PointLight(numbers(fields[1], (3,), "the position"), numbers(fields[2], (1, 3), "the intensity"))
+        if kind == "directional" and 3 <= len(fields) <= 4:
+            return DirectionalLight(
+                numbers(fields[1], (3,), "the direction"),
+                numbers(fields[2], (1, 3), "the irradiance"),
+                angle=numbers(fields[3], (1,), "an angle") if len(fields) == 4 else 0.0,
+            )
         if kind == "spot" and 4 <= len(fields) <= 6:
             angles = [numbers(f, (1,), "an angle") for f in fields[4:]]
             return SpotLight(
@@ -94,10 +170,11 @@ def _parse_light(spec: str):
     except LightprobeError as exc:
         message = str(exc)
         raise LightprobeError(message if message.startswith("--light") else f"--light {spec!r}: {message}") from None
-    raise LightprobeError(f"--light {spec!r}: expected 'point:X,Y,Z:I' or 'spot:X,Y,Z:TX,TY,TZ:I[:ANGLE[:START]]'")
+    raise LightprobeError(f"--light {spec!r}: expected {LIGHT_SPECS}")
 
 
 @app.command("render")
+@render_options(*RENDER_COMMAND_OPTIONS)
 def render_command(
     scene_file: Annotated[Path | None, typer.Argument(metavar="SCENE", help="Scene file (TOML).")] = None,
     output: Annotated[Path, typer.Option("--output", "-o", help=".exr, .hdr, .pfm or .png.")] = Path("render.exr"),
@@ -107,69 +184,17 @@ def render_command(
             "--demo", help="Render a built-in scene (no files needed): the default one, or `--demo many-lights`."
         ),
     ] = False,
-    spp: Annotated[int | None, typer.Option(help="Camera samples per pixel [scene or 16].")] = None,
-    strategy: Annotated[
-        str | None, typer.Option(help="uniform, cosine, brdf, env (light sampling) or mis [mis].")
-    ] = None,
-    heuristic: Annotated[
-        str | None,
-        typer.Option(help="MIS heuristic: balance or power [balance if only an environment lights the scene]."),
-    ] = None,
-    bsdf_samples: Annotated[
-        int | None,
-        typer.Option(help="BSDF samples per camera sample [4 if only an environment map lights the scene, else 1]."),
-    ] = None,
-    env_samples: Annotated[
-        int | None,
-        typer.Option(
-            "--env-samples",
-            "--light-samples",
-            help="Samples per picked light, N [4 if only an environment map lights the scene, else 1].",
-        ),
-    ] = None,
-    seed: Annotated[int | None, typer.Option(help="Random seed [0].")] = None,
-    sampler: Annotated[
-        str | None, typer.Option(help="Random numbers: sobol (Owen-scrambled Sobol') or independent [sobol].")
-    ] = None,
-    env_candidates: Annotated[
-        int | None,
-        typer.Option(help="Resample each environment sample from this many candidates (RIS; env maps alone) [1]."),
-    ] = None,
-    mis_compensation: Annotated[
-        bool | None,
-        typer.Option(
-            "--mis-compensation/--no-mis-compensation",
-            help="Sample the MIS-compensated env PDF on every material / on none [mis, env map alone: diffuse ones].",
-        ),
-    ] = None,
-    light_sampler: Annotated[
-        str | None, typer.Option(help="How a light is picked: uniform, power or bvh [bvh].")
-    ] = None,
-    lights_per_sample: Annotated[
-        int | None, typer.Option(help="Lights picked per camera sample, K (each gets --env-samples samples) [1].")
-    ] = None,
-    light_strategy: Annotated[
-        str | None, typer.Option(help="How an area light is sampled: area, solid-angle, hemisphere, cosine.")
-    ] = None,
     light: Annotated[
         list[str] | None,
         typer.Option(
             "--light",
             metavar="SPEC",
-            help="Add a point light 'point:X,Y,Z:I' or a spot light 'spot:X,Y,Z:TX,TY,TZ:I[:ANGLE[:START]]' aimed "
-            "at (TX, TY, TZ) (I a number or R,G,B in W/sr; angles in degrees, ANGLE 30, START ANGLE - 5); repeatable.",
+            help="Add a point light 'point:X,Y,Z:I', a spot light 'spot:X,Y,Z:TX,TY,TZ:I[:ANGLE[:START]]' aimed "
+            "at (TX, TY, TZ) (I a number or R,G,B in W/sr; angles in degrees, ANGLE 30, START ANGLE - 5) or a "
+            "directional light 'directional:DX,DY,DZ:E[:ANGLE]' shining along (DX, DY, DZ) with irradiance E "
+            "(W/m^2) from a disc ANGLE degrees wide (0: a delta light, the default); repeatable.",
         ),
     ] = None,
-    time_limit: Annotated[float | None, typer.Option(help="Stop after this many seconds (keeps the result).")] = None,
-    adaptive: Annotated[
-        bool | None,
-        typer.Option(
-            "--adaptive/--no-adaptive",
-            help="A pilot of about spp / 4 samples in every pixel, then --spp on average where the noise is "
-            "(with --time-limit: as much of both as the limit affords).",
-        ),
-    ] = None,
-    threads: Annotated[int | None, typer.Option(help="Threads [all cores].")] = None,
     width: Annotated[int | None, typer.Option(help="Override the image width (height keeps the aspect).")] = None,
     variance: Annotated[bool, typer.Option(help="Add variance.R/G/B channels to an EXR.")] = False,
     exposure: Annotated[float, typer.Option(help="PNG exposure in stops.")] = 0.0,
@@ -179,8 +204,10 @@ def render_command(
         typer.Option(help="Also write an object-id pass here (.exr, channel object_id; -1 = background)."),
     ] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+    render_options: dict | None = None,
 ) -> None:
-    """Render a scene (or a built-in demo) with direct illumination from its environment map and area lights."""
+    """Render a scene (or a built-in demo) with direct illumination from its environment map and lights.  A
+    rendering option left out takes the scene file's [render] value, else the default shown."""
     from .integrators.wavefront import render
     from .io.outputs import check_output, write_render
 
@@ -208,23 +235,7 @@ def render_command(
             raise LightprobeError(f"--width must be >= 1, got {width}")
         w, h = scene.camera.resolution
         scene.camera = scene.camera.with_resolution(width, max(1, round(h * width / w)))
-    chosen = {
-        "spp": spp,
-        "strategy": strategy,
-        "heuristic": heuristic,
-        "n_bsdf": bsdf_samples,
-        "n_env": env_samples,
-        "seed": seed,
-        "sampler": sampler,
-        "env_candidates": env_candidates,
-        "mis_compensation": mis_compensation,
-        "light_sampler": light_sampler,
-        "lights_per_sample": lights_per_sample,
-        "light_strategy": light_strategy,
-        "time_limit": time_limit,
-        "threads": threads,
-        "adaptive": adaptive,
-    }
+    chosen = render_options
     settings = _render_settings(defaults, chosen)
     check_output(output, variance=variance, png=png, resolution=scene.camera.resolution)
     typer.echo(scene.summary(), err=True)
@@ -256,16 +267,12 @@ def render_command(
 
 
 @app.command("reference")
+@render_options("strategy", "seed", "sampler", "time_limit", "threads")
 def reference_command(
     scene_file: Annotated[Path, typer.Argument(metavar="SCENE", help="Scene file (TOML).")],
     output: Annotated[Path, typer.Option("--output", "-o", help=".exr (mean and variance).")] = Path("reference.exr"),
     spp: Annotated[int, typer.Option(help="Total samples per pixel of the reference.")] = 1024,
     chunk: Annotated[int, typer.Option(help="Samples per pixel between checkpoints.")] = 16,
-    strategy: Annotated[str | None, typer.Option(help="Strategy [scene or mis].")] = None,
-    seed: Annotated[int | None, typer.Option(help="Random seed [scene or 0].")] = None,
-    sampler: Annotated[str | None, typer.Option(help="sobol or independent [sobol].")] = None,
-    time_limit: Annotated[float | None, typer.Option(help="Stop this run after this many seconds.")] = None,
-    threads: Annotated[int | None, typer.Option(help="Threads [all cores].")] = None,
     dask: Annotated[bool, typer.Option("--dask", help="Render the chunks on a Dask LocalCluster.")] = False,
     scheduler: Annotated[
         str | None, typer.Option(help="Render the chunks on this Dask scheduler (tcp://host:8786).")
@@ -274,9 +281,11 @@ def reference_command(
     quiet: Annotated[
         bool, typer.Option("--quiet", "-q", help="No line per checkpoint (errors and the result only).")
     ] = False,
+    render_options: dict | None = None,
 ) -> None:
     """Render a high-sample reference in checkpointed chunks.  Run the same command again to resume after Ctrl-C,
-    a crash or a time limit (bit for bit the same image as an uninterrupted run), or with a larger --spp to extend."""
+    a crash or a time limit (bit for bit the same image as an uninterrupted run), or with a larger --spp to extend.
+    A rendering option left out takes the scene file's [render] value, else the default shown."""
     from .analysis.reference import checkpoint_path, file_id, render_reference
     from .io.outputs import check_output, write_render
     from .io.scene_file import load_scene
@@ -285,9 +294,8 @@ def reference_command(
         raise LightprobeError(f"{output}: a reference is written as .exr (mean and variance)")
     check_output(output, variance=True)
     scene, defaults = load_scene(scene_file)
-    chosen = {"spp": spp, "strategy": strategy, "seed": seed, "sampler": sampler, "time_limit": time_limit}
     # a reference is resumable and mergeable by sample range, which per-pixel counts are not
-    settings = _render_settings(defaults, {**chosen, "threads": threads, "adaptive": False})
+    settings = _render_settings(defaults, {**render_options, "spp": spp, "adaptive": False})
     check_output(output, variance=True, resolution=scene.camera.resolution)
     if not quiet:
         typer.echo(scene.summary(), err=True)
@@ -347,7 +355,8 @@ def compare_command(
 
     from .analysis.report import write_report
     from .experiments.compare import compare
-    from .integrators.wavefront import RenderSettings, render
+    from .integrators.settings import RenderSettings
+    from .integrators.wavefront import render
     from .io.images import read_image
 
     if output.suffix.lower() not in (".html", ".htm"):
@@ -508,10 +517,9 @@ def _write_object_ids(path: Path, scene) -> list[Path]:
 def _render_settings(defaults: dict, chosen: dict):
     """Settings from a scene file's ``[render]`` table, overridden by the options given (None: not given), checked
     (a :class:`~lightprobe.errors.LightprobeError` naming the setting if one is of the wrong type or range)."""
-    from .integrators.wavefront import RenderSettings
-    from .io.scene_file import settings_fields
+    from .integrators.settings import RenderSettings, settings_from_table
 
-    settings = settings_fields(defaults)
+    settings = settings_from_table(defaults)
     settings.update({k: v for k, v in chosen.items() if v is not None})
     settings.setdefault("spp", 16)
     settings = RenderSettings(**settings)

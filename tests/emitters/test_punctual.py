@@ -8,7 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from lightprobe.emitters.area import STRATEGIES, _pdf_batch, _sample_batch, light_arrays
+from lightprobe.emitters.area import STRATEGIES
+from lightprobe.emitters.lights import light_arrays, pdf_batch, sample_batch
 from lightprobe.emitters.punctual import PointLight, SpotLight
 from lightprobe.emitters.selection import power_of_lights
 from lightprobe.errors import ParameterError
@@ -21,7 +22,7 @@ NORMALS = np.tile([0.0, 1.0, 0.0], (64, 1))
 def _sample(light, strategy="solid-angle"):
     table = light_arrays([light])
     u = RNG.random((POINTS.shape[0], 2))
-    return _sample_batch(table, 0, STRATEGIES[strategy], POINTS, NORMALS, u)
+    return sample_batch(table, 0, POINTS, NORMALS, u, strategy=strategy)
 
 
 @pytest.mark.parametrize("strategy", list(STRATEGIES))
@@ -33,9 +34,9 @@ def test_a_point_light_is_one_direction_with_the_inverse_square_law(strategy):
     np.testing.assert_allclose(out[:, :3], to_light / dist[:, None], rtol=0, atol=1e-12)
     np.testing.assert_allclose(out[:, 3], dist, rtol=1e-12)
     np.testing.assert_allclose(out[:, 4:7], light.radiance / dist[:, None] ** 2, rtol=1e-12)
-    assert np.all(out[:, 7] == 1.0)
+    assert np.all(out[:, 7] == 1.0) and np.all(out[:, 8] == 1.0)  # pdf 1, a delta light
     # no direction given in advance is ever the light's: density 0, so BSDF samples never weigh against it
-    pdf = _pdf_batch(light_arrays([light]), 0, STRATEGIES[strategy], POINTS, NORMALS, out[:, :3].copy())
+    pdf = pdf_batch(light_arrays([light]), 0, POINTS, NORMALS, out[:, :3].copy(), strategy=strategy)
     assert np.all(pdf == 0.0)
 
 
@@ -44,7 +45,7 @@ def test_a_spot_light_falls_off_smoothly_between_its_angles():
     table = light_arrays([spot])
     for angle, expected in [(0.0, 1.0), (19.0, 1.0), (30.0, None), (41.0, 0.0), (80.0, 0.0)]:
         x = 3.0 * math.tan(math.radians(angle))
-        out = _sample_batch(table, 0, 1, np.array([[x, 0.0, 0.0]]), np.array([[0.0, 1.0, 0.0]]), np.zeros((1, 2)))
+        out = sample_batch(table, 0, np.array([[x, 0.0, 0.0]]), np.array([[0.0, 1.0, 0.0]]), np.zeros((1, 2)))
         d2 = 9.0 + x * x
         if expected is None:  # the smoothstep of pbrt-v4 at the middle of the band: 0.5
             c = math.cos(math.radians(angle))
@@ -61,7 +62,7 @@ def test_powers_are_the_integrals_of_the_intensity():
     table = light_arrays([spot])
     c = np.linspace(-1, 1, 200_001)
     dirs = np.column_stack([np.sqrt(1 - c**2), -c, np.zeros_like(c)])  # angle acos(c) from the axis (0, -1, 0)
-    out = _sample_batch(table, 0, 1, -dirs, np.tile([0.0, 1.0, 0.0], (c.size, 1)), np.zeros((c.size, 2)))
+    out = sample_batch(table, 0, -dirs, np.tile([0.0, 1.0, 0.0], (c.size, 1)), np.zeros((c.size, 2)))
     intensity = out[:, 4]  # at distance 1
     numeric = 2 * math.pi * np.trapezoid(intensity, c)
     assert spot.power == pytest.approx(numeric, rel=1e-6)

@@ -7,7 +7,8 @@ import pytest
 from scipy import stats
 
 from lightprobe.demo import light_panels
-from lightprobe.emitters.area import AreaLight, light_arrays
+from lightprobe.emitters.area import AreaLight
+from lightprobe.emitters.lights import light_arrays
 from lightprobe.emitters.punctual import PointLight, SpotLight
 from lightprobe.emitters.selection import SELECTORS, LightSampler
 

@@ -91,7 +91,7 @@ def test_full_scene(scene_dir):
     assert scene.camera.resolution == (64, 48)
     mesh = scene.objects[0].shape
     assert mesh.bounds[0][1] == pytest.approx(0.25)  # scaled by 0.5 and lifted by 0.5
-    assert isinstance(Scene.load(scene_dir / "scene.toml"), Scene)
+    assert isinstance(load_scene(scene_dir / "scene.toml")[0], Scene)
 
 
 @pytest.mark.parametrize(
@@ -168,20 +168,35 @@ target = [0.0, 0.0, 0.0]
 intensity = [60.0, 55.0, 50.0]
 cone_angle = 25.0
 falloff_start = 20.0
+
+[[lights]]
+type = "directional"
+direction = [-0.3, -1.0, 0.2]
+irradiance = [3.0, 2.8, 2.5]
+angle = 0.53
+irradiance_scale = 2.0
 """
 
 
-def test_point_and_spot_lights(scene_dir):
+def test_point_spot_and_directional_lights(scene_dir):
+    from lightprobe.emitters.directional import DirectionalLight
+    from lightprobe.emitters.kinds import LIGHT_DIRECTIONAL, LIGHT_ENVIRONMENT, LIGHT_POINT, LIGHT_SPOT
     from lightprobe.emitters.punctual import PointLight, SpotLight
 
     path = scene_dir / "scene.toml"
     path.write_text(SCENE + LIGHTS)
     scene, _ = load_scene(path)
-    point, spot = scene.lights
+    point, spot, sun = scene.lights
     assert type(point) is PointLight and np.allclose(point.radiance, 60.0) and np.allclose(point.position, [2, 3, 1])
     assert type(spot) is SpotLight and spot.cone_angle == 25.0 and spot.falloff_start == 20.0
     np.testing.assert_allclose(spot.axis, -np.array([0.0, 4.0, 2.0]) / np.sqrt(20.0))
-    assert scene.light_table().kind.shape == (2,) and "1 point light + 1 spot light" in scene.summary()
+    assert type(sun) is DirectionalLight and sun.angle == 0.53
+    np.testing.assert_allclose(sun.irradiance, [6.0, 5.6, 5.0])
+    np.testing.assert_allclose(sun.direction, np.array([-0.3, -1.0, 0.2]) / np.linalg.norm([-0.3, -1.0, 0.2]))
+    # bounded lights first, then the infinite ones: the directional light, the environment last
+    kinds = scene.light_table().kind.tolist()
+    assert kinds == [LIGHT_POINT, LIGHT_SPOT, LIGHT_DIRECTIONAL, LIGHT_ENVIRONMENT]
+    assert "1 point light + 1 spot light + 1 directional light" in scene.summary()
     # a scene lit by a lamp alone needs no environment
     path.write_text(SCENE.replace('[environment]\nfile = "sky.exr"\nscale = 2.0\nrotation = 30.0\n', "") + LIGHTS)
     assert load_scene(path)[0].environment is None
@@ -196,6 +211,10 @@ def test_point_and_spot_lights(scene_dir):
         ("cone_angle = 25.0", "cone_angle = 95.0", "lights[1]: cone_angle"),
         ("falloff_start = 20.0", "falloff_start = 30.0", "lights[1]: falloff_start"),
         ("position = [2.0, 3.0, 1.0]", 'position = "up"', "lights[0]: position must be 3 finite numbers"),
+        ("angle = 0.53", "angle = 190.0", "lights[2]: angle must be"),
+        ("direction = [-0.3, -1.0, 0.2]", "direction = [0, 0, 0]", "lights[2]: directional light: direction"),
+        ("irradiance_scale = 2.0", "irradiance_scale = -2.0", "lights[2]: irradiance_scale must be >= 0"),
+        ("irradiance = [3.0, 2.8, 2.5]\n", "", "lights[2]: missing required key 'irradiance'"),
     ],
 )
 def test_light_mistakes_are_one_error_naming_the_light(scene_dir, old, new, message):
@@ -312,7 +331,9 @@ def test_a_mesh_takes_one_radiance_per_face_from_a_file_or_its_colours(tmp_path)
     }
     for extra, expected in cases.items():
         scene, _ = load_scene(_mesh_scene(tmp_path, extra))
-        np.testing.assert_allclose(scene.light_table().radiance, expected, err_msg=extra)
+        table = scene.light_table()  # the faces' rows, then the environment's
+        np.testing.assert_allclose(table.radiance[:2], expected, err_msg=extra)
+        assert table.kind.shape == (3,)
 
 
 @pytest.mark.parametrize(

@@ -143,7 +143,8 @@ def test_a_camera_samples_light_picks_are_stratified():
     # the first number of their own 2D pair, which the group's stratification puts one in each sixteenth of [0, 1)
     # under sobol (the selector hands back what is left of it, so each light's samples keep the pair's net); under
     # independent, slot j's own pair.  With two samples per light the group's slots share the 1D number.
-    from lightprobe.integrators.area_lights import _pick_number, _pick_slot
+    from lightprobe.integrators.techniques import pick_number as _pick_number
+    from lightprobe.integrators.techniques import pick_slot as _pick_slot
 
     k, n_bsdf = 16, 1
 

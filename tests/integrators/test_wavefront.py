@@ -323,14 +323,13 @@ def test_a_time_limit_sizes_the_last_round_to_end_at_it(monkeypatch):
     pixels, and the image is the 10-spp render's, bit for bit."""
     scene = small_scene((8, 6))
     now = [0.0]
-    launch = wavefront._launch
+    run = wavefront._Pass.run
 
-    def timed_launch(kernel, values):
-        if kernel in (wavefront._camera_pass, wavefront._camera_scalar_pass):
-            now[0] += 1e-3 * values["dirs"].shape[0]
-        launch(kernel, values)
+    def timed_run(self, acc, pixels, spp_now, sample_start):
+        now[0] += 1e-3 * pixels.size * spp_now
+        return run(self, acc, pixels, spp_now, sample_start)
 
-    monkeypatch.setattr(wavefront, "_launch", timed_launch)
+    monkeypatch.setattr(wavefront._Pass, "run", timed_run)
     monkeypatch.setattr(wavefront, "_clock", lambda: now[0])
     limited = render(scene, RenderSettings(spp=4096, time_limit=0.5))
     assert limited.stats["stopped_by_time_limit"]

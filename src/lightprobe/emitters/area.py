@@ -14,11 +14,11 @@ pdf_direction / eval``: for a reference point ``p`` with normal ``n`` and two ra
 * ``light_radiance(...)``: the radiance seen along a ray that hits the light with cosine ``cos_light`` between
   the light's normal and the reversed ray (the camera and BSDF samples use it).
 
-Lights live in one table (:class:`LightArrays`), a row per emitter: rectangles, spheres and triangles (an
-emissive mesh contributes one row per triangle, as pbrt-v4 does), and point and spot lights, delta lights whose
-one direction :mod:`lightprobe.emitters.punctual` samples (the strategies below are the area lights').
-Emission is uniform RGB radiance per row; a later textured emission replaces ``radiance[l]`` by a lookup at the
-sampled point and changes nothing else.
+Area lights are rows of the light table (:mod:`lightprobe.emitters.kinds`): rectangles, spheres and triangles (an
+emissive mesh contributes one row per triangle, as pbrt-v4 does).  The renderer reaches them through the one light
+contract of :mod:`lightprobe.emitters.lights`, which calls the functions here for these kinds.  Emission is uniform
+RGB radiance per row; a later textured emission replaces ``radiance[l]`` by a lookup at the sampled point and
+changes nothing else.
 
 Strategies (``STRATEGIES``), each with its density per steradian:
 
@@ -47,7 +47,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import NamedTuple
 
 import numpy as np
 
@@ -72,15 +71,13 @@ from ..sampling.kernels import (
     square_to_uniform_hemisphere,
     square_to_uniform_triangle,
 )
-from .punctual import punctual_sample
+from .kinds import LIGHT_POINT, LIGHT_RECT, LIGHT_SPHERE, LIGHT_TRIANGLE, LightArrays
 
 __all__ = [
-    "KINDS",
     "STRATEGIES",
     "AreaLight",
-    "LightArrays",
     "LightSample",
-    "light_arrays",
+    "area_power",
     "light_normal",
     "light_pdf",
     "light_pdf_at",
@@ -89,31 +86,11 @@ __all__ = [
     "light_sample",
 ]
 
-LIGHT_RECT, LIGHT_SPHERE, LIGHT_TRIANGLE = 0, 1, 2
-LIGHT_POINT, LIGHT_SPOT = 3, 4  # delta lights (emitters/punctual.py): every kind >= LIGHT_POINT is one
-KINDS = {
-    "rectangle": LIGHT_RECT,
-    "sphere": LIGHT_SPHERE,
-    "triangle": LIGHT_TRIANGLE,
-    "point": LIGHT_POINT,
-    "spot": LIGHT_SPOT,
-}
+_AREA_KINDS = {"rectangle": LIGHT_RECT, "sphere": LIGHT_SPHERE, "triangle": LIGHT_TRIANGLE}
 AREA, SOLID_ANGLE, HEMISPHERE, COSINE = 0, 1, 2, 3
 STRATEGIES = {"area": AREA, "solid-angle": SOLID_ANGLE, "hemisphere": HEMISPHERE, "cosine": COSINE}
 MIN_SOLID_ANGLE = 3e-4  # sr: below, spherical sampling falls back to area sampling (pbrt-v4)
 MAX_SOLID_ANGLE = 6.22  # sr: above, likewise (pbrt-v4's MaxSphericalSampleArea)
-
-
-class LightArrays(NamedTuple):
-    """The light table the kernels read: row l is one emitter."""
-
-    kind: np.ndarray  # (L,) int64: LIGHT_RECT / LIGHT_SPHERE / LIGHT_TRIANGLE / LIGHT_POINT / LIGHT_SPOT
-    geom: np.ndarray  # (L, RECT_WIDTH) float64: a rectangle's row of geometry/intersect.rectangle_rows (origin,
-    #                   edge_u, edge_v, unit normal, dual vectors) | sphere centre, radius | triangle v0, v1, v2,
-    #                   unit normal | point position | spot position, axis, cos total, cos start (unused columns 0)
-    radiance: np.ndarray  # (L, 3) float64: radiance; a point or spot light's intensity
-    two_sided: np.ndarray  # (L,) int64
-    area: np.ndarray  # (L,) float64
 
 
 # --- geometry helpers ------------------------------------------------------------------------------------------------
@@ -173,7 +150,7 @@ def light_intersect(lights, l, ox, oy, oz, dx, dy, dz):
     between the light's normal at the hit and -d (> 0: the front)."""
     g = lights.geom[l]
     kind = lights.kind[l]
-    if kind >= LIGHT_POINT:  # a delta light: no ray meets it
+    if kind >= LIGHT_POINT:  # no surface: no ray meets it
         return math.inf, 0.0
     if kind == LIGHT_SPHERE:
         t = sphere_hit(ox, oy, oz, dx, dy, dz, g[0], g[1], g[2], g[3], math.inf)
@@ -420,10 +397,8 @@ def _behind(lights, l, px, py, pz):
 
 @jit
 def light_sample(lights, l, strategy, px, py, pz, nx, ny, nz, u0, u1):
-    """Sample a direction toward light l from point p (normal n): (wx, wy, wz, distance, r, g, b, pdf per sr).  A
-    point or spot light has one direction whatever the strategy, with pdf 1 (a delta: emitters/punctual.py)."""
-    if lights.kind[l] >= LIGHT_POINT:
-        return punctual_sample(lights.kind[l] == LIGHT_SPOT, lights.geom[l], lights.radiance[l], px, py, pz)
+    """Sample a direction toward area light l from point p (normal n): (wx, wy, wz, distance, r, g, b, pdf per
+    sr)."""
     if strategy == HEMISPHERE or strategy == COSINE:
         ts, tt = coordinate_system(nx, ny, nz)
         if strategy == HEMISPHERE:
@@ -495,8 +470,7 @@ def _hemisphere_pdf(strategy, nx, ny, nz, wx, wy, wz):
 
 @jit
 def light_pdf(lights, l, strategy, px, py, pz, nx, ny, nz, wx, wy, wz):
-    """Density per steradian with which ``light_sample(..., strategy, ...)`` produces unit direction w (0 for a
-    delta light: no given direction is ever its)."""
+    """Density per steradian with which ``light_sample(..., strategy, ...)`` produces unit direction w."""
     if lights.kind[l] >= LIGHT_POINT:
         return 0.0
     if strategy == HEMISPHERE or strategy == COSINE:
@@ -640,13 +614,20 @@ class AreaLight:
     """
 
     def __init__(self, kind: str, geom, radiance, *, two_sided: bool = False):
-        if kind not in KINDS:
-            raise ParameterError(f"light kind must be one of {list(KINDS)}, got {kind!r}")
+        if kind not in _AREA_KINDS:
+            raise ParameterError(f"light kind must be one of {list(_AREA_KINDS)}, got {kind!r}")
         self.kind = kind
         self.geom = _geom_row(kind, geom)
         self.radiance = _rgb(radiance, "emission")
         self.two_sided = bool(two_sided)
-        self._arrays = light_arrays([self])
+        self.area = _area(kind, self.geom)
+        self._arrays = LightArrays(
+            np.array([_AREA_KINDS[kind]], np.int64),
+            self.geom.reshape(1, RECT_WIDTH).copy(),
+            self.radiance.reshape(1, 3).copy(),
+            np.array([int(self.two_sided)], np.int64),
+            np.array([self.area]),
+        )
 
     @classmethod
     def rectangle(cls, origin, edge_u, edge_v, radiance, *, two_sided: bool = False) -> AreaLight:
@@ -671,15 +652,9 @@ class AreaLight:
         return cls("triangle", [*v.reshape(-1), *(n / np.linalg.norm(n))], radiance, two_sided=two_sided)
 
     @property
-    def area(self) -> float:
-        return float(self._arrays.area[0])
-
-    @property
     def power(self) -> float:
         """Emitted flux of the luminance: pi A L (x 2 if two-sided)."""
-        from ..color import luminance
-
-        return float(math.pi * self.area * luminance(self.radiance) * (2 if self.two_sided else 1))
+        return float(area_power(self._arrays)[0])
 
     def _strategy(self, strategy: str) -> int:
         if strategy not in STRATEGIES:
@@ -724,8 +699,6 @@ def _geom_row(kind: str, geom) -> np.ndarray:
 
 
 def _area(kind: str, g: np.ndarray) -> float:
-    if kind in ("point", "spot"):
-        return 0.0
     if kind == "rectangle":
         return float(np.linalg.norm(np.cross(g[3:6], g[6:9])))
     if kind == "triangle":
@@ -733,14 +706,8 @@ def _area(kind: str, g: np.ndarray) -> float:
     return float(4.0 * math.pi * g[3] ** 2)
 
 
-def light_arrays(lights) -> LightArrays:
-    """The kernels' table of ``lights``: a sequence of :class:`AreaLight`,
-    :class:`~lightprobe.emitters.punctual.PointLight` and :class:`~lightprobe.emitters.punctual.SpotLight`."""
-    n = len(lights)
-    return LightArrays(
-        np.array([KINDS[x.kind] for x in lights], dtype=np.int64).reshape(n),
-        np.array([x.geom for x in lights], dtype=np.float64).reshape(n, RECT_WIDTH),
-        np.array([x.radiance for x in lights], dtype=np.float64).reshape(n, 3),
-        np.array([x.two_sided for x in lights], dtype=np.int64).reshape(n),
-        np.array([_area(x.kind, x.geom) for x in lights], dtype=np.float64).reshape(n),
-    )
+def area_power(lights: LightArrays) -> np.ndarray:
+    """Emitted power (of the luminance) of each row: pi A L, doubled for two-sided lights."""
+    from ..color import luminance
+
+    return math.pi * lights.area * luminance(lights.radiance) * np.where(lights.two_sided == 1, 2.0, 1.0)

@@ -45,6 +45,7 @@ that is black everywhere is rejected (nothing could be lit and there is no distr
 
 from __future__ import annotations
 
+import functools
 import math
 import numbers
 import os
@@ -73,7 +74,7 @@ from .envmap_bilinear import (
 from .envmap_pdf import build_distributions, luminance_f32
 from .mappings import bilinear_latlong, direction_to_latlong, nearest_latlong
 
-__all__ = ["EnvKernel", "EnvironmentMap"]
+__all__ = ["EnvKernel", "EnvironmentMap", "placeholder_environment"]
 
 LOOKUPS = {"nearest": 0, "bilinear": 1}
 PDF_MODES = {"exact": 0, "pbrt": 1, "bilinear": 2}
@@ -717,3 +718,12 @@ def _unit_square(u) -> np.ndarray:
     if a.ndim != 2 or a.shape[1] != 2:
         raise ParameterError(f"u must be an (N, 2) array, got shape {a.shape}")
     return np.ascontiguousarray(a)
+
+
+@functools.lru_cache(maxsize=1)
+def placeholder_environment() -> EnvironmentMap:
+    """An environment for kernels that must be given one when the scene has none (no light row refers to it, so it
+    is never looked up)."""
+    from .procedural import constant
+
+    return EnvironmentMap.from_array(constant(1.0, width=2, height=1), source="none")

@@ -9,7 +9,7 @@ A delta light has a position and no area.  From a reference point p it lights al
   MIS weight 1: the renderer passes a BSDF density of 0 to the weight.  The BSDF-only and hemisphere strategies
   cannot see it at all, as in every renderer.
 
-Rows of the light table (:class:`~lightprobe.emitters.area.LightArrays`): ``geom[0:3]`` the position; a spot's unit
+Rows of the light table (:class:`~lightprobe.emitters.kinds.LightArrays`): ``geom[0:3]`` the position; a spot's unit
 axis in ``geom[3:6]``, the cosine of its total half-angle in ``geom[6]`` and of the angle where its falloff begins in
 ``geom[7]``; ``radiance`` is the intensity I (W/sr per channel, along the axis for a spot); area 0.  A spot's
 intensity at angle theta from its axis is I x smoothstep(cos theta, cos total, cos falloff start) (pbrt-v4).
@@ -26,8 +26,9 @@ import numpy as np
 
 from .._numba import jit
 from ..errors import ParameterError
+from .kinds import ROW_WIDTH
 
-__all__ = ["PointLight", "SpotLight", "punctual_sample", "spot_falloff"]
+__all__ = ["PointLight", "SpotLight", "punctual_power", "punctual_sample", "spot_falloff"]
 
 
 @jit
@@ -53,6 +54,16 @@ def punctual_sample(is_spot, g, intensity, px, py, pz):
     if is_spot:
         scale *= spot_falloff(-(wx * g[3] + wy * g[4] + wz * g[5]), g[6], g[7])
     return wx, wy, wz, dist, intensity[0] * scale, intensity[1] * scale, intensity[2] * scale, 1.0
+
+
+def punctual_power(is_spot: np.ndarray, geom: np.ndarray, intensity: np.ndarray) -> np.ndarray:
+    """Emitted power of the luminance of point lights (4 pi I) and spot lights (2 pi I (1 - (cos_start +
+    cos_total) / 2), pbrt-v4's ``Phi``), one per row."""
+    from ..color import luminance
+
+    lum = luminance(intensity)
+    spot = 2.0 * math.pi * lum * (1.0 - 0.5 * (geom[:, 7] + geom[:, 6]))
+    return np.where(is_spot, spot, 4.0 * math.pi * lum)
 
 
 def _floats(value) -> np.ndarray | None:
@@ -95,19 +106,14 @@ class PointLight:
 
     @property
     def geom(self) -> np.ndarray:
-        from ..geometry.intersect import RECT_WIDTH
-
-        g = np.zeros(RECT_WIDTH)
+        g = np.zeros(ROW_WIDTH)
         g[0:3] = self.position
         return g
 
     @property
     def power(self) -> float:
-        """The emitted power of the luminance, as the ``power`` selector weighs it (``power_of_lights``)."""
-        from .area import light_arrays
-        from .selection import power_of_lights
-
-        return float(power_of_lights(light_arrays([self]))[0])
+        """The emitted power of the luminance, as the ``power`` selector weighs it."""
+        return float(punctual_power(np.array([self.kind == "spot"]), self.geom[None, :], self.radiance[None, :])[0])
 
     def __repr__(self) -> str:
         return f"PointLight(position={self.position.tolist()}, intensity={self.radiance.tolist()})"

@@ -4,7 +4,8 @@ The lecture's many-light estimator picks light l with probability p_l and divide
 so every selector offers ``select(p, n, u) -> (light, pmf, u')`` and ``pmf(p, n, light)`` for MIS (pbrt-v4's
 ``LightSampler::Sample / PMF``); u' is what is left of u after it chose the light, uniform on [0, 1) again, which the
 renderer gives the light as the first number of its sample (decisions.md 74).  Lights are numbered as in the scene's
-light table; when the scene has an environment map it is one more light, the last index.
+light table (:mod:`lightprobe.emitters.kinds`): the bounded lights first, then the infinite ones (directional lights,
+then the environment map, the last row).
 
 ``uniform``
     p_l = 1 / L.
@@ -24,15 +25,17 @@ light table; when the scene has an environment map it is one more light, the las
     uses a surface-area-orientation cost; the median split is simpler and keeps the tree balanced: depth
     ceil(log2 L)).
 
-The environment (``power`` and ``bvh``) is kept apart from the area lights, as pbrt-v4's ``BVHLightSampler`` keeps
-its infinite lights, and is chosen *per shading point*: with probability I_env / (I_env + I_area), where I_area
-is the importance of the root of the area lights' bounds for the receiver (the BVH's own estimate of pi x their
-irradiance, pbrt-v4's ``LightBounds::Importance``) and I_env = pi E_env(n), E_env(n) = a + b . n the
-environment's irradiance to first order (its radiance's constant and linear terms: a = pi c0, b = 2 pi / 3 c1),
-floored at a / 4.  A global share by power (pi R^2 of the scene's bounding sphere x the map's integral, pbrt-v4's
-``ImageInfiniteLight::Phi``) gave a dim sky 89 % of the picks in a scene with a 16 m ground, where uniform selection
-was more efficient (issue 32; decisions.md 71).  The area lights' ``power`` CDF and the BVH are then over the area
-lights alone.  ``uniform`` keeps the environment as one of its L equally likely lights.
+The infinite lights (``power`` and ``bvh``) are kept apart from the bounded ones, as pbrt-v4's ``BVHLightSampler``
+keeps them, and chosen *per shading point*: together with probability I_inf / (I_inf + I_area), each in proportion
+to its own I, where I_area is the importance of the root of the bounded lights' bounds for the receiver (the
+BVH's own estimate of pi x their irradiance, pbrt-v4's ``LightBounds::Importance``) and an infinite light's
+I = pi max(a + b . n, floor) is pi x its irradiance on the receiver: for the environment E_env(n) = a + b . n to
+first order (its radiance's constant and linear terms: a = pi c0, b = 2 pi / 3 c1), floored at a / 4; for a
+directional light E n . w_l, floored at E / 4 (emitters/directional.py).  A global share by power (pi R^2 of the
+scene's bounding sphere x the map's integral, pbrt-v4's ``ImageInfiniteLight::Phi``) gave a dim sky 89 % of the
+picks in a scene with a 16 m ground, where uniform selection was more efficient (issue 32; decisions.md 71).  The
+bounded lights' ``power`` CDF and the BVH are then over the bounded lights alone.  ``uniform`` keeps the infinite
+lights among its L equally likely lights.
 """
 
 from __future__ import annotations
@@ -46,14 +49,27 @@ from .._numba import jit, jit_inline, jit_parallel, prange
 from ..color import luminance
 from ..errors import ParameterError
 from ..geometry.shape_bvh import sort_along_widest_axis
-from .area import LIGHT_POINT, LIGHT_RECT, LIGHT_SPHERE, LIGHT_SPOT, LIGHT_TRIANGLE, LightArrays
+from .area import area_power
+from .kinds import (
+    LIGHT_DIRECTIONAL,
+    LIGHT_ENVIRONMENT,
+    LIGHT_POINT,
+    LIGHT_RECT,
+    LIGHT_SPHERE,
+    LIGHT_SPOT,
+    LIGHT_TRIANGLE,
+    ROW_WIDTH,
+    LightArrays,
+    concatenate,
+)
+from .punctual import punctual_power
 
 __all__ = [
     "SELECTORS",
     "LightSampler",
     "LightSelector",
     "build_selector",
-    "env_probability",
+    "infinite_probability",
     "power_of_lights",
     "select_light",
     "selector_pmf",
@@ -68,11 +84,13 @@ class LightSelector(NamedTuple):
     """Arrays the kernels read.  Node arrays are empty unless ``mode == BVH``."""
 
     mode: int
-    n_lights: int  # area lights + the environment (if any)
-    env_index: int  # -1: no environment
-    env_a: float  # the environment's irradiance to first order, E(n) = env_a + env_b . n
-    env_b: np.ndarray  # (3,)
-    cdf: np.ndarray  # (area lights + 1,) power CDF over the area lights (POWER), empty otherwise
+    n_lights: int  # rows of the light table
+    n_bounded: int  # its bounded lights, rows 0 .. n_bounded - 1; the infinite ones follow
+    env_index: int  # the environment's row; -1: no environment
+    inf_a: np.ndarray  # (infinite lights,) each one's irradiance on a receiver with normal n: max(a + b . n, floor)
+    inf_b: np.ndarray  # (infinite lights, 3)
+    inf_floor: np.ndarray  # (infinite lights,)
+    cdf: np.ndarray  # (bounded lights + 1,) power CDF over the bounded lights (POWER), empty otherwise
     # the light bounds: a tree (BVH) or its root alone (POWER: for the environment's share), empty without area
     # lights or in UNIFORM mode; node 0 is the root
     node_center: np.ndarray  # (M, 3) centre of each node's box
@@ -85,7 +103,7 @@ class LightSelector(NamedTuple):
     node_two_sided: np.ndarray  # (M,) int64
     node_second: np.ndarray  # (M,) index of the second child (the first is node + 1); -1 for a leaf
     node_light: np.ndarray  # (M,) the light of a leaf, -1 otherwise
-    light_trail: np.ndarray  # (n_area,) bit trail from the root to each light's leaf (bit d: 1 = second child)
+    light_trail: np.ndarray  # (n_bounded,) bit trail from the root to each light's leaf (bit d: 1 = second child)
 
 
 # --- light bounds (pbrt-v4 LightBounds, DirectionCone) ----------------------------------------------------------------
@@ -134,14 +152,15 @@ def _light_bounds(lights: LightArrays):
 
 
 def power_of_lights(lights: LightArrays) -> np.ndarray:
-    """Emitted power (of the luminance) of each light: pi A L for an area light, doubled for two-sided ones; 4 pi I
-    for a point light, 2 pi I (1 - (cos_start + cos_total) / 2) for a spot (pbrt-v4's ``Phi``)."""
-    lum = luminance(lights.radiance)
-    power = math.pi * lights.area * lum * np.where(lights.two_sided == 1, 2.0, 1.0)
-    point, spot = lights.kind == LIGHT_POINT, lights.kind == LIGHT_SPOT
-    power[point] = 4.0 * math.pi * lum[point]
-    g = lights.geom
-    power[spot] = 2.0 * math.pi * lum[spot] * (1.0 - 0.5 * (g[spot, 7] + g[spot, 6]))
+    """Emitted power (of the luminance) of each bounded light: pi A L for an area light, doubled for two-sided ones;
+    4 pi I for a point light, 2 pi I (1 - (cos_start + cos_total) / 2) for a spot (pbrt-v4's ``Phi``); 0 for the
+    infinite lights (chosen by their irradiance, not their power)."""
+    power = area_power(lights)
+    punctual = (lights.kind == LIGHT_POINT) | (lights.kind == LIGHT_SPOT)
+    power[punctual] = punctual_power(
+        lights.kind[punctual] == LIGHT_SPOT, lights.geom[punctual], lights.radiance[punctual]
+    )
+    power[lights.kind >= LIGHT_DIRECTIONAL] = 0.0
     return power
 
 
@@ -341,20 +360,30 @@ def _child_weights(sel, a, b, px, py, pz, nx, ny, nz):
     return ia, ib
 
 
+@jit_inline
+def _infinite_importance(sel, i, nx, ny, nz):
+    """pi x infinite light i's irradiance on a receiver with normal n, floored (never 0 where the light exists)."""
+    e = sel.inf_a[i] + sel.inf_b[i, 0] * nx + sel.inf_b[i, 1] * ny + sel.inf_b[i, 2] * nz
+    return math.pi * max(e, sel.inf_floor[i])
+
+
 @jit
-def env_probability(sel, px, py, pz, nx, ny, nz):
-    """Probability of choosing the environment for a receiver at p with normal n (``power`` and ``bvh``; see the
-    module docstring): I_env / (I_env + I_area); 0 without an environment, 1 without area lights."""
-    if sel.env_index < 0:
-        return 0.0
+def infinite_probability(sel, px, py, pz, nx, ny, nz):
+    """(probability of choosing an infinite light for a receiver at p with normal n, the infinite lights' summed
+    importance) for ``power`` and ``bvh`` (see the module docstring): I_inf / (I_inf + I_area); 0 without infinite
+    lights, 1 without bounded ones."""
+    n_inf = sel.n_lights - sel.n_bounded
+    if n_inf == 0:
+        return 0.0, 0.0
+    i_inf = 0.0
+    for i in range(n_inf):
+        i_inf += _infinite_importance(sel, i, nx, ny, nz)
     if sel.node_phi.shape[0] == 0 or sel.node_phi[0] <= 0.0:
-        return 1.0
-    irradiance = max(sel.env_a + sel.env_b[0] * nx + sel.env_b[1] * ny + sel.env_b[2] * nz, 0.25 * sel.env_a)
-    i_env = math.pi * irradiance
+        return 1.0, i_inf
     i_area = node_importance(sel, 0, px, py, pz, nx, ny, nz)
-    if i_env + i_area <= 0.0:
-        return 0.5
-    return i_env / (i_env + i_area)
+    if i_inf + i_area <= 0.0:
+        return 0.5, i_inf
+    return i_inf / (i_inf + i_area), i_inf
 
 
 ONE_MINUS_EPSILON = 1.0 - 2.0**-53  # the largest double below 1
@@ -381,14 +410,23 @@ def select_light(sel, px, py, pz, nx, ny, nz, u):
         light = min(int(x), sel.n_lights - 1)
         return light, 1.0 / sel.n_lights, _rescaled(x, float(light), 1.0)
     pmf = 1.0
-    if sel.env_index >= 0:
-        p_env = env_probability(sel, px, py, pz, nx, ny, nz)
-        if u < p_env:
-            return sel.env_index, p_env, _rescaled(u, 0.0, p_env)
-        if p_env >= 1.0:
+    if sel.n_lights > sel.n_bounded:
+        p_inf, i_inf = infinite_probability(sel, px, py, pz, nx, ny, nz)
+        if u < p_inf:
+            u = _rescaled(u, 0.0, p_inf)
+            n_inf = sel.n_lights - sel.n_bounded
+            if n_inf == 1:  # one infinite light (the environment, most often): it is the choice
+                return sel.n_bounded, p_inf, u
+            lo = 0.0
+            for i in range(n_inf):  # a few lights: a linear search of their importances
+                width = _infinite_importance(sel, i, nx, ny, nz) / i_inf if i_inf > 0.0 else 1.0 / n_inf
+                if u < lo + width or i == n_inf - 1:
+                    return sel.n_bounded + i, p_inf * width, _rescaled(u, lo, width)
+                lo += width
+        if p_inf >= 1.0:
             return -1, 0.0, u
-        pmf = 1.0 - p_env
-        u = _rescaled(u, p_env, pmf)
+        pmf = 1.0 - p_inf
+        u = _rescaled(u, p_inf, pmf)
     if sel.mode == POWER:
         cdf = sel.cdf
         lo, hi = 0, cdf.shape[0] - 2
@@ -428,11 +466,16 @@ def selector_pmf(sel, px, py, pz, nx, ny, nz, light):
     if sel.mode == UNIFORM:
         return 1.0 / sel.n_lights
     pmf = 1.0
-    if sel.env_index >= 0:
-        p_env = env_probability(sel, px, py, pz, nx, ny, nz)
-        if light == sel.env_index:
-            return p_env
-        pmf = 1.0 - p_env
+    if sel.n_lights > sel.n_bounded:
+        p_inf, i_inf = infinite_probability(sel, px, py, pz, nx, ny, nz)
+        if light >= sel.n_bounded:
+            n_inf = sel.n_lights - sel.n_bounded
+            if n_inf == 1:
+                return p_inf
+            if i_inf <= 0.0:
+                return p_inf / n_inf
+            return p_inf * (_infinite_importance(sel, light - sel.n_bounded, nx, ny, nz) / i_inf)
+        pmf = 1.0 - p_inf
     if sel.mode == POWER:
         return pmf * (sel.cdf[light + 1] - sel.cdf[light])
     if sel.node_phi.shape[0] == 0 or sel.node_phi[0] <= 0.0:
@@ -477,36 +520,49 @@ def _pmf_all(sel, p, n):
 
 # --- construction ----------------------------------------------------------------------------------------------------
 def build_selector(mode: str, lights: LightArrays, *, env_irradiance=None) -> LightSelector:
-    """A selector over ``lights`` plus, if ``env_irradiance`` = (a, bx, by, bz) is given (the environment's
-    irradiance to first order, E(n) = a + b . n: :meth:`EnvironmentMap.irradiance_terms`), the environment as the
-    last light."""
+    """A selector over the light table ``lights`` (bounded rows first, then the infinite ones: kinds.py).
+    ``env_irradiance`` = (a, bx, by, bz), the environment's irradiance to first order, E(n) = a + b . n
+    (:meth:`EnvironmentMap.irradiance_terms`), is required when the table has an environment row; given for a table
+    without one, a row is added for it (the last)."""
     if mode not in SELECTORS:
         raise ParameterError(f"light sampler must be one of {list(SELECTORS)}, got {mode!r}")
-    n_area = lights.kind.shape[0]
-    has_env = env_irradiance is not None
-    n = n_area + int(has_env)
     env = np.zeros(4) if env_irradiance is None else np.asarray(env_irradiance, dtype=np.float64).reshape(4)
     if not np.all(np.isfinite(env)) or env[0] < 0:
         raise ParameterError(f"env_irradiance must be 4 finite numbers with a >= 0, got {env_irradiance!r}")
+    kinds = lights.kind
+    if env_irradiance is not None and not np.any(kinds == LIGHT_ENVIRONMENT):
+        lights = concatenate([lights, _environment_row()])
+        kinds = lights.kind
+    infinite = kinds >= LIGHT_DIRECTIONAL
+    n = kinds.shape[0]
+    n_bounded = int(np.count_nonzero(~infinite))
+    if np.any(infinite[:n_bounded]) or np.count_nonzero(kinds == LIGHT_ENVIRONMENT) > 1:
+        raise ParameterError("the light table must list its bounded lights first, then at most one environment last")
+    if np.any(kinds == LIGHT_ENVIRONMENT) and (kinds[-1] != LIGHT_ENVIRONMENT or env_irradiance is None):
+        raise ParameterError("an environment row must be the table's last, with env_irradiance given")
+    bounded = LightArrays(*(a[:n_bounded] for a in lights))
+    inf_a, inf_b, inf_floor = _infinite_terms(LightArrays(*(a[n_bounded:] for a in lights)), env)
     emptyi = np.zeros(0, np.int64)
     cdf = np.zeros(0)
     if mode == "uniform":
         nodes, trail = _no_nodes(), emptyi
     elif mode == "bvh":
-        nodes, trail, _ = _build_bvh(lights)
+        nodes, trail, _ = _build_bvh(bounded)
     else:
-        phi = power_of_lights(lights)
-        weights = phi if phi.sum() > 0 else np.ones(n_area)
-        cdf = np.concatenate([[0.0], np.cumsum(weights) / weights.sum()]) if n_area else np.zeros(0)
-        if n_area:
+        phi = power_of_lights(bounded)
+        weights = phi if phi.sum() > 0 else np.ones(n_bounded)
+        cdf = np.concatenate([[0.0], np.cumsum(weights) / weights.sum()]) if n_bounded else np.zeros(0)
+        if n_bounded:
             cdf[-1] = 1.0
-        nodes, trail = _root_only(lights), emptyi
+        nodes, trail = _root_only(bounded), emptyi
     return LightSelector(
         SELECTORS[mode],
         n,
-        n_area if has_env else -1,
-        float(env[0]),
-        np.ascontiguousarray(env[1:]),
+        n_bounded,
+        n - 1 if n and kinds[-1] == LIGHT_ENVIRONMENT else -1,
+        inf_a,
+        inf_b,
+        inf_floor,
         cdf,
         np.ascontiguousarray(0.5 * (nodes["lo"] + nodes["hi"])),
         0.5 * np.linalg.norm(nodes["hi"] - nodes["lo"], axis=1),
@@ -520,6 +576,29 @@ def build_selector(mode: str, lights: LightArrays, *, env_irradiance=None) -> Li
         nodes["light"],
         trail,
     )
+
+
+def _environment_row() -> LightArrays:
+    return LightArrays(
+        np.array([LIGHT_ENVIRONMENT], np.int64), np.zeros((1, ROW_WIDTH)), np.zeros((1, 3)), np.zeros(1, np.int64),
+        np.zeros(1),
+    )  # fmt: skip
+
+
+def _infinite_terms(infinite: LightArrays, env: np.ndarray):
+    """(a, b, floor) of each infinite light's irradiance on a receiver with normal n, max(a + b . n, floor): the
+    environment's first-order terms (floored at a / 4), a directional light's E n . w_l (floored at E / 4)."""
+    k = infinite.kind.shape[0]
+    a, b, floor = np.zeros(k), np.zeros((k, 3)), np.zeros(k)
+    for i in range(k):
+        if infinite.kind[i] == LIGHT_ENVIRONMENT:
+            a[i], b[i], floor[i] = env[0], env[1:], 0.25 * env[0]
+        else:  # directional: its irradiance at normal incidence is E (kept in radiance at angle 0, else pi L sin^2)
+            g = infinite.geom[i]
+            sin2 = g[4] * (2.0 - g[4])  # 1 - cos^2 alpha from 1 - cos alpha
+            e = float(luminance(infinite.radiance[i])) * (1.0 if g[4] <= 0.0 else math.pi * sin2)
+            b[i], floor[i] = e * g[0:3], 0.25 * e
+    return a, np.ascontiguousarray(b), floor
 
 
 def _no_nodes() -> dict:

@@ -64,18 +64,19 @@ def parse_strategy(
 ) -> tuple[str, RenderSettings]:
     """(label, settings) for a strategy token, to be compared at ``equal`` samples (``spp`` of them, if given) or
     time; a :class:`LightprobeError` names a bad token."""
-    from ..io.scene_file import RENDER_KEYS, settings_fields
+    from ..integrators.settings import options, settings_from_table
 
+    keys = {o.key for o in options().values() if o.key is not None} - {"spp"}
     name, *overrides = [part.strip() for part in token.strip().split("/")]
     if name not in PRESETS:
         raise LightprobeError(f"unknown strategy {name!r} in {token!r}; use {', '.join(PRESETS)}")
     changes = dict(PRESETS[name])
     for item in overrides:
         key, sep, value = item.partition("=")
-        if not sep or key.strip() not in RENDER_KEYS - {"spp"}:
-            keys = ", ".join(sorted(RENDER_KEYS - {"spp"}))
-            raise LightprobeError(f"strategy {token!r}: {item!r} is not key=value with a key among {keys}")
-        changes.update(settings_fields({key.strip(): _value(value)}))
+        if not sep or key.strip() not in keys:
+            allowed = ", ".join(sorted(keys))
+            raise LightprobeError(f"strategy {token!r}: {item!r} is not key=value with a key among {allowed}")
+        changes.update(settings_from_table({key.strip(): _value(value)}))
     settings = dataclasses.replace(base, **changes)
     if settings.adaptive is True and equal == "spp" and spp is not None and spp < 4:
         raise LightprobeError(f"strategy {token!r}: adaptive sampling needs spp >= 4 (a pilot first), got {spp}")

@@ -7,8 +7,9 @@ a kernel would make Numba refuse to cache it; a symbol name is resolved when the
 Embree inside the kernels drops the gather, float32 copy, thread pool and scatter that batches through ``embreex``
 needed (decisions.md 30 has the measurements).
 
-Ray structs live in ``scratch``, one 640-byte row per Numba thread (``numba.get_thread_id()``): Embree wants them
-16-byte aligned (NumPy's allocations are), and rows a cache line apart keep the two threads from sharing lines.
+Ray structs live in ``scratch``, one 640-byte row per thread (the renderer's worker index, or a batch kernel's
+``numba.get_thread_id()``): the functions here take the caller's row.  Embree wants them 16-byte aligned (NumPy's
+allocations are), and rows a cache line apart keep the two threads from sharing lines.
 Layout of ``RTCRayHit`` in this build (instance arrays enabled: 96 bytes), in 32-bit words: origin 0-2, tnear 3,
 direction 4-6, time 7, tfar 8, mask 9, id 10, flags 11, geometric normal 12-14, u 15, v 16, primID 17, geomID 18,
 instID 19, instPrimID 20.  ``rtcOccluded1`` reads the first 12 words (``RTCRay``) and reports a blocked ray by
@@ -196,9 +197,9 @@ def _put_ray(words, floats, ox, oy, oz, dx, dy, dz, tfar):
 
 
 @jit_inline
-def mesh_occluded(scene, scratch, ox, oy, oz, dx, dy, dz, tfar):
-    """Does a mesh triangle block the ray on (0, tfar)?  (tfar float32: pass ``FAR`` for an unbounded ray.)"""
-    words = scratch[numba.get_thread_id()]
+def mesh_occluded(scene, words, ox, oy, oz, dx, dy, dz, tfar):
+    """Does a mesh triangle block the ray on (0, tfar)?  (tfar float32: pass ``FAR`` for an unbounded ray.)
+    ``words``: the caller's scratch row."""
     floats = words.view(np.float32)
     _put_ray(words, floats, ox, oy, oz, dx, dy, dz, tfar)
     _rtc_occluded1(scene, words.ctypes.data, 0)
@@ -206,9 +207,8 @@ def mesh_occluded(scene, scratch, ox, oy, oz, dx, dy, dz, tfar):
 
 
 @jit_inline
-def packet_words(scratch):
-    """This thread's RTCRay8 and valid mask: 104 words of its scratch row, 64-byte aligned."""
-    words = scratch[numba.get_thread_id()]
+def packet_words(words):
+    """The RTCRay8 and valid mask in a scratch row: 104 of its words, 64-byte aligned."""
     start = 32 + ((64 - words.ctypes.data % 64) % 64) // 4
     return words[start : start + _PACKET_WORDS]
 
@@ -243,9 +243,9 @@ def occluded_packet(scene, packet, floats, count):
 
 
 @jit_inline
-def closest_mesh_hit(scene, scratch, ox, oy, oz, dx, dy, dz, tfar):
-    """The nearest triangle hit closer than tfar: (t, mesh, face, b1, b2); mesh -1 when there is none."""
-    words = scratch[numba.get_thread_id()]
+def closest_mesh_hit(scene, words, ox, oy, oz, dx, dy, dz, tfar):
+    """The nearest triangle hit closer than tfar: (t, mesh, face, b1, b2); mesh -1 when there is none.  ``words``:
+    the caller's scratch row."""
     floats = words.view(np.float32)
     _put_ray(words, floats, ox, oy, oz, dx, dy, dz, tfar)
     words[17] = INVALID_ID
@@ -262,7 +262,15 @@ def occluded_batch(scene, scratch, origins, dirs, tfar):
     blocked = np.empty(n, np.bool_)
     for i in prange(n):
         blocked[i] = mesh_occluded(
-            scene, scratch, origins[i, 0], origins[i, 1], origins[i, 2], dirs[i, 0], dirs[i, 1], dirs[i, 2], tfar[i]
+            scene,
+            scratch[numba.get_thread_id()],
+            origins[i, 0],
+            origins[i, 1],
+            origins[i, 2],
+            dirs[i, 0],
+            dirs[i, 1],
+            dirs[i, 2],
+            tfar[i],
         )
     return blocked
 
@@ -275,7 +283,7 @@ def occluded_packets_batch(scene, scratch, origins, dirs, tfar):
     for p in prange((n + PACKET - 1) // PACKET):
         first = p * PACKET
         count = min(PACKET, n - first)
-        packet = packet_words(scratch)
+        packet = packet_words(scratch[numba.get_thread_id()])
         floats = packet.view(np.float32)
         for i in range(count):
             q = first + i
@@ -297,6 +305,14 @@ def intersect_batch(scene, scratch, origins, dirs, tfar):
     v = np.empty(n, np.float32)
     for i in prange(n):
         t[i], geom[i], prim[i], u[i], v[i] = closest_mesh_hit(
-            scene, scratch, origins[i, 0], origins[i, 1], origins[i, 2], dirs[i, 0], dirs[i, 1], dirs[i, 2], tfar[i]
+            scene,
+            scratch[numba.get_thread_id()],
+            origins[i, 0],
+            origins[i, 1],
+            origins[i, 2],
+            dirs[i, 0],
+            dirs[i, 1],
+            dirs[i, 2],
+            tfar[i],
         )
     return t, geom, prim, u, v

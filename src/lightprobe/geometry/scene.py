@@ -1,4 +1,5 @@
-"""A scene: camera, environment light, materials, objects (meshes, spheres, rectangles) and point and spot lights.
+"""A scene: camera, environment light, materials, objects (meshes, spheres, rectangles) and point, spot and
+directional lights.
 
 Build one from Python::
 
@@ -9,13 +10,12 @@ Build one from Python::
     scene.add(Rectangle.ground(size=100), Lambert(0.5))
     scene.add_light(SpotLight([0, 4, 2], target=[0, 0, 0], intensity=50, cone_angle=25))
 
-or from a TOML file with :func:`lightprobe.io.scene_file.load_scene` (``Scene.load``).  :meth:`Scene.compile`
+or from a TOML file with :func:`lightprobe.io.scene_file.load_scene`.  :meth:`Scene.compile`
 flattens everything into the plain arrays the Numba kernels read (:class:`SceneArrays`).
 """
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -92,7 +92,9 @@ class Scene:
         self.name = name
         self.materials: dict[str, BSDF] = {}
         self.objects: list[SceneObject] = []
-        self.lights: list = []  # point and spot lights (emitters/punctual.py), after the emitting objects' rows
+        # point, spot and directional lights (emitters/punctual.py, directional.py): in the light table after the
+        # emitting objects' rows, the directional ones with the infinite lights
+        self.lights: list = []
 
     def add_material(self, name: str, bsdf: BSDF) -> str:
         if not isinstance(bsdf, BSDF):
@@ -144,21 +146,15 @@ class Scene:
         return obj
 
     def add_light(self, light):
-        """Add a :class:`~lightprobe.emitters.punctual.PointLight` or
-        :class:`~lightprobe.emitters.punctual.SpotLight` (an emitter without a surface)."""
+        """Add a :class:`~lightprobe.emitters.punctual.PointLight`, :class:`~lightprobe.emitters.punctual.SpotLight`
+        or :class:`~lightprobe.emitters.directional.DirectionalLight` (an emitter without a surface)."""
+        from ..emitters.directional import DirectionalLight
         from ..emitters.punctual import PointLight
 
-        if not isinstance(light, PointLight):
-            raise SceneError(f"add_light takes a PointLight or SpotLight, got {type(light).__name__}")
+        if not isinstance(light, PointLight | DirectionalLight):
+            raise SceneError(f"add_light takes a PointLight, SpotLight or DirectionalLight, got {type(light).__name__}")
         self.lights.append(light)
         return light
-
-    @classmethod
-    def load(cls, path: str | os.PathLike) -> Scene:
-        """Read a TOML scene file (see :mod:`lightprobe.io.scene_file`)."""
-        from ..io.scene_file import load_scene
-
-        return load_scene(path)[0]
 
     @property
     def triangle_count(self) -> int:
@@ -238,10 +234,11 @@ class Scene:
         return [o for o in self.objects if o.emission is not None]
 
     def light_table(self):
-        """The :class:`~lightprobe.emitters.area.LightArrays` of every emissive object (world space): spheres,
-        rectangles, then each face of each emissive mesh, in the order :meth:`compile` numbers them; then the point
-        and spot lights."""
-        from ..emitters.area import LIGHT_RECT, LIGHT_SPHERE, LightArrays
+        """The light table (:class:`~lightprobe.emitters.kinds.LightArrays`, world space): every emissive object --
+        spheres, rectangles, then each face of each emissive mesh, in the order :meth:`compile` numbers them --,
+        the point and spot lights, then the infinite lights: the directional ones, and the environment last."""
+        from ..emitters.kinds import LIGHT_RECT, LIGHT_SPHERE, LightArrays, concatenate
+        from ..emitters.lights import light_arrays
 
         emitters = self.emitters
         spheres = [o for o in emitters if isinstance(o.shape, Sphere)]
@@ -265,12 +262,11 @@ class Scene:
         meshes = [
             _triangle_lights(o.shape, o.emission, o.two_sided) for o in emitters if isinstance(o.shape, TriangleMesh)
         ]
-        parts = [analytic, *meshes]
-        if self.lights:  # after every surface's rows, so compile()'s numbering of those holds
-            from ..emitters.area import light_arrays
-
-            parts.append(light_arrays(self.lights))
-        return LightArrays(*(np.concatenate([getattr(t, f) for t in parts]) for f in LightArrays._fields))
+        # after every surface's rows, so compile()'s numbering of those holds; bounded lights before infinite ones
+        bounded = [x for x in self.lights if x.kind != "directional"]
+        infinite = [x for x in self.lights if x.kind == "directional"]
+        lamps = light_arrays(bounded + infinite, environment=self.environment is not None)
+        return concatenate([analytic, *meshes, lamps])
 
     def summary(self) -> str:
         w, h = self.camera.resolution
@@ -280,7 +276,7 @@ class Scene:
         if self.emitters:
             n = sum(_light_rows(o) for o in self.emitters)
             lights.append(f"{n} area lights")
-        for kind in ("point", "spot"):
+        for kind in ("point", "spot", "directional"):
             n = sum(light.kind == kind for light in self.lights)
             if n:
                 lights.append(f"{n} {kind} light{'s' if n > 1 else ''}")
@@ -323,7 +319,7 @@ def _emission(value, shape, label: str) -> np.ndarray | None:
 
 def _triangle_lights(mesh: TriangleMesh, emission, two_sided: bool):
     """The light table rows of an emissive mesh, one per face."""
-    from ..emitters.area import LIGHT_TRIANGLE, LightArrays
+    from ..emitters.kinds import LIGHT_TRIANGLE, LightArrays
 
     v = mesh.vertices[mesh.faces]  # (F, 3, 3)
     cross = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])

@@ -86,6 +86,13 @@ Example (every key shown; optional ones have their default)::
     intensity = 40.0
     intensity_scale = 1.0               # optional, multiplies intensity
 
+    [[lights]]                          # a directional light (a sun): irradiance E in W/m^2 at normal incidence
+    type = "directional"                #   (RGB or a number) from a disc of angular diameter `angle` degrees
+    direction = [-0.3, -1.0, 0.2]       #   (0: a delta light); `direction` is the way its light travels
+    irradiance = [3.0, 2.8, 2.5]
+    angle = 0.53
+    irradiance_scale = 1.0              # optional, multiplies irradiance
+
     [[lights]]                          # a spot light: full intensity within falloff_start degrees of its axis,
     type = "spot"                       #   none beyond cone_angle (default falloff_start: cone_angle - 5)
     position = [0.0, 4.0, 2.0]
@@ -120,6 +127,7 @@ from pathlib import Path
 import numpy as np
 
 from ..bsdfs import GGXConductor, Lambert, Phong, RoughPlastic
+from ..emitters.directional import DirectionalLight
 from ..emitters.envmap import EnvironmentMap
 from ..emitters.procedural import constant, sky_with_sun
 from ..emitters.punctual import PointLight, SpotLight
@@ -128,24 +136,9 @@ from ..geometry.camera import Camera
 from ..geometry.mesh import TriangleMesh
 from ..geometry.scene import Scene
 from ..geometry.shapes import Rectangle, Sphere
+from ..integrators.settings import read_render_table
 
-__all__ = ["RENDER_KEYS", "load_scene", "settings_fields"]
-
-RENDER_KEYS = {
-    "spp",
-    "strategy",
-    "heuristic",
-    "bsdf_samples",
-    "env_samples",
-    "seed",
-    "sampler",
-    "env_candidates",
-    "mis_compensation",
-    "light_sampler",
-    "lights_per_sample",
-    "light_strategy",
-    "adaptive",
-}
+__all__ = ["load_scene"]
 
 
 class _Table:
@@ -367,8 +360,20 @@ def _object(scene: Scene, t: _Table, base: Path) -> None:
 
 def _light(scene: Scene, t: _Table) -> None:
     kind = t.string("type", required=True)
-    if kind not in ("point", "spot"):
-        raise SceneError(f"{t.where}: unknown light type {kind!r}; use point or spot (area lights are objects)")
+    if kind not in ("point", "spot", "directional"):
+        raise SceneError(
+            f"{t.where}: unknown light type {kind!r}; use point, spot or directional (area lights are objects)"
+        )
+    if kind == "directional":
+        direction = t.get("direction", required=True)
+        t.get("irradiance", required=True)
+        scale = t.number("irradiance_scale", 1.0)
+        if scale < 0:
+            raise SceneError(f"{t.where}: irradiance_scale must be >= 0, got {scale!r}")
+        light = DirectionalLight(direction, t.rgb("irradiance") * scale, angle=t.number("angle", 0.0))
+        t.done()
+        scene.add_light(light)
+        return
     position = t.get("position", required=True)
     t.get("intensity", required=True)
     scale = t.number("intensity_scale", 1.0)
@@ -428,48 +433,12 @@ def load_scene(path: str | os.PathLike, *, require_light: bool = True) -> tuple[
         raise SceneError(
             f"{p}: the scene has no light: add an [environment] table, an object with emission or a [[lights]] entry"
         )
-    defaults = _render_defaults(_Table(root.get("render", {}), f"{p}: [render]"))
+    render_table = root.get("render", {})
+    if not isinstance(render_table, dict):
+        raise SceneError(f"{p}: [render]: expected a table, got {type(render_table).__name__}")
+    defaults = read_render_table(render_table, f"{p}: [render]", SceneError)
     root.done()
     return scene, defaults
-
-
-def settings_fields(defaults: dict) -> dict:
-    """``[render]`` keys as :class:`~lightprobe.integrators.wavefront.RenderSettings` field names."""
-    names = {"bsdf_samples": "n_bsdf", "env_samples": "n_env"}
-    return {names.get(k, k): v for k, v in defaults.items()}
-
-
-def _render_defaults(t: _Table) -> dict:
-    """The ``[render]`` table, checked key by key (type and range), then as a whole (e.g. compensation needs
-    strategy 'mis'); returns the keys given."""
-    from ..emitters.area import STRATEGIES as LIGHT_STRATEGIES
-    from ..emitters.selection import SELECTORS
-    from ..integrators.wavefront import HEURISTICS, STRATEGIES, RenderSettings
-    from ..sampling.rng import SAMPLERS
-
-    readers = {
-        "spp": lambda: t.integer("spp", minimum=1),
-        "strategy": lambda: t.choice("strategy", list(STRATEGIES)),
-        "heuristic": lambda: t.choice("heuristic", list(HEURISTICS)),
-        "bsdf_samples": lambda: t.integer("bsdf_samples", minimum=0),
-        "env_samples": lambda: t.integer("env_samples", minimum=0),
-        "seed": lambda: t.integer("seed", minimum=0),
-        "sampler": lambda: t.choice("sampler", list(SAMPLERS)),
-        "env_candidates": lambda: t.integer("env_candidates", minimum=1),
-        "mis_compensation": lambda: t.boolean("mis_compensation"),
-        "light_sampler": lambda: t.choice("light_sampler", list(SELECTORS)),
-        "lights_per_sample": lambda: t.integer("lights_per_sample", minimum=1),
-        "light_strategy": lambda: t.choice("light_strategy", list(LIGHT_STRATEGIES)),
-        "adaptive": lambda: t.boolean("adaptive"),
-    }
-    assert set(readers) == RENDER_KEYS
-    defaults = {key: read() for key, read in readers.items() if key in t.data}
-    t.done()
-    try:
-        RenderSettings(**settings_fields(defaults)).validate()
-    except LightprobeError as exc:
-        raise SceneError(f"{t.where}: {exc}") from None
-    return defaults
 
 
 def _within(where: str, build):

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 from numba import njit
 
+from lightprobe.integrators.stages.sobol_lanes import LANES, camera_numbers_block, slot_numbers_block
 from lightprobe.integrators.techniques import BRDF, MIS, technique_slot
 from lightprobe.sampling.rng import SAMPLERS, sample_state, uniform, uniform_2d
-from lightprobe.sampling.sobol_lanes import LANES, camera_numbers_block, slot_numbers_block
 
 SOBOL = SAMPLERS["sobol"]
 

@@ -16,13 +16,13 @@ from numba import types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
-from ..emitters.envmap_lanes import LANES, _Lanes
-from .rng import _DIM, _GOLDEN, _INV32, _LK1, _LK2, _LK3, _M1, _M2, _PIXEL, _SUPERSET
+from ...sampling.rng import _DIM, _GOLDEN, _INV32, _LK1, _LK2, _LK3, _M1, _M2, _PIXEL, _SUPERSET
+from ...simd import LANES, Lanes
 
 __all__ = ["LANES", "camera_numbers_block", "slot_numbers_block"]
 
-_F64, _I32, _I64 = ir.DoubleType(), ir.IntType(32), ir.IntType(64)
-_VI32, _VI64, _VF64 = ir.VectorType(_I32, LANES), ir.VectorType(_I64, LANES), ir.VectorType(_F64, LANES)
+F64, I32, I64 = ir.DoubleType(), ir.IntType(32), ir.IntType(64)
+VI32, VI64, VF64 = ir.VectorType(I32, LANES), ir.VectorType(I64, LANES), ir.VectorType(F64, LANES)
 
 
 def _u64(x) -> int:
@@ -32,14 +32,14 @@ def _u64(x) -> int:
 class _Integers:
     """The rng module's integer functions on 8 lanes of int64 (wrapping arithmetic, as NumPy's uint64)."""
 
-    def __init__(self, lanes: _Lanes):
+    def __init__(self, lanes: Lanes):
         self.v, self.b = lanes, lanes.b
 
     def c64(self, x):
-        return ir.Constant(_VI64, [_u64(x)] * LANES)
+        return ir.Constant(VI64, [_u64(x)] * LANES)
 
     def c32(self, x):
-        return ir.Constant(_VI32, [int(x) & 0xFFFFFFFF] * LANES)
+        return ir.Constant(VI32, [int(x) & 0xFFFFFFFF] * LANES)
 
     def mix(self, z):
         """rng._mix: SplitMix64's finaliser."""
@@ -51,7 +51,7 @@ class _Integers:
     def reverse32(self, x32):
         """rng._reverse32 of 32-bit lanes."""
         function = cgutils.get_or_insert_function(
-            self.b.module, ir.FunctionType(_VI32, [_VI32]), f"llvm.bitreverse.v{LANES}i32"
+            self.b.module, ir.FunctionType(VI32, [VI32]), f"llvm.bitreverse.v{LANES}i32"
         )
         return self.b.call(function, [x32])
 
@@ -59,7 +59,7 @@ class _Integers:
         """rng._laine_karras: every operation is mod 2^32 there (``& 0xFFFFFFFF`` after each), so it runs in 32-bit
         lanes, whose wrapping gives the same low 32 bits."""
         b = self.b
-        seed = b.trunc(seed64, _VI32)
+        seed = b.trunc(seed64, VI32)
         x = b.xor(x32, b.mul(x32, self.c32(_LK1)))
         x = b.add(x, seed)
         x = b.mul(x, b.or_(b.lshr(seed, self.c32(16)), self.c32(1)))
@@ -72,14 +72,14 @@ class _Integers:
 
     def to_unit(self, x32):
         """float(x) * 2^-32 for a 32-bit value: exact."""
-        return self.b.fmul(self.b.uitofp(x32, _VF64), ir.Constant(_VF64, [_INV32] * LANES))
+        return self.b.fmul(self.b.uitofp(x32, VF64), ir.Constant(VF64, [_INV32] * LANES))
 
     def pair_hash(self, pkey, index, pair):
         """rng._pair_scramble: the hash of (pixel key, Sobol' pair, index's high half) and the shuffled index."""
         b = self.b
         high = b.mul(b.lshr(index, self.c64(32)), self.c64(_GOLDEN))
         h = self.mix(b.add(b.add(pkey, b.mul(b.add(pair, self.v.i(1)), self.c64(_DIM))), high))
-        return h, self.owen(b.trunc(index, _VI32), h)
+        return h, self.owen(b.trunc(index, VI32), h)
 
     def sobol_x(self, h, shuffled):
         """rng._sobol_x."""
@@ -116,16 +116,16 @@ def slot_numbers_block(typingctx, out, pkey, sample, mis, n_bsdf, m, row, first_
 
     def codegen(context, builder, signature, args):
         out_a = context.make_array(signature.args[0])(context, builder, args[0])
-        v, b = _Lanes(builder), builder
+        v, b = Lanes(builder), builder
         n = _Integers(v)
 
         def scalar(i):
             return context.cast(b, args[i], signature.args[i], types.int64)
 
-        sample_v, n_bsdf_v, m_v, first_v = (v.splat(scalar(i), _VI64) for i in (2, 4, 5, 7))
+        sample_v, n_bsdf_v, m_v, first_v = (v.splat(scalar(i), VI64) for i in (2, 4, 5, 7))
         mis = v.splat(context.cast(b, args[3], signature.args[3], types.boolean), ir.VectorType(ir.IntType(1), LANES))
-        pkey_v = v.splat(args[1], _VI64)
-        j = b.add(first_v, ir.Constant(_VI64, list(range(LANES))))
+        pkey_v = v.splat(args[1], VI64)
+        j = b.add(first_v, ir.Constant(VI64, list(range(LANES))))
         live = b.icmp_signed("<", j, m_v)
         # techniques.technique_slot + rng.group_slot: under MIS the BSDF slots are one group and the light slots
         # another; otherwise all m slots are one.  Member jj of a group of n takes sample index sample n + jj and
@@ -142,7 +142,7 @@ def slot_numbers_block(typingctx, out, pkey, sample, mis, n_bsdf, m, row, first_
         u2 = n.sobol_x(h2, shuffled2)
         # the 8 rows (u0, u1, u2) are 24 consecutive doubles: one masked vector store (a scatter per number measured
         # the same in the render, 3.0-3.1 s of setup)
-        v.store_run([u0, u1, u2], b.gep(out_a.data, [b.mul(scalar(6), _I64(3))]), live)
+        v.store_run([u0, u1, u2], b.gep(out_a.data, [b.mul(scalar(6), I64(3))]), live)
         return context.get_dummy_value()
 
     return types.void(*signature_args), codegen
@@ -166,21 +166,21 @@ def camera_numbers_block(typingctx, dirs, seed, pixels, spp_pass, sample_start, 
     def codegen(context, builder, signature, args):
         dirs_a = context.make_array(signature.args[0])(context, builder, args[0])
         pixels_a = context.make_array(signature.args[2])(context, builder, args[2])
-        v, b = _Lanes(builder), builder
+        v, b = Lanes(builder), builder
         n = _Integers(v)
 
         def scalar(i):
             return context.cast(b, args[i], signature.args[i], types.int64)
 
-        seed_v, spp_v, first_sample_v = (v.splat(scalar(i), _VI64) for i in (1, 3, 4))
+        seed_v, spp_v, first_sample_v = (v.splat(scalar(i), VI64) for i in (1, 3, 4))
         _, inside, k = v.slots(scalar(5), cgutils.unpack_tuple(b, dirs_a.shape, 2)[0])
         q = v.quotient(k, spp_v)  # the camera sample's pixel in the pass
-        pixel = v.gather(_I64, v.address(pixels_a, q, 8))
+        pixel = v.gather(I64, v.address(pixels_a, q, 8))
         sample = b.add(first_sample_v, b.sub(k, b.mul(q, spp_v)))
         pkey = n.mix(b.add(b.mul(seed_v, n.c64(_GOLDEN)), b.mul(pixel, n.c64(_PIXEL))))  # rng.pixel_key
         u0, u1 = n.sobol_2d(pkey, sample, v.i(0))  # dimensions 0 and 1: Sobol' pair 0
-        first = b.extract_element(k, _I32(0))
-        v.store_run([u0, u1, v.f(0.0)], b.gep(dirs_a.data, [b.mul(first, _I64(3))]), inside)
+        first = b.extract_element(k, I32(0))
+        v.store_run([u0, u1, v.f(0.0)], b.gep(dirs_a.data, [b.mul(first, I64(3))]), inside)
         return context.get_dummy_value()
 
     return types.void(*signature_args), codegen

@@ -17,9 +17,9 @@ from numba import types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
-from ..emitters.envmap_lanes import _F64, _I32, _I64, _VF64, _VI64, LANES, _Lanes
-from .intersect import MISS, RECT, RECT_WIDTH, SPHERE
-from .shadow_lanes import _INF, _arrays, _c_array, _loop, _rect_t, _row, _sphere_t
+from ...geometry.intersect import MISS, RECT, RECT_WIDTH, SPHERE
+from ...simd import F64, I32, I64, LANES, VF64, VI64, Lanes, array_structs, c_array, ir_loop, splat_row
+from .shadow_lanes import _INF, _rect_t, _sphere_t
 
 __all__ = ["LANES", "nearest_block"]
 
@@ -32,23 +32,23 @@ def nearest_block(typingctx, dirs, t, kind, index, cam, spheres, rects, start):
     rects (R, RECT_WIDTH) float64; kind, index (N,) int64; all C-contiguous."""
     f64, i64 = types.float64, types.int64
     if not (
-        all(_c_array(a, f64, 2) for a in (dirs, spheres, rects))
-        and _c_array(t, f64, 1)
-        and _c_array(cam, f64, 1)
-        and _c_array(kind, i64, 1)
-        and _c_array(index, i64, 1)
+        all(c_array(a, f64, 2) for a in (dirs, spheres, rects))
+        and c_array(t, f64, 1)
+        and c_array(cam, f64, 1)
+        and c_array(kind, i64, 1)
+        and c_array(index, i64, 1)
         and isinstance(start, types.Integer)
     ):
         return None
 
     def codegen(context, builder, signature, args):
-        dirs_a, t_a, kind_a, index_a, cam_a, spheres_a, rects_a = _arrays(context, builder, signature, args, 7)
-        v, b = _Lanes(builder), builder
+        dirs_a, t_a, kind_a, index_a, cam_a, spheres_a, rects_a = array_structs(context, builder, signature, args, 7)
+        v, b = Lanes(builder), builder
         start_v = context.cast(b, args[7], signature.args[7], types.int64)
         _, inside, read = v.slots(start_v, cgutils.unpack_tuple(b, t_a.shape, 1)[0])
-        first = b.extract_element(read, _I32(0))
-        d = list(v.load_run(_F64, b.gep(dirs_a.data, [b.mul(first, _I64(3))]), inside, 3, 0.0))
-        o = [v.splat(b.load(b.gep(cam_a.data, [_I64(i)])), _VF64) for i in range(3)]
+        first = b.extract_element(read, I32(0))
+        d = list(v.load_run(F64, b.gep(dirs_a.data, [b.mul(first, I64(3))]), inside, 3, 0.0))
+        o = [v.splat(b.load(b.gep(cam_a.data, [I64(i)])), VF64) for i in range(3)]
         counts = [cgutils.unpack_tuple(b, a.shape, 2)[0] for a in (spheres_a, rects_a)]
 
         def nearer(shape_kind, hit_at):
@@ -62,24 +62,24 @@ def nearest_block(typingctx, dirs, t, kind, index, cam, spheres, rects, start):
                 return (
                     b.select(closer, hit, best),
                     b.select(closer, v.i(shape_kind), kinds),
-                    b.select(closer, v.splat(i, _VI64), indices),
+                    b.select(closer, v.splat(i, VI64), indices),
                 )
 
             return body
 
         def sphere(i, best):
-            row = _row(v, spheres_a, i, 4, range(4))
+            row = splat_row(v, spheres_a, i, 4, range(4))
             return _sphere_t(v, o, d, row[0:3], row[3], best)
 
         def rect(i, best):
-            return _rect_t(v, o, d, _row(v, rects_a, i, RECT_WIDTH, range(RECT_WIDTH)), best)
+            return _rect_t(v, o, d, splat_row(v, rects_a, i, RECT_WIDTH, range(RECT_WIDTH)), best)
 
         found = (v.f(_INF), v.i(MISS), v.i(-1))
-        found = _loop(v, counts[0], found, nearer(SPHERE, sphere))
-        best, kinds, indices = _loop(v, counts[1], found, nearer(RECT, rect))
+        found = ir_loop(v, counts[0], found, nearer(SPHERE, sphere))
+        best, kinds, indices = ir_loop(v, counts[1], found, nearer(RECT, rect))
         v.store_run([best], b.gep(t_a.data, [first]), inside)
         for array, values in ((kind_a, kinds), (index_a, indices)):  # int64 lanes stored as their bits
-            v.store_run([b.bitcast(values, _VF64)], b.gep(array.data, [first]), inside)
+            v.store_run([b.bitcast(values, VF64)], b.gep(array.data, [first]), inside)
         return context.get_dummy_value()
 
     return types.void(dirs, t, kind, index, cam, spheres, rects, start), codegen

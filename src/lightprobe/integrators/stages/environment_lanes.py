@@ -36,250 +36,24 @@ from numba import types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
-from .._numba import jit_parallel, prange
+from ..._numba import jit_parallel, prange
+from ...simd import (
+    F64,
+    I8,
+    I32,
+    I64,
+    LANES,
+    MASK,
+    VF64,
+    VI8,
+    VI64,
+    Lanes,
+    llvm_function,
+)
+from ..techniques import SLOT_BSDF, SLOT_LIGHT, SLOT_NONE
 
-LANES = 8
-
-_F32, _F64, _I8, _I32, _I64 = ir.FloatType(), ir.DoubleType(), ir.IntType(8), ir.IntType(32), ir.IntType(64)
-_VF64, _VI64, _VF32 = ir.VectorType(_F64, LANES), ir.VectorType(_I64, LANES), ir.VectorType(_F32, LANES)
-_VI8, _MASK = ir.VectorType(_I8, LANES), ir.VectorType(ir.IntType(1), LANES)
-_VI32 = ir.VectorType(_I32, LANES)
-_FLAGS = ("contract", "arcp", "afn")  # the scalar kernels' fast-math flags (_numba.FASTMATH)
-#: (vector type, intrinsic suffix, alignment in bytes) of each element type stored here
-_ELEMENTS = {
-    _F32: (_VF32, "v8f32", 4),
-    _F64: (_VF64, "v8f64", 8),
-    _I8: (_VI8, "v8i8", 1),
-    _I32: (_VI32, "v8i32", 4),
-    _I64: (_VI64, "v8i64", 8),
-}
 _TWO_PI = 2.0 * math.pi
 _TWO_PI_SQUARED = 2.0 * math.pi * math.pi  # folded as the scalar code's 2.0 * math.pi * math.pi * sin_theta is
-SLOT_NONE, SLOT_BSDF, SLOT_ENV = 0, 1, 2  # integrators.techniques' slot states
-
-
-def _intrinsic(builder, name: str, ret: ir.Type, *params: ir.Type):
-    return cgutils.get_or_insert_function(builder.module, ir.FunctionType(ret, list(params)), name)
-
-
-def _pointers(element: ir.Type) -> ir.VectorType:
-    return ir.VectorType(element.as_pointer(), LANES)
-
-
-class _Lanes:
-    """The vector operations the intrinsics need, each as the scalar code's Python operator compiles: float
-    arithmetic with the kernels' fast-math flags, ``max(a, b)`` as ``b if b > a else a`` and ``min(a, b)`` as
-    ``b if b < a else a`` (Numba's builtins), integer arithmetic in int64."""
-
-    def __init__(self, builder):
-        self.b = builder
-
-    def f(self, x):
-        return ir.Constant(_VF64, [float(x)] * LANES)
-
-    def i(self, x):
-        return ir.Constant(_VI64, [int(x)] * LANES)
-
-    def splat(self, value, t):
-        lane0 = self.b.insert_element(ir.Constant(t, None), value, _I32(0))
-        return self.b.shuffle_vector(lane0, ir.Constant(t, None), ir.Constant(ir.VectorType(_I32, LANES), [0] * 8))
-
-    def add(self, a, c):
-        return self.b.fadd(a, c, flags=_FLAGS)
-
-    def sub(self, a, c):
-        return self.b.fsub(a, c, flags=_FLAGS)
-
-    def mul(self, a, c):
-        return self.b.fmul(a, c, flags=_FLAGS)
-
-    def div(self, a, c):
-        return self.b.fdiv(a, c, flags=_FLAGS)
-
-    def neg(self, a):
-        return self.b.fneg(a, flags=_FLAGS)
-
-    def sqrt(self, a):
-        return self.b.call(_intrinsic(self.b, "llvm.sqrt.v8f64", _VF64, _VF64), [a], fastmath=_FLAGS)
-
-    def fabs(self, a):
-        return self.b.call(_intrinsic(self.b, "llvm.fabs.v8f64", _VF64, _VF64), [a])
-
-    def fmax(self, a, c):
-        return self.b.select(self.b.fcmp_ordered(">", c, a), c, a)
-
-    def fmin(self, a, c):
-        return self.b.select(self.b.fcmp_ordered("<", c, a), c, a)
-
-    def imin(self, a, c):
-        return self.b.select(self.b.icmp_signed("<", c, a), c, a)
-
-    def imax(self, a, c):
-        return self.b.select(self.b.icmp_signed(">", c, a), c, a)
-
-    def lt(self, a, c):
-        return self.b.fcmp_ordered("<", a, c)
-
-    def le(self, a, c):
-        return self.b.fcmp_ordered("<=", a, c)
-
-    def gt(self, a, c):
-        return self.b.fcmp_ordered(">", a, c)
-
-    def ge(self, a, c):
-        return self.b.fcmp_ordered(">=", a, c)
-
-    def to_f(self, a):
-        return self.b.sitofp(a, _VF64)
-
-    def quotient(self, a, c):
-        """a // c for non-negative int64 lanes below 2^52 and c > 0, without an integer division (none in vector
-        form): (a + 1/2) / c lies at least 1 / (2 c) from an integer, far above the rounding of a double."""
-        return self.b.fptosi(self.div(self.add(self.to_f(a), self.f(0.5)), self.to_f(c)), _VI64)
-
-    def address(self, array, index, size):
-        """Byte addresses of elements ``index`` (int64 lanes) of an array of ``size``-byte elements."""
-        base = self.splat(self.b.ptrtoint(array.data, _I64), _VI64)
-        return self.b.add(base, self.b.mul(index, self.i(size)))
-
-    def gather(self, element, addresses):
-        """The ``element`` values at 8 byte addresses (each must be valid), as 8 scalar loads: on AMD Zen 4 they
-        beat ``vgatherqpd`` in the sampling stage's bisections, whose loads depend on the step before (peer scene,
-        64 spp: 4.08 / 4.12 s against 4.61 / 5.03 s)."""
-        out = ir.Constant(_ELEMENTS[element][0], None)
-        for lane in range(LANES):
-            at = self.b.inttoptr(self.b.extract_element(addresses, _I32(lane)), element.as_pointer())
-            out = self.b.insert_element(out, self.b.load(at), _I32(lane))
-        return out
-
-    def load_f64(self, array, index):
-        return self.gather(_F64, self.address(array, index, 8))
-
-    def load_f32(self, array, index):
-        return self.b.fpext(self.gather(_F32, self.address(array, index, 4)), _VF64)
-
-    def store(self, element, values, addresses, mask):
-        """A masked scatter: the lanes where ``mask`` is false write nothing."""
-        vector, suffix, align = _ELEMENTS[element]
-        function = _intrinsic(
-            self.b, f"llvm.masked.scatter.{suffix}.v{LANES}p0", ir.VoidType(), vector, _pointers(element), _I32, _MASK
-        )
-        self.b.call(function, [values, self.b.inttoptr(addresses, _pointers(element)), _I32(align), mask])
-
-    def load_run(self, element, pointer, mask, fields, fill):
-        """Lanes 0-7 of ``fields`` interleaved values from ``pointer`` on (8 rows of a (N, fields) array, or of a
-        vector when fields is 1), by one masked load: rows whose lane is off are not read and get ``fill``.
-        Returns one vector per field."""
-        b = self.b
-        _, suffix, align = _ELEMENTS[element]
-        width = fields * LANES
-        wide = ir.VectorType(element, width)
-        wide_mask = self._widen(mask, fields)
-        constant = float(fill) if element in (_F32, _F64) else int(fill)
-        function = _intrinsic(
-            b, f"llvm.masked.load.v{width}{suffix[2:]}.p0", wide, wide.as_pointer(), _I32, wide_mask.type, wide
-        )
-        values = b.call(function, [b.bitcast(pointer, wide.as_pointer()), _I32(align), wide_mask,
-                                   ir.Constant(wide, [constant] * width)])  # fmt: skip
-        if fields == 1:
-            return values
-        indices = ir.VectorType(_I32, LANES)
-        return tuple(
-            b.shuffle_vector(values, values, ir.Constant(indices, [fields * lane + f for lane in range(LANES)]))
-            for f in range(fields)
-        )
-
-    def store_run(self, vectors, pointer, mask):
-        """The inverse of :meth:`load_run` for float64 fields: row i gets lane i of each vector where ``mask``."""
-        b = self.b
-        fields = len(vectors)
-        width = fields * LANES
-        wide = ir.VectorType(_F64, width)
-        parts = list(vectors)
-        while len(parts) > 1:  # concatenate the fields (an odd one out padded with undefined lanes)
-            if len(parts) % 2:
-                parts.append(ir.Constant(parts[0].type, None))
-            n = parts[0].type.count
-            join = ir.Constant(ir.VectorType(_I32, 2 * n), list(range(2 * n)))
-            parts = [b.shuffle_vector(parts[i], parts[i + 1], join) for i in range(0, len(parts), 2)]
-        order = [f * LANES + lane for lane in range(LANES) for f in range(fields)]  # then interleave them
-        values = b.shuffle_vector(parts[0], parts[0], ir.Constant(ir.VectorType(_I32, width), order))
-        wide_mask = self._widen(mask, fields)
-        function = _intrinsic(
-            b, f"llvm.masked.store.v{width}f64.p0", ir.VoidType(), wide, wide.as_pointer(), _I32, wide_mask.type
-        )
-        target = b.bitcast(pointer, wide.as_pointer())
-        # every lane live (the usual block): a plain store, which a later scalar load of one of its values can take
-        # from the store buffer; a load after a masked store waits until the store has reached the cache (perf: the
-        # setup stage's reads of the Sobol' rows just stored, decisions.md 64)
-        full = b.call(_intrinsic(b, f"llvm.vector.reduce.and.v{LANES}i1", ir.IntType(1), _MASK), [mask])
-        with b.if_else(full) as (every_lane, some_lanes):
-            with every_lane:
-                b.store(values, target, align=8)
-            with some_lanes:
-                b.call(function, [values, target, _I32(8), wide_mask])
-
-    def _widen(self, mask, fields):
-        """Each lane's mask bit repeated ``fields`` times, in row order."""
-        if fields == 1:
-            return mask
-        order = [lane for lane in range(LANES) for _ in range(fields)]
-        return self.b.shuffle_vector(mask, mask, ir.Constant(ir.VectorType(_I32, fields * LANES), order))
-
-    def clamp(self, x, lo, hi):
-        """x clipped to [lo, hi], a NaN to lo (both compares are false for it)."""
-        x = self.b.select(self.ge(x, self.f(lo)), x, self.f(lo))
-        return self.b.select(self.le(x, self.f(hi)), x, self.f(hi))
-
-    def slots(self, start, n):
-        """(slot indices start .. start + 7, which of them are below n, the indices clipped to n - 1 for reading)."""
-        slots = self.b.add(self.splat(start, _VI64), ir.Constant(_VI64, list(range(LANES))))
-        n = self.splat(n, _VI64)
-        return slots, self.b.icmp_signed("<", slots, n), self.imin(slots, self.b.sub(n, self.i(1)))
-
-    def any(self, mask):
-        reduce = _intrinsic(self.b, f"llvm.vector.reduce.or.v{LANES}i1", ir.IntType(1), _MASK)
-        return self.b.call(reduce, [mask])
-
-    def skip_unless(self, mask):
-        """Branch past the code that follows, up to :meth:`end_skip`, when no lane of ``mask`` is set (a block
-        whose slots are all dead -- a sky pixel's -- writes nothing, so it need not compute anything either)."""
-        work = self.b.append_basic_block("block.live")
-        done = self.b.append_basic_block("block.done")
-        self.b.cbranch(self.any(mask), work, done)
-        self.b.position_at_end(work)
-        return done
-
-    def end_skip(self, done):
-        self.b.branch(done)
-        self.b.position_at_end(done)
-
-    def bisect(self, lo, hi, mask, below):
-        """Per lane of ``mask``, envmap_bilinear's bisection: while hi - lo > 1, mid = (lo + hi) >> 1 becomes lo
-        where ``below(mid)`` (the value at mid <= the target) and hi elsewhere.  Lanes stop one by one; the loop runs
-        while any lane is active.  Returns lo."""
-        b = self.b
-        entry = b.block
-        loop = b.append_basic_block("bisect")
-        body = b.append_basic_block("bisect.step")
-        done = b.append_basic_block("bisect.done")
-        b.branch(loop)
-        b.position_at_end(loop)
-        lo_phi, hi_phi = b.phi(_VI64), b.phi(_VI64)
-        lo_phi.add_incoming(lo, entry)
-        hi_phi.add_incoming(hi, entry)
-        active = b.and_(mask, b.icmp_signed(">", b.sub(hi_phi, lo_phi), self.i(1)))
-        b.cbranch(self.any(active), body, done)
-        b.position_at_end(body)
-        mid = b.ashr(b.add(lo_phi, hi_phi), self.i(1))
-        up = below(mid)
-        go_up = b.and_(active, up)
-        go_down = b.and_(active, b.not_(up))
-        lo_phi.add_incoming(b.select(go_up, mid, lo_phi), b.block)
-        hi_phi.add_incoming(b.select(go_down, mid, hi_phi), b.block)
-        b.branch(loop)
-        b.position_at_end(done)
-        return lo_phi
 
 
 @intrinsic
@@ -302,47 +76,47 @@ def radiance_block(typingctx, radiance, image, uv, state, start):
             context.make_array(t)(context, builder, value)
             for t, value in zip(signature.args[:4], args[:4], strict=True)
         )
-        v, b = _Lanes(builder), builder
+        v, b = Lanes(builder), builder
         start_v = context.cast(b, args[4], signature.args[4], types.int64)
         _, inside, read = v.slots(start_v, cgutils.unpack_tuple(b, state_a.shape, 1)[0])
         # the block's 8 slots are consecutive: its states, coordinates and radiances are contiguous runs, read and
         # written by masked vector loads and stores (a lane past the end reads and writes nothing)
-        first = v.b.extract_element(read, _I32(0))
-        states = v.load_run(_I8, b.gep(state_a.data, [first]), inside, 1, 0)
-        live = b.and_(inside, b.icmp_signed("!=", states, ir.Constant(_VI8, [SLOT_NONE] * LANES)))
-        u, vv = v.load_run(_F64, b.gep(uv_a.data, [b.mul(first, _I64(2))]), inside, 2, 0.5)
+        first = v.b.extract_element(read, I32(0))
+        states = v.load_run(I8, b.gep(state_a.data, [first]), inside, 1, 0)
+        live = b.and_(inside, b.icmp_signed("!=", states, ir.Constant(VI8, [SLOT_NONE] * LANES)))
+        u, vv = v.load_run(F64, b.gep(uv_a.data, [b.mul(first, I64(2))]), inside, 2, 0.5)
         # mappings.bilinear_latlong_weights: columns at u = (i + 0.5) / W, periodic; rows at v = j / (H - 1), clamped
         h, w, _ = cgutils.unpack_tuple(b, image_a.shape, 3)
-        wv, hv = v.splat(w, _VI64), v.splat(h, _VI64)
+        wv, hv = v.splat(w, VI64), v.splat(h, VI64)
         # prefetched: the two texel rows at the slots PREFETCH_BLOCKS blocks ahead (their coordinates a contiguous run;
         # the column without the half-texel shift, near enough for a prefetch, which never faults)
         n_slots = cgutils.unpack_tuple(b, state_a.shape, 1)[0]
-        ahead = b.add(first, _I64(PREFETCH_BLOCKS * LANES))
-        ahead = b.select(b.icmp_signed("<", ahead, b.sub(n_slots, _I64(LANES))), ahead, first)
-        ua, va = v.load_run(_F64, b.gep(uv_a.data, [b.mul(ahead, _I64(2))]), inside, 2, 0.5)
-        xa = b.fptosi(v.mul(v.clamp(ua, 0.0, 1.0), v.to_f(wv)), _VI64)
+        ahead = b.add(first, I64(PREFETCH_BLOCKS * LANES))
+        ahead = b.select(b.icmp_signed("<", ahead, b.sub(n_slots, I64(LANES))), ahead, first)
+        ua, va = v.load_run(F64, b.gep(uv_a.data, [b.mul(ahead, I64(2))]), inside, 2, 0.5)
+        xa = b.fptosi(v.mul(v.clamp(ua, 0.0, 1.0), v.to_f(wv)), VI64)
         xa = b.select(b.icmp_signed(">=", xa, wv), b.sub(xa, wv), xa)
-        ya = v.imin(b.fptosi(v.mul(v.clamp(va, 0.0, 1.0), v.to_f(b.sub(hv, v.i(1)))), _VI64), b.sub(hv, v.i(2)))
-        prefetch = _intrinsic(b, "llvm.prefetch.p0", ir.VoidType(), _I8.as_pointer(), _I32, _I32, _I32)
-        texel_base = b.ptrtoint(image_a.data, _I64)
+        ya = v.imin(b.fptosi(v.mul(v.clamp(va, 0.0, 1.0), v.to_f(b.sub(hv, v.i(1)))), VI64), b.sub(hv, v.i(2)))
+        prefetch = llvm_function(b, "llvm.prefetch.p0", ir.VoidType(), I8.as_pointer(), I32, I32, I32)
+        texel_base = b.ptrtoint(image_a.data, I64)
         for yy in (ya, b.add(ya, v.i(1))):
-            at = b.add(v.splat(texel_base, _VI64), b.mul(b.add(b.mul(yy, wv), xa), v.i(12)))
+            at = b.add(v.splat(texel_base, VI64), b.mul(b.add(b.mul(yy, wv), xa), v.i(12)))
             for lane in range(LANES):
-                pointer = b.inttoptr(b.extract_element(at, _I32(lane)), _I8.as_pointer())
-                b.call(prefetch, [pointer, _I32(0), _I32(3), _I32(1)])
+                pointer = b.inttoptr(b.extract_element(at, I32(lane)), I8.as_pointer())
+                b.call(prefetch, [pointer, I32(0), I32(3), I32(1)])
         skipped = v.skip_unless(live)
         # u clamped to [-1/2, 3/2] (a NaN to -1/2) so that one wrap below brings every column into [0, W); with
         # [-1, 2] a NaN's column was -1, a read before the image (caught by CI as a NaN radiance, once)
         fx = v.sub(v.mul(v.clamp(u, -0.5, 1.5), v.to_f(wv)), v.f(0.5))
-        x0f = b.call(_intrinsic(b, "llvm.floor.v8f64", _VF64, _VF64), [fx])
+        x0f = b.call(llvm_function(b, "llvm.floor.v8f64", VF64, VF64), [fx])
         tx = v.sub(fx, x0f)
-        x0 = b.fptosi(x0f, _VI64)
+        x0 = b.fptosi(x0f, VI64)
         x0 = b.select(b.icmp_signed("<", x0, v.i(0)), b.add(x0, wv), x0)
         x0 = b.select(b.icmp_signed(">=", x0, wv), b.sub(x0, wv), x0)
         x1 = b.add(x0, v.i(1))
         x1 = b.select(b.icmp_signed("<", x1, wv), x1, v.i(0))
         fy = v.mul(v.clamp(vv, 0.0, 1.0), v.to_f(b.sub(hv, v.i(1))))
-        y0 = v.imin(b.fptosi(fy, _VI64), b.sub(hv, v.i(2)))
+        y0 = v.imin(b.fptosi(fy, VI64), b.sub(hv, v.i(2)))
         ty = v.sub(fy, v.to_f(y0))
         y1 = b.add(y0, v.i(1))
         corners = [b.mul(b.add(b.mul(y, wv), x), v.i(3)) for y in (y0, y1) for x in (x0, x1)]
@@ -354,7 +128,7 @@ def radiance_block(typingctx, radiance, image, uv, state, start):
             top = v.add(v.mul(one_tx, t00), v.mul(tx, t01))
             bottom = v.add(v.mul(one_tx, t10), v.mul(tx, t11))
             channels.append(v.add(v.mul(one_ty, top), v.mul(ty, bottom)))
-        v.store_run(channels, b.gep(radiance_a.data, [b.mul(first, _I64(3))]), live)
+        v.store_run(channels, b.gep(radiance_a.data, [b.mul(first, I64(3))]), live)
         v.end_skip(skipped)
         return context.get_dummy_value()
 
@@ -386,17 +160,17 @@ class _Arguments:
             for name, t in zip(names, signature.args, strict=True)
             if isinstance(t, types.Array)
         }
-        self.v = _Lanes(builder)
+        self.v = Lanes(builder)
 
     def scalar(self, name, to):
         return self.context.cast(self.b, self.values[name], self.signature.args[self.names.index(name)], to)
 
     def integer(self, name):
-        return self.v.splat(self.scalar(name, types.int64), _VI64)
+        return self.v.splat(self.scalar(name, types.int64), VI64)
 
     def shape(self, name, axis):
         ndim = self.signature.args[self.names.index(name)].ndim
-        return self.v.splat(cgutils.unpack_tuple(self.b, self.arrays[name].shape, ndim)[axis], _VI64)
+        return self.v.splat(cgutils.unpack_tuple(self.b, self.arrays[name].shape, ndim)[axis], VI64)
 
 
 def _numbered_slots(a: _Arguments):
@@ -406,7 +180,7 @@ def _numbered_slots(a: _Arguments):
     load has a valid address and needs no mask."""
     v, b = a.v, a.b
     m_v, first_v, count_v = a.integer("m"), a.integer("first"), a.integer("count")
-    q = b.add(a.integer("start"), ir.Constant(_VI64, list(range(LANES))))
+    q = b.add(a.integer("start"), ir.Constant(VI64, list(range(LANES))))
     n_q = b.mul(a.shape("material", 0), count_v)
     inside = b.icmp_signed("<", q, n_q)
     q = v.imin(q, b.sub(n_q, v.i(1)))
@@ -428,35 +202,35 @@ def _prefetch_ahead(a: _Arguments, streams):
     b = a.b
     count, m, first, start = (a.scalar(name, types.int64) for name in ("count", "m", "first", "start"))
     n_k = cgutils.unpack_tuple(b, a.arrays["material"].shape, 1)[0]
-    prefetch = _intrinsic(b, "llvm.prefetch.p0", ir.VoidType(), _I8.as_pointer(), _I32, _I32, _I32)
+    prefetch = llvm_function(b, "llvm.prefetch.p0", ir.VoidType(), I8.as_pointer(), I32, I32, I32)
     for lane in (0, LANES - 1):
-        k = b.sdiv(b.add(start, _I64(PREFETCH_BLOCKS * LANES + lane)), count)
-        k = b.select(b.icmp_signed("<", k, n_k), k, b.sub(n_k, _I64(1)))
+        k = b.sdiv(b.add(start, I64(PREFETCH_BLOCKS * LANES + lane)), count)
+        k = b.select(b.icmp_signed("<", k, n_k), k, b.sub(n_k, I64(1)))
         for name, size, per, written in streams:
             row = b.add(b.mul(k, m), first) if per == "slot" else k
-            rows = count if per == "slot" else _I64(1)
-            at = b.add(b.ptrtoint(a.arrays[name].data, _I64), b.mul(row, _I64(size)))
-            last = b.add(at, b.sub(b.mul(rows, _I64(size)), _I64(1)))
+            rows = count if per == "slot" else I64(1)
+            at = b.add(b.ptrtoint(a.arrays[name].data, I64), b.mul(row, I64(size)))
+            last = b.add(at, b.sub(b.mul(rows, I64(size)), I64(1)))
             for address in (at, last) if size > 1 else (at,):
-                pointer = b.inttoptr(address, _I8.as_pointer())
-                b.call(prefetch, [pointer, _I32(1 if written else 0), _I32(3), _I32(1)])
+                pointer = b.inttoptr(address, I8.as_pointer())
+                b.call(prefetch, [pointer, I32(1 if written else 0), I32(3), I32(1)])
 
 
 def _compensation(a: _Arguments, k):
     """Per lane, whether camera sample k's material takes the compensated density, and the luminance offset."""
     v, b = a.v, a.b
-    kind = v.gather(_I64, v.address(a.arrays["material"], k, 8))
+    kind = v.gather(I64, v.address(a.arrays["material"], k, 8))
     compensated = b.icmp_signed(
-        "!=", v.gather(_I8, v.address(a.arrays["compensate"], kind, 1)), ir.Constant(_VI8, [0] * LANES)
+        "!=", v.gather(I8, v.address(a.arrays["compensate"], kind, 1)), ir.Constant(VI8, [0] * LANES)
     )
-    return compensated, b.select(compensated, v.splat(a.values["comp_offset"], _VF64), v.f(0.0))
+    return compensated, b.select(compensated, v.splat(a.values["comp_offset"], VF64), v.f(0.0))
 
 
 def _pick(a: _Arguments, compensated, name_comp, name_plain):
     """Per lane, the compensated or the plain table's base address."""
     v, b = a.v, a.b
-    comp_base = v.splat(b.ptrtoint(a.arrays[name_comp].data, _I64), _VI64)
-    plain_base = v.splat(b.ptrtoint(a.arrays[name_plain].data, _I64), _VI64)
+    comp_base = v.splat(b.ptrtoint(a.arrays[name_comp].data, I64), VI64)
+    plain_base = v.splat(b.ptrtoint(a.arrays[name_plain].data, I64), VI64)
     return b.select(compensated, comp_base, plain_base)
 
 
@@ -475,7 +249,7 @@ def _node_weight(a: _Arguments, offset):
 
 
 # --- environment samples from the bilinear density ----------------------------------------------------------------
-def _invert_linear_lanes(v: _Lanes, a, c, m):
+def _invert_linear_lanes(v: Lanes, a, c, m):
     """envmap_bilinear._invert_linear: t in [0, 1] with a t + (c - a) t^2 / 2 = m."""
     discriminant = v.add(v.mul(a, a), v.mul(v.mul(v.f(2.0), v.sub(c, a)), m))
     den = v.add(a, v.sqrt(v.fmax(discriminant, v.f(0.0))))
@@ -483,7 +257,7 @@ def _invert_linear_lanes(v: _Lanes, a, c, m):
     return v.b.select(v.le(den, v.f(0.0)), v.f(0.0), t)
 
 
-def _small_cos_sin_lanes(v: _Lanes, d):
+def _small_cos_sin_lanes(v: Lanes, d):
     """envmap_bilinear._small_cos_sin, term by term."""
     d2 = v.mul(d, d)
     c = v.sub(v.f(1.0 / 40320.0), v.div(d2, v.f(3628800.0)))
@@ -506,7 +280,7 @@ _ATAN_Q = (2.485846490142306297962e1, 1.650270098316988542046e2, 4.3288106049129
 _ATAN_MOREBITS = 6.123233995736765886130e-17  # pi/4's double rounding error, added back (atan.c)
 
 
-def _atan2_lanes(v: _Lanes, y, x):
+def _atan2_lanes(v: Lanes, y, x):
     """atan2(y, x) in the lanes, within 2 ulp of the C library's (a test checks 4e-16 rad on directions, poles
     included): |y| / |x| or its inverse, whichever is in [0, 1], through Cephes' atan -- its rational function
     up to 0.66, pi/4 + atan((t - 1) / (t + 1)) above -- then the octant's reflections, by the signs' bits as the C
@@ -533,20 +307,20 @@ def _atan2_lanes(v: _Lanes, y, x):
     return b.select(_sign_bit(v, y), v.neg(r), r)
 
 
-def _sign_bit(v: _Lanes, x):
+def _sign_bit(v: Lanes, x):
     """Which lanes have their sign bit set (-0.0 included: atan2(0, -0.0) is pi, as in the C library)."""
-    return v.b.icmp_signed("<", v.b.bitcast(x, _VI64), v.i(0))
+    return v.b.icmp_signed("<", v.b.bitcast(x, VI64), v.i(0))
 
 
-def _acos_lanes(v: _Lanes, c):
+def _acos_lanes(v: Lanes, c):
     """acos(c) for c in [-1, 1] as atan2(sqrt((1 - c)(1 + c)), c), within 2 ulp of the C library's."""
     return _atan2_lanes(v, v.sqrt(v.mul(v.sub(v.f(1.0), c), v.add(v.f(1.0), c))), c)
 
 
-def _bucket(v: _Lanes, u, buckets):
+def _bucket(v: Lanes, u, buckets):
     """The guide bucket of a number in [0, 1): a dead lane's NaN or stale value included (clamped first, so that
     its index stays inside the table)."""
-    bucket = v.b.fptosi(v.mul(v.clamp(u, 0.0, 1.0 - 2.0**-53), v.to_f(buckets)), _VI64)
+    bucket = v.b.fptosi(v.mul(v.clamp(u, 0.0, 1.0 - 2.0**-53), v.to_f(buckets)), VI64)
     return v.imin(bucket, v.b.sub(buckets, v.i(1)))
 
 
@@ -642,8 +416,8 @@ def env_sample_block(
                 ("frame", 72, "k", False), ("wdir", 24, "slot", True), ("uv", 16, "slot", True),
                 ("tpdf", 8, "slot", True))
         )  # fmt: skip
-        states = v.gather(_I8, v.address(arrays["state"], slots, 1))
-        live = b.and_(inside, b.icmp_signed("==", states, ir.Constant(_VI8, [SLOT_ENV] * LANES)))
+        states = v.gather(I8, v.address(arrays["state"], slots, 1))
+        live = b.and_(inside, b.icmp_signed("==", states, ir.Constant(VI8, [SLOT_LIGHT] * LANES)))
         skipped = v.skip_unless(live)
         compensated, offset = _compensation(a, k)
         u0 = v.load_f64(arrays["env_u"], b.mul(slots, v.i(2)))
@@ -657,13 +431,13 @@ def env_sample_block(
         w = b.sub(n1, v.i(1))
 
         def marginal_at(index):
-            return v.gather(_F64, b.add(marginal_base, b.mul(index, v.i(8))))
+            return v.gather(F64, b.add(marginal_base, b.mul(index, v.i(8))))
 
         def rows_at(row, column):
-            return v.gather(_F64, b.add(rows_base, b.mul(b.add(b.mul(row, n1), column), v.i(8))))
+            return v.gather(F64, b.add(rows_base, b.mul(b.add(b.mul(row, n1), column), v.i(8))))
 
         def guide_at(base, index):
-            return b.sext(v.gather(_I32, b.add(base, b.mul(index, v.i(4)))), _VI64)
+            return b.sext(v.gather(I32, b.add(base, b.mul(index, v.i(4)))), VI64)
 
         def searched(lo, hi, top, below):
             """The bisection of [0, top] for the largest index that is ``below`` (envmap_bilinear's searches),
@@ -739,8 +513,8 @@ def env_sample_block(
         matrix = arrays["to_world"]
         world = []
         for i in range(3):
-            row_i = [b.load(b.gep(matrix.data, [_I64(3 * i + j)])) for j in range(3)]
-            terms = [v.mul(v.splat(row_i[j], _VF64), local[j]) for j in range(3)]
+            row_i = [b.load(b.gep(matrix.data, [I64(3 * i + j)])) for j in range(3)]
+            terms = [v.mul(v.splat(row_i[j], VF64), local[j]) for j in range(3)]
             world.append(v.add(v.add(terms[0], terms[1]), terms[2]))
         pdf = b.select(v.le(sin_theta, v.f(0.0)), v.f(0.0), v.div(joint, v.mul(v.f(_TWO_PI_SQUARED), sin_theta)))
         # wavefront._env_sample_stage: below the shading point's surface, or no density: the slot is dropped
@@ -748,12 +522,12 @@ def env_sample_block(
         facing = v.add(v.add(v.mul(normal[0], world[0]), v.mul(normal[1], world[1])), v.mul(normal[2], world[2]))
         dropped = b.or_(v.le(facing, v.f(0.0)), v.le(pdf, v.f(0.0)))
         kept = b.and_(live, b.not_(dropped))
-        v.store(_I8, ir.Constant(_VI8, [0] * LANES), v.address(arrays["state"], slots, 1), b.and_(live, dropped))
+        v.store(I8, ir.Constant(VI8, [0] * LANES), v.address(arrays["state"], slots, 1), b.and_(live, dropped))
         for i in range(3):
-            v.store(_F64, world[i], b.add(v.address(arrays["wdir"], slots, 24), v.i(8 * i)), kept)
-        v.store(_F64, pdf, v.address(arrays["tpdf"], slots, 8), kept)
-        v.store(_F64, x, v.address(arrays["uv"], slots, 16), kept)
-        v.store(_F64, y, b.add(v.address(arrays["uv"], slots, 16), v.i(8)), kept)
+            v.store(F64, world[i], b.add(v.address(arrays["wdir"], slots, 24), v.i(8 * i)), kept)
+        v.store(F64, pdf, v.address(arrays["tpdf"], slots, 8), kept)
+        v.store(F64, x, v.address(arrays["uv"], slots, 16), kept)
+        v.store(F64, y, b.add(v.address(arrays["uv"], slots, 16), v.i(8)), kept)
         v.end_skip(skipped)
         return context.get_dummy_value()
 
@@ -795,15 +569,15 @@ def env_coords_block(
             a, (("state", 1, "slot", False), ("material", 8, "k", False), ("wdir", 24, "slot", False),
                 ("uv", 16, "slot", True), ("epdf", 8, "slot", True))
         )  # fmt: skip
-        states = v.gather(_I8, v.address(arrays["state"], read, 1))
-        wanted = b.and_(inside, b.icmp_signed("!=", states, ir.Constant(_VI8, [SLOT_NONE] * LANES)))
-        wanted = b.and_(wanted, b.icmp_signed("!=", states, ir.Constant(_VI8, [SLOT_ENV] * LANES)))
+        states = v.gather(I8, v.address(arrays["state"], read, 1))
+        wanted = b.and_(inside, b.icmp_signed("!=", states, ir.Constant(VI8, [SLOT_NONE] * LANES)))
+        wanted = b.and_(wanted, b.icmp_signed("!=", states, ir.Constant(VI8, [SLOT_LIGHT] * LANES)))
         skipped = v.skip_unless(wanted)
         # envmap.env_coords: the direction in the environment's frame, then mappings.direction_to_latlong
         world = [v.load_f64(arrays["wdir"], b.add(b.mul(read, v.i(3)), v.i(i))) for i in range(3)]
         local = []
         for i in range(3):
-            row = [v.splat(b.load(b.gep(arrays["to_env"].data, [_I64(3 * i + j)])), _VF64) for j in range(3)]
+            row = [v.splat(b.load(b.gep(arrays["to_env"].data, [I64(3 * i + j)])), VF64) for j in range(3)]
             local.append(v.add(v.add(v.mul(row[0], world[0]), v.mul(row[1], world[1])), v.mul(row[2], world[2])))
         ex, ey, ez = local
         u = v.mul(_atan2_lanes(v, ex, v.neg(ez)), v.f(_INV_2PI))
@@ -812,11 +586,11 @@ def env_coords_block(
         lat = v.fmin(v.f(1.0), v.fmax(v.f(-1.0), ey))
         vv = v.mul(_acos_lanes(v, lat), v.f(_INV_PI))
         at = v.address(arrays["uv"], read, 16)
-        v.store(_F64, u, at, wanted)
-        v.store(_F64, vv, b.add(at, v.i(8)), wanted)
+        v.store(F64, u, at, wanted)
+        v.store(F64, vv, b.add(at, v.i(8)), wanted)
         # envmap._pdf_at for the bilinear density, at BSDF samples under MIS
-        mis_v = v.splat(a.scalar("mis", types.boolean), _MASK)
-        bsdf = b.icmp_signed("==", states, ir.Constant(_VI8, [SLOT_BSDF] * LANES))
+        mis_v = v.splat(a.scalar("mis", types.boolean), MASK)
+        bsdf = b.icmp_signed("==", states, ir.Constant(VI8, [SLOT_BSDF] * LANES))
         with_pdf = b.and_(b.and_(wanted, bsdf), mis_v)
         compensated, offset = _compensation(a, k)
         marginal_base = _pick(a, compensated, "comp_marginal", "plain_marginal")
@@ -833,7 +607,7 @@ def env_coords_block(
 
         def cell(n, coordinate):  # envmap_bilinear._cell
             f = v.mul(v.fmin(v.fmax(v.clamp(coordinate, 0.0, 1.0), v.f(0.0)), v.f(1.0)), v.to_f(n))
-            i = v.imin(b.fptosi(f, _VI64), b.sub(n, v.i(1)))
+            i = v.imin(b.fptosi(f, VI64), b.sub(n, v.i(1)))
             return i, v.sub(f, v.to_f(i))
 
         row, t = cell(b.sub(ny, v.i(1)), vv)
@@ -844,12 +618,12 @@ def env_coords_block(
         above, right = b.add(row, v.i(1)), b.add(column, v.i(1))
         c0 = v.add(v.mul(s, node_weight(row, column)), v.mul(t, node_weight(above, column)))
         c1 = v.add(v.mul(s, node_weight(row, right)), v.mul(t, node_weight(above, right)))
-        total = v.gather(_F64, b.add(marginal_base, b.mul(b.sub(ny, v.i(1)), v.i(8))))
+        total = v.gather(F64, b.add(marginal_base, b.mul(b.sub(ny, v.i(1)), v.i(8))))
         scale = v.to_f(b.mul(width, b.sub(ny, v.i(1))))
         p = v.div(v.mul(v.add(v.mul(v.sub(v.f(1.0), tx), c0), v.mul(tx, c1)), scale), total)
         p = b.select(inside_square, p, v.f(0.0))
         pdf = b.select(v.le(sin_theta, v.f(0.0)), v.f(0.0), v.div(p, v.mul(v.f(_TWO_PI_SQUARED), sin_theta)))
-        v.store(_F64, pdf, v.address(arrays["epdf"], read, 8), with_pdf)
+        v.store(F64, pdf, v.address(arrays["epdf"], read, 8), with_pdf)
         v.end_skip(skipped)
         return context.get_dummy_value()
 
@@ -901,7 +675,7 @@ def applies(image: np.ndarray, lookup_is_bilinear: bool) -> bool:
 def coords_apply(k) -> bool:
     """Whether :func:`env_coords_block` fits environment kernel ``k``: the bilinear density, its tables
     C-contiguous float64 beside the float32 luminance, on a Numba that compiles the lanes."""
-    from .envmap import BILINEAR_PDF
+    from ...emitters.envmap import BILINEAR_PDF
 
     tables = (k.node_sines, k.marginal_cdf, k.comp_marginal_cdf, k.to_env)
     return (
@@ -916,8 +690,8 @@ def coords_apply(k) -> bool:
 def samples_apply(k) -> bool:
     """Whether :func:`env_sample_block` samples environment kernel ``k``: the bilinear density with the small-angle
     tables (maps of at least 64 node rows and 128 columns), on a Numba that compiles the lanes."""
-    from .envmap import BILINEAR_PDF
-    from .envmap_bilinear import SMALL_ANGLE_COLUMNS, SMALL_ANGLE_ROWS
+    from ...emitters.envmap import BILINEAR_PDF
+    from ...emitters.envmap_bilinear import SMALL_ANGLE_COLUMNS, SMALL_ANGLE_ROWS
 
     tables = (k.luminance, k.node_sines, k.conditional_cdf, k.marginal_cdf, k.comp_conditional_cdf)
     tables += (k.comp_marginal_cdf, k.row_angles, k.column_angles, k.to_world)

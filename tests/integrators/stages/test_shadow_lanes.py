@@ -1,11 +1,10 @@
-"""The analytic shadow tests in lanes (geometry/shadow_lanes.py) against the scalar stage, ray for ray."""
+"""The analytic shadow tests in lanes (integrators/stages/shadow_lanes.py) against the scalar stage, ray for ray."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from lightprobe._worksharing import claims
 from lightprobe.bsdfs import Lambert
 from lightprobe.demo import blob_mesh
 from lightprobe.emitters.envmap import EnvironmentMap
@@ -13,8 +12,21 @@ from lightprobe.geometry.camera import Camera
 from lightprobe.geometry.intersect import ANALYTIC_ERROR
 from lightprobe.geometry.scene import Scene
 from lightprobe.geometry.shapes import Rectangle, Sphere
-from lightprobe.integrators import wavefront
 from lightprobe.integrators.techniques import BLOCKED, NONE, TEST_ANALYTIC, TEST_MESH, VISIBLE
+
+from . import records
+
+LANES_STAGE, SCALAR_STAGE = "analytic_shadows_lanes", "analytic_shadows"
+
+
+def _shadow_stage(name, arrays, m, point, normal, wdir, flags):
+    """Run shadow stage ``name`` on shading points with their normals and the slots' directions; ``flags`` (in
+    place) become the stage's answers."""
+    c = records.constants(m)
+    cams = records.cameras(point.shape[0], point=point, gnormal=normal, point_error=_errors(point, normal))
+    slots = records.slots(wdir.shape[0], wdir=wdir, flags=flags)
+    records.run(name, records.records(c, cams, slots, arrays=arrays))
+    flags[:] = slots.flags
 
 
 def _scene(meshes=True, spheres=True):
@@ -66,8 +78,8 @@ def test_lanes_flag_every_ray_as_the_scalar_stage_does(meshes, spheres, m):
     arrays = _scene(meshes, spheres)
     point, normal, wdir, flags = _rays(2503, m, seed=m)
     scalar, lanes = flags.copy(), flags.copy()
-    wavefront._analytic_shadow_scalar_stage(arrays, m, point, normal, _errors(point, normal), wdir, scalar, *claims())
-    wavefront._analytic_shadow_stage(arrays, m, point, normal, _errors(point, normal), wdir, lanes, *claims())
+    _shadow_stage(SCALAR_STAGE, arrays, m, point, normal, wdir, scalar)
+    _shadow_stage(LANES_STAGE, arrays, m, point, normal, wdir, lanes)
     assert np.array_equal(lanes, scalar)
     assert np.array_equal(lanes[flags != TEST_ANALYTIC], flags[flags != TEST_ANALYTIC])
     tested = lanes[flags == TEST_ANALYTIC]
@@ -84,10 +96,10 @@ def test_the_mesh_spheres_only_settle_rays_the_boxes_sent_to_embree():
     arrays = _scene()
     boxes_only = arrays._replace(mesh_spheres=np.tile([0.0, 0.0, 0.0, 1e300, -1.0], (arrays.mesh_spheres.shape[0], 1)))
     point, normal, wdir, flags = _rays(2503, 8, seed=5)
-    for stage in (wavefront._analytic_shadow_stage, wavefront._analytic_shadow_scalar_stage):
+    for stage in (LANES_STAGE, SCALAR_STAGE):
         with_spheres, without = flags.copy(), flags.copy()
-        stage(arrays, 8, point, normal, _errors(point, normal), wdir, with_spheres, *claims())
-        stage(boxes_only, 8, point, normal, _errors(point, normal), wdir, without, *claims())
+        _shadow_stage(stage, arrays, 8, point, normal, wdir, with_spheres)
+        _shadow_stage(stage, boxes_only, 8, point, normal, wdir, without)
         sent = without == TEST_MESH
         np.testing.assert_array_equal(with_spheres[~sent], without[~sent])
         assert np.count_nonzero(with_spheres[sent] == BLOCKED) > 100
@@ -111,8 +123,8 @@ def test_a_ray_grazing_a_sphere_or_leaving_its_surface():
     wdir = np.array(wdir)
     flags = np.full(wdir.shape[0], TEST_ANALYTIC, np.int8)
     scalar, lanes = flags.copy(), flags.copy()
-    wavefront._analytic_shadow_scalar_stage(arrays, 4, point, normals, _errors(point, normals), wdir, scalar, *claims())
-    wavefront._analytic_shadow_stage(arrays, 4, point, normals, _errors(point, normals), wdir, lanes, *claims())
+    _shadow_stage(SCALAR_STAGE, arrays, 4, point, normals, wdir, scalar)
+    _shadow_stage(LANES_STAGE, arrays, 4, point, normals, wdir, lanes)
     assert np.array_equal(lanes, scalar)
     assert np.all(lanes[0::4] == VISIBLE)  # nothing else in their way
     assert np.all(lanes[1::4] == BLOCKED)
@@ -130,7 +142,7 @@ def test_rays_from_inside_a_sphere_square_to_its_centre():
     wdir = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
     flags = np.full(4, TEST_ANALYTIC, np.int8)
     scalar, lanes = flags.copy(), flags.copy()
-    wavefront._analytic_shadow_scalar_stage(arrays, 1, point, normals, _errors(point, normals), wdir, scalar, *claims())
-    wavefront._analytic_shadow_stage(arrays, 1, point, normals, _errors(point, normals), wdir, lanes, *claims())
+    _shadow_stage(SCALAR_STAGE, arrays, 1, point, normals, wdir, scalar)
+    _shadow_stage(LANES_STAGE, arrays, 1, point, normals, wdir, lanes)
     assert np.array_equal(lanes, scalar)
     assert np.all(lanes == BLOCKED)

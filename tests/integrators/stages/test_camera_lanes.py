@@ -1,11 +1,13 @@
-"""The camera rays' nearest analytic hits in lanes (geometry/camera_lanes.py) against the scalar pass, ray for ray."""
+"""The camera rays' nearest analytic hits in lanes (integrators/stages/camera_lanes.py) against the scalar stage, ray
+for ray."""
 
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from lightprobe._worksharing import claims
 from lightprobe.bsdfs import Lambert
 from lightprobe.demo import blob_mesh
 from lightprobe.emitters.envmap import EnvironmentMap
@@ -19,6 +21,8 @@ from lightprobe.geometry.shapes import Rectangle, Sphere
 from lightprobe.integrators import wavefront
 from lightprobe.integrators.wavefront import RenderSettings, render
 from lightprobe.sampling.rng import SAMPLERS
+
+from . import records
 
 
 def _scene(meshes=True, spheres=True, resolution=(97, 89)):
@@ -36,21 +40,20 @@ def _scene(meshes=True, spheres=True, resolution=(97, 89)):
     return sc
 
 
-def _hits(kernel, scene, cam, spp_pass=3, tracer=None, sampler="sobol"):
+def _hits(stage, scene, cam, spp_pass=3, tracer=None, sampler="sobol"):
     """(t, kind, index, prim) of every camera sample of one pass over all pixels, ``spp_pass`` samples each."""
     arrays = scene.compile()
     width, height = scene.camera.resolution
     pixels = np.arange(width * height, dtype=np.int64)
     n = pixels.size * spp_pass  # 25 899 for 97 x 89 x 3: not a multiple of 8
-    out = {"dirs": np.zeros((n, 3)), "t": np.zeros(n), "b1": np.zeros(n), "b2": np.zeros(n)}
-    out.update({name: np.zeros(n, np.int64) for name in ("kind", "index", "prim")})
-    mesh_scene = tracer.mesh_scene if tracer is not None else 0
-    scratch = tracer.scratch if tracer is not None else new_scratch()
-    ray_counts = np.zeros((64, 2), np.int64)
-    counter, workers = claims()
-    kernel(arrays, cam, SAMPLERS[sampler], 7, pixels, spp_pass, 0, mesh_scene, scratch, ray_counts, **out,
-           counter=counter, workers=workers)  # fmt: skip
-    return out
+    c = records.constants(
+        2, sampler=SAMPLERS[sampler], seed=7, pixels=pixels, spp_pass=spp_pass, cam=cam,
+        mesh_scene=tracer.mesh_scene if tracer is not None else 0,
+        scratch=tracer.scratch if tracer is not None else new_scratch(),
+    )  # fmt: skip
+    cams = records.cameras(n)
+    records.run(stage, records.records(c, cams, records.slots(2 * n), arrays=arrays))
+    return cams._asdict()
 
 
 @pytest.mark.parametrize(
@@ -71,8 +74,8 @@ def test_lanes_find_every_nearest_hit_the_scalar_pass_finds(meshes, spheres, ins
     cam = scene.camera.kernel_array()
     if inside:
         cam[0:3] = [-1.5, 0.6, 0.1]  # inside both overlapping spheres
-    scalar = _hits(wavefront._camera_scalar_pass, scene, cam, sampler=sampler)
-    lanes = _hits(wavefront._camera_pass, scene, cam, sampler=sampler)
+    scalar = _hits("camera_scalar", scene, cam, sampler=sampler)
+    lanes = _hits("camera", scene, cam, sampler=sampler)
     for name in ("dirs", "t", "kind", "index"):
         assert np.array_equal(lanes[name], scalar[name]), name
     kinds = lanes["kind"]
@@ -92,8 +95,8 @@ def test_lanes_and_the_scalar_pass_leave_the_same_mesh_hits():
     tracer = RayTracer(scene.compile())
     try:
         cam = scene.camera.kernel_array()
-        scalar = _hits(wavefront._camera_scalar_pass, scene, cam, tracer=tracer)
-        lanes = _hits(wavefront._camera_pass, scene, cam, tracer=tracer)
+        scalar = _hits("camera_scalar", scene, cam, tracer=tracer)
+        lanes = _hits("camera", scene, cam, tracer=tracer)
     finally:
         tracer.close()
     for name in ("t", "kind", "index", "prim", "b1", "b2"):
@@ -106,8 +109,11 @@ def test_a_render_is_the_same_with_the_scalar_camera_pass(monkeypatch):
     scene = _scene(resolution=(40, 30))
     settings = RenderSettings(spp=4)
     lanes = render(scene, settings)
-    monkeypatch.setattr(wavefront, "_camera_pass_for", lambda: wavefront._camera_scalar_pass)
+    assert "camera" in lanes.stats["stages"]
+    plan_for = wavefront.plan_for
+    monkeypatch.setattr(wavefront, "plan_for", lambda scene, settings: replace(plan_for(scene, settings), lanes=False))
     scalar = render(scene, settings)
+    assert "camera_scalar" in scalar.stats["stages"]
     assert np.array_equal(lanes.image, scalar.image) and np.array_equal(lanes.variance, scalar.variance)
 
 
@@ -119,7 +125,11 @@ def test_a_render_is_the_same_with_single_mesh_shadow_rays(monkeypatch):
     scene = _scene(resolution=(40, 30))
     settings = RenderSettings(spp=4)
     packets = render(scene, settings)
-    monkeypatch.setattr(wavefront, "_mesh_shadow_stage_for", lambda: wavefront._mesh_shadow_single_stage)
+    plan_for = wavefront.plan_for
+    monkeypatch.setattr(
+        wavefront, "plan_for", lambda scene, settings: replace(plan_for(scene, settings), packets=False)
+    )
     single = render(scene, settings)
+    assert "mesh_shadows" in packets.stats["stages"] and "mesh_shadows_single" in single.stats["stages"]
     assert packets.stats["embree_rays"] == single.stats["embree_rays"] > 0
     assert np.array_equal(packets.image, single.image) and np.array_equal(packets.variance, single.variance)

@@ -1,5 +1,5 @@
-"""The environment's radiance lookups 8 slots at a time (emitters/envmap_lanes.py): the scalar lookup's values, no
-read or write outside the live slots, and the renderer's choice between the two stages."""
+"""The environment's work 8 slots at a time (integrators/stages/environment_lanes.py): the scalar stages' values, no
+read or write outside the live slots, and the renderer's choice between the two."""
 
 from __future__ import annotations
 
@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 from numba import njit, prange
 
-from lightprobe._worksharing import claims
 from lightprobe.emitters.envmap import EnvironmentMap, env_lookup
-from lightprobe.emitters.envmap_lanes import LANES, applies, radiance_block
 from lightprobe.emitters.procedural import constant, sky_with_sun
-from lightprobe.integrators import wavefront
+from lightprobe.integrators.stages.environment_lanes import LANES, applies, radiance_block
 from lightprobe.integrators.wavefront import RenderSettings, render
+
+from . import records
 
 
 @njit(parallel=True)
@@ -90,7 +90,7 @@ def test_which_maps_the_lanes_take():
 
 
 def _scene(**env_options):
-    from ..integrators.test_wavefront import small_scene
+    from ..test_wavefront import small_scene
 
     return small_scene((20, 12), **env_options)
 
@@ -98,18 +98,16 @@ def _scene(**env_options):
 def test_a_render_with_the_lanes_equals_one_with_the_scalar_stages(monkeypatch):
     """The whole environment path, with the lanes' sampling and radiance stages or the scalar ones: the same image
     to float32 rounding (bit for bit on the machine measured; a fused multiply-add may differ elsewhere)."""
+    from lightprobe.integrators.stages import environment_lanes
+
     settings = RenderSettings(spp=4, seed=3)
-    profile = {}
-    monkeypatch.setattr(wavefront, "PROFILE", profile)
     lanes = render(_scene(), settings)
-    assert {"env_radiance_stage", "env_sample_lanes_stage"} <= profile.keys()
-    assert not {"env_radiance_scalar_stage", "env_sample_stage"} & profile.keys()
-    profile.clear()
-    monkeypatch.setattr(wavefront, "lanes_apply", lambda image, bilinear: False)
-    monkeypatch.setattr(wavefront, "samples_in_lanes", lambda k: False)
+    assert {"environment_radiance_lanes", "environment_samples_lanes"} <= set(lanes.stats["stages"])
+    monkeypatch.setattr(environment_lanes, "applies", lambda image, bilinear: False)
+    monkeypatch.setattr(environment_lanes, "samples_apply", lambda k: False)
     scalar = render(_scene(), settings)
-    assert {"env_radiance_scalar_stage", "env_sample_stage"} <= profile.keys()
-    assert not {"env_radiance_stage", "env_sample_lanes_stage"} & profile.keys()
+    assert {"environment_radiance", "environment_samples"} <= set(scalar.stats["stages"])
+    assert not {"environment_radiance_lanes", "environment_samples_lanes"} & set(scalar.stats["stages"])
     np.testing.assert_allclose(lanes.image, scalar.image, rtol=1e-6, atol=0)
     assert np.all(lanes.counts == scalar.counts)
 
@@ -130,10 +128,8 @@ def test_maps_the_lanes_do_not_take_render_through_the_scalar_stage(env, monkeyp
         environment = EnvironmentMap.from_array(constant(radiance, width=8, height=1))
     scene = Scene(Camera([0, 0, 4], [0, 0, 0], fov=40, resolution=(16, 16)), environment)
     scene.add(Sphere([0, 0, 0], 1.0), Lambert(albedo))
-    profile = {}
-    monkeypatch.setattr(wavefront, "PROFILE", profile)
     result = render(scene, RenderSettings(spp=4, strategy="brdf"))
-    assert "env_radiance_scalar_stage" in profile
+    assert "environment_radiance" in result.stats["stages"]
     np.testing.assert_allclose(result.image[6:10, 6:10], albedo * radiance, rtol=1e-5)
     np.testing.assert_allclose(result.image[0, 0], radiance, rtol=1e-6)
 
@@ -162,14 +158,23 @@ def _sampling_case(m=8, n_bsdf=4, n=3001, seed=4):
     }
 
 
-def _sample(stage, case, *extra):
-    slots = case["state"].shape[0]
-    out = {"state": case["state"].copy(), "wdir": np.full((slots, 3), -7.0), "tpdf": np.full(slots, -7.0)}
-    out["uv"] = np.full((slots, 2), -7.0)
-    c = case
-    stage(c["env"], c["compensate"], *extra, c["m"], c["material"], c["frame"], out["state"], c["env_u"],
-          out["wdir"], out["tpdf"], out["uv"], *claims())  # fmt: skip
-    return out
+def _sample(stage, case, strategy=None, n_bsdf=None):
+    """Run environment-sample stage ``stage`` on the case (``strategy`` and ``n_bsdf`` for the lanes' numbering)."""
+    from lightprobe.integrators.techniques import MIS
+
+    nm = case["state"].shape[0]
+    m = case["m"]
+    n_bsdf = 0 if n_bsdf is None else n_bsdf
+    c = records.constants(
+        m, n_bsdf=n_bsdf, strategy=MIS if strategy is None else strategy, compensate=case["compensate"]
+    )
+    cams = records.cameras(nm // m, material=case["material"], frame=case["frame"])
+    slots = records.slots(
+        nm, state=case["state"].copy(), wdir=np.full((nm, 3), -7.0), tpdf=np.full(nm, -7.0),
+        uv=np.full((nm, 2), -7.0), u=case["env_u"],
+    )  # fmt: skip
+    records.run(stage, records.records(c, cams, slots, env=case["env"]))
+    return {"state": slots.state, "wdir": slots.wdir, "tpdf": slots.tpdf, "uv": slots.uv}
 
 
 @pytest.mark.parametrize(("m", "n_bsdf", "n"), [(8, 4, 3001), (5, 2, 7), (1, 0, 13)])
@@ -179,9 +184,9 @@ def test_environment_samples_in_lanes_are_the_scalar_stages(m, n_bsdf, n):
     from lightprobe.integrators.techniques import ENV, MIS
 
     case = _sampling_case(m, n_bsdf, n)
-    scalar = _sample(wavefront._env_sample_stage, case)
+    scalar = _sample("environment_samples", case)
     strategy = MIS if n_bsdf else ENV
-    lanes = _sample(wavefront._env_sample_lanes_stage, case, strategy, n_bsdf)
+    lanes = _sample("environment_samples_lanes", case, strategy, n_bsdf)
     assert np.array_equal(lanes["state"], scalar["state"])
     assert np.count_nonzero(scalar["state"] == 0) > np.count_nonzero(case["state"] == 0)  # some were dropped
     assert np.array_equal(lanes["wdir"], scalar["wdir"])
@@ -197,7 +202,7 @@ def test_strategies_without_environment_samples_give_the_lanes_nothing():
 
     case = _sampling_case(m=4, n_bsdf=4, n=64)
     case["state"][:] = 2  # even slots marked as environment samples are not the lanes' under BRDF
-    lanes = _sample(wavefront._env_sample_lanes_stage, case, BRDF, 4)
+    lanes = _sample("environment_samples_lanes", case, BRDF, 4)
     assert np.all(lanes["wdir"] == -7.0) and np.all(lanes["state"] == 2)
 
 
@@ -243,10 +248,10 @@ def test_a_wrong_guide_changes_no_sample(corrupt):
             g = getattr(k, other)
         guides[name] = g
     case["env"] = k._replace(**guides)
-    scalar = _sample(wavefront._env_sample_stage, case)
+    scalar = _sample("environment_samples", case)
     from lightprobe.integrators.techniques import MIS
 
-    lanes = _sample(wavefront._env_sample_lanes_stage, case, MIS, 2)
+    lanes = _sample("environment_samples_lanes", case, MIS, 2)
     assert np.array_equal(lanes["state"], scalar["state"])
     assert np.array_equal(lanes["wdir"], scalar["wdir"])
     assert np.array_equal(lanes["tpdf"], scalar["tpdf"])
@@ -255,14 +260,14 @@ def test_a_wrong_guide_changes_no_sample(corrupt):
 @pytest.mark.parametrize(
     ("strategy_name", "m", "n_bsdf"), [("mis", 8, 4), ("mis", 5, 2), ("brdf", 3, 3), ("env", 4, 0)]
 )
-@pytest.mark.parametrize("mis", [True, False])
-def test_coordinates_and_densities_in_lanes_are_the_scalar_stages(strategy_name, m, n_bsdf, mis):
-    """wavefront._env_coords_stage's lat-long coordinates and MIS densities, within the lanes' atan2 and acos's 2
+def test_coordinates_and_densities_in_lanes_are_the_scalar_stages(strategy_name, m, n_bsdf):
+    """The scalar coordinates stage's lat-long coordinates and MIS densities, within the lanes' atan2 and acos's 2
     ulp (the scalar stage calls the C library), for every slot the strategy's numbering gives the lanes that is
     neither dead nor an environment sample; every other slot untouched."""
     from lightprobe.integrators.techniques import STRATEGIES
 
     strategy = STRATEGIES[strategy_name]
+    mis = strategy_name == "mis"
     case = _sampling_case(m=m, n_bsdf=n_bsdf, n=1003, seed=9)
     rng = np.random.default_rng(10)
     slots = case["state"].shape[0]
@@ -274,20 +279,25 @@ def test_coordinates_and_densities_in_lanes_are_the_scalar_stages(strategy_name,
     poles = np.flatnonzero(ours)[:3]  # the poles and u = 0 exactly, in slots of the lanes' numbering
     directions[poles] = np.array([[0.0, 1.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]])[: poles.size]
     state[poles] = 1
-    c = case
-    uv_s, epdf_s = np.full((slots, 2), -7.0), np.full(slots, -7.0)
-    wavefront._env_coords_stage(
-        c["env"], c["compensate"], m, c["material"], mis, state, directions, uv_s, epdf_s, *claims()
-    )
-    uv_l, epdf_l = np.full((slots, 2), -7.0), np.full(slots, -7.0)
-    wavefront._env_coords_lanes_stage(
-        c["env"], c["compensate"], strategy, n_bsdf, m, c["material"], mis, state, directions, uv_l, epdf_l, *claims()
-    )
+
+    def coords(stage):
+        c = records.constants(m, n_bsdf=n_bsdf, strategy=strategy, compensate=case["compensate"])
+        cams = records.cameras(slots // m, material=case["material"])
+        out = records.slots(
+            slots, state=state, wdir=directions, uv=np.full((slots, 2), -7.0), light_pdf=np.full(slots, -7.0)
+        )
+        records.run(stage, records.records(c, cams, out, env=case["env"]))
+        return out.uv, out.light_pdf
+
+    uv_s, epdf_s = coords("environment_coords")
+    uv_l, epdf_l = coords("environment_coords_lanes")
     # u on the circle: 1 - 1e-17 rounds to 1 and wraps to 0
     du = np.abs(uv_l[:, 0] - uv_s[:, 0])
     assert np.minimum(du, 1.0 - du).max() <= 4.5e-16  # 4 ulp of numbers near 1
     assert np.abs(uv_l[:, 1] - uv_s[:, 1]).max() <= 4.5e-16
     np.testing.assert_allclose(epdf_l, epdf_s, rtol=1e-12, atol=0.0)
+    if strategy_name != "env":  # (under env no slot is the stage's)
+        assert np.count_nonzero(uv_l != -7.0) > 100  # coordinates, not untouched slots, were compared
     assert np.all(uv_l[(state == 0) | (state == 2)] == -7.0)
     assert np.count_nonzero(epdf_l != -7.0) == (np.count_nonzero(state == 1) if mis else 0)
     if mis and strategy_name != "env":

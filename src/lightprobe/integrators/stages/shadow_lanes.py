@@ -23,88 +23,30 @@ from numba import types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
-from ..emitters.envmap_lanes import _F64, _I8, _I32, _I64, _VF64, _VI8, LANES, _Lanes
-from .intersect import RECT_WIDTH
+from ...geometry.intersect import RECT_WIDTH
+from ...simd import F64, I8, I32, I64, LANES, VI8, Lanes, array_structs, c_array, dot3, ir_loop, splat_row
+from ..techniques import BLOCKED, TEST_ANALYTIC, TEST_MESH, VISIBLE
 
 __all__ = ["LANES", "shadow_block"]
 
-# integrators.techniques' shadow flags
-VISIBLE, TEST_MESH, BLOCKED, TEST_ANALYTIC = 1, 2, 3, 4
 _INF = float("inf")
 
 
-def _loop(v: _Lanes, count, carried, body):
-    """``for i in range(count): carried = body(i, carried)`` as an IR loop (``count`` an i64 scalar, ``carried`` a
-    value, or a tuple of values, threaded through the iterations); returns the last ``carried``."""
-    b = v.b
-    single = not isinstance(carried, tuple)
-    values = (carried,) if single else carried
-    entry = b.block
-    head = b.append_basic_block("shapes")
-    done = b.append_basic_block("shapes.done")
-    b.cbranch(b.icmp_signed(">", count, _I64(0)), head, done)
-    b.position_at_end(head)
-    i = b.phi(_I64)
-    phis = [b.phi(x.type) for x in values]
-    i.add_incoming(_I64(0), entry)
-    for phi, x in zip(phis, values, strict=True):
-        phi.add_incoming(x, entry)
-    new_values = body(i, phis[0] if single else tuple(phis))
-    new_values = (new_values,) if single else new_values
-    following = b.add(i, _I64(1))
-    latch = b.block
-    i.add_incoming(following, latch)
-    for phi, x in zip(phis, new_values, strict=True):
-        phi.add_incoming(x, latch)
-    b.cbranch(b.icmp_signed("<", following, count), head, done)
-    b.position_at_end(done)
-    results = []
-    for x, y in zip(values, new_values, strict=True):
-        result = b.phi(x.type)
-        result.add_incoming(x, entry)
-        result.add_incoming(y, latch)
-        results.append(result)
-    return results[0] if single else tuple(results)
-
-
-def _c_array(t, dtype, ndim) -> bool:
-    """Whether an intrinsic's argument type is a C-contiguous array of ``dtype`` and ``ndim``."""
-    return isinstance(t, types.Array) and t.dtype == dtype and t.ndim == ndim and t.layout == "C"
-
-
-def _arrays(context, builder, signature, args, n):
-    """The intrinsic's first ``n`` arguments (arrays) as Numba array structures."""
-    return [
-        context.make_array(t)(context, builder, value) for t, value in zip(signature.args[:n], args[:n], strict=True)
-    ]
-
-
-def _row(v: _Lanes, array, i, width, fields):
-    """Elements ``fields`` of row i of a C-contiguous float64 (N, width) array, each splatted to the lanes."""
-    base = v.b.mul(i, _I64(width))
-    return [v.splat(v.b.load(v.b.gep(array.data, [v.b.add(base, _I64(f))])), _VF64) for f in fields]
-
-
-def _dot(v: _Lanes, x, y):
-    """x . y of 3-vectors of lanes, summed as the scalar code writes it: (x0 y0 + x1 y1) + x2 y2."""
-    return v.add(v.add(v.mul(x[0], y[0]), v.mul(x[1], y[1])), v.mul(x[2], y[2]))
-
-
-def _toward_centre(v: _Lanes, o, d, centre):
+def _toward_centre(v: Lanes, o, d, centre):
     """(f, bq, foot) of intersect.sphere_hit: the origin from the centre, the distance along the ray to the line's
     nearest point to the centre, and that point from the centre."""
     f = [v.sub(o[i], centre[i]) for i in range(3)]
-    bq = v.neg(_dot(v, f, d))
+    bq = v.neg(dot3(v, f, d))
     return f, bq, [v.add(f[i], v.mul(bq, d[i])) for i in range(3)]
 
 
-def _sphere_t(v: _Lanes, o, d, centre, radius, tmax):
+def _sphere_t(v: Lanes, o, d, centre, radius, tmax):
     """intersect.sphere_hit(..., tmax): the nearest t in (0, tmax), else inf."""
     b = v.b
     f, bq, foot = _toward_centre(v, o, d, centre)
     r2 = v.mul(radius, radius)
-    disc = v.sub(r2, _dot(v, foot, foot))
-    c = v.sub(_dot(v, f, f), r2)
+    disc = v.sub(r2, dot3(v, foot, foot))
+    c = v.sub(dot3(v, f, f), r2)
     s = v.sqrt(v.fmax(disc, v.f(0.0)))
     q = b.select(v.ge(bq, v.f(0.0)), v.add(bq, s), v.sub(bq, s))
     t0 = b.select(b.fcmp_unordered("!=", q, v.f(0.0)), v.div(c, q), v.f(_INF))
@@ -119,15 +61,15 @@ def _sphere_t(v: _Lanes, o, d, centre, radius, tmax):
     return b.select(v.ge(disc, v.f(0.0)), t, v.f(_INF))
 
 
-def _sphere_blocks(v: _Lanes, o, d, centre, radius):
+def _sphere_blocks(v: Lanes, o, d, centre, radius):
     """Whether ``_sphere_t(..., tmax=inf)`` is finite, without its square root and division: its roots are q and
     c / q, so one is positive exactly when q > 0, or q < 0 and c < 0 (c / q cannot underflow to 0: c is a difference
     of squares of order 1, q at most a scene's size); q = 0 gives no root in (0, inf) either way."""
     b = v.b
     f, bq, foot = _toward_centre(v, o, d, centre)
     r2 = v.mul(radius, radius)
-    disc = v.sub(r2, _dot(v, foot, foot))
-    c = v.sub(_dot(v, f, f), r2)
+    disc = v.sub(r2, dot3(v, foot, foot))
+    c = v.sub(dot3(v, f, f), r2)
     # q = bq + s where bq >= 0, else bq - s (s = sqrt(max(disc, 0)) >= 0): q > 0 when bq > 0, or bq = 0 and s > 0;
     # q < 0 when bq < 0
     s_positive = v.gt(disc, v.f(0.0))
@@ -137,22 +79,22 @@ def _sphere_blocks(v: _Lanes, o, d, centre, radius):
     return b.and_(v.ge(disc, v.f(0.0)), root)
 
 
-def _rect_t(v: _Lanes, o, d, row, tmax):
+def _rect_t(v: Lanes, o, d, row, tmax):
     """intersect.rect_hit(..., tmax) for a row of intersect.rectangle_rows (origin, edges, normal, dual vectors) of
     splatted values: t, else inf."""
     b = v.b
     origin, normal, dual_u, dual_v = row[0:3], row[9:12], row[12:15], row[15:18]
-    denom = _dot(v, d, normal)
-    t = v.div(_dot(v, [v.sub(origin[i], o[i]) for i in range(3)], normal), denom)
+    denom = dot3(v, d, normal)
+    t = v.div(dot3(v, [v.sub(origin[i], o[i]) for i in range(3)], normal), denom)
     valid = b.and_(b.fcmp_unordered("!=", denom, v.f(0.0)), b.and_(v.gt(t, v.f(0.0)), v.lt(t, tmax)))
     p = [v.sub(v.add(o[i], v.mul(t, d[i])), origin[i]) for i in range(3)]  # intersect.rect_coordinates
-    a = _dot(v, p, dual_u)
-    c = _dot(v, p, dual_v)
+    a = dot3(v, p, dual_u)
+    c = dot3(v, p, dual_v)
     outside = b.or_(b.or_(v.lt(a, v.f(0.0)), v.gt(a, v.f(1.0))), b.or_(v.lt(c, v.f(0.0)), v.gt(c, v.f(1.0))))
     return b.select(b.and_(valid, b.not_(outside)), t, v.f(_INF))
 
 
-def _box_hit(v: _Lanes, o, d, lows, highs):
+def _box_hit(v: Lanes, o, d, lows, highs):
     """intersect.box_hit(..., tmax=inf) for a box's splatted corners: the three slabs without the early exits."""
     b = v.b
     t0, t1 = v.f(0.0), v.f(_INF)
@@ -173,12 +115,12 @@ def _box_hit(v: _Lanes, o, d, lows, highs):
     return v.le(t0, t1)
 
 
-def _ball_crossed(v: _Lanes, o, d, centre, radius2):
+def _ball_crossed(v: Lanes, o, d, centre, radius2):
     """intersect.ball_crossed(..., tmax=inf) for a splatted centre and squared radius."""
     b = v.b
     f, bq, foot = _toward_centre(v, o, d, centre)
-    near = v.gt(v.sub(radius2, _dot(v, foot, foot)), v.f(0.0))
-    ahead = b.or_(v.lt(_dot(v, f, f), radius2), v.gt(bq, v.f(0.0)))
+    near = v.gt(v.sub(radius2, dot3(v, foot, foot)), v.f(0.0))
+    ahead = b.or_(v.lt(dot3(v, f, f), radius2), v.gt(bq, v.f(0.0)))
     return b.and_(near, ahead)
 
 
@@ -192,33 +134,33 @@ def shadow_block(typingctx, flags, point, gnormal, point_error, wdir, spheres, r
     proxies (G, 5) float64 (``SceneArrays.mesh_spheres``); all C-contiguous."""
     f64 = types.float64
     if not (
-        _c_array(flags, types.int8, 1)
-        and all(_c_array(t, f64, 2) for t in (point, gnormal, wdir, spheres, rects, proxies))
-        and _c_array(point_error, f64, 1)
-        and _c_array(bounds, f64, 3)
+        c_array(flags, types.int8, 1)
+        and all(c_array(t, f64, 2) for t in (point, gnormal, wdir, spheres, rects, proxies))
+        and c_array(point_error, f64, 1)
+        and c_array(bounds, f64, 3)
         and isinstance(m, types.Integer)
         and isinstance(start, types.Integer)
     ):
         return None
 
     def codegen(context, builder, signature, args):
-        arrays = _arrays(context, builder, signature, args, 9)
+        arrays = array_structs(context, builder, signature, args, 9)
         flags_a, point_a, normal_a, error_a, wdir_a, spheres_a, rects_a, bounds_a, proxies_a = arrays
-        v, b = _Lanes(builder), builder
-        m_v = v.splat(context.cast(b, args[9], signature.args[9], types.int64), ir.VectorType(_I64, LANES))
+        v, b = Lanes(builder), builder
+        m_v = v.splat(context.cast(b, args[9], signature.args[9], types.int64), ir.VectorType(I64, LANES))
         start_v = context.cast(b, args[10], signature.args[10], types.int64)
         _, inside, read = v.slots(start_v, cgutils.unpack_tuple(b, flags_a.shape, 1)[0])
-        first = b.extract_element(read, _I32(0))
-        states = v.load_run(_I8, b.gep(flags_a.data, [first]), inside, 1, 0)
-        live = b.and_(inside, b.icmp_signed("==", states, ir.Constant(_VI8, [TEST_ANALYTIC] * LANES)))
+        first = b.extract_element(read, I32(0))
+        states = v.load_run(I8, b.gep(flags_a.data, [first]), inside, 1, 0)
+        live = b.and_(inside, b.icmp_signed("==", states, ir.Constant(VI8, [TEST_ANALYTIC] * LANES)))
         skipped = v.skip_unless(live)
-        d = list(v.load_run(_F64, b.gep(wdir_a.data, [b.mul(first, _I64(3))]), inside, 3, 0.0))
+        d = list(v.load_run(F64, b.gep(wdir_a.data, [b.mul(first, I64(3))]), inside, 3, 0.0))
         k = v.quotient(read, m_v)  # the camera sample of each slot
         p = [v.load_f64(point_a, b.add(b.mul(k, v.i(3)), v.i(i))) for i in range(3)]
         n = [v.load_f64(normal_a, b.add(b.mul(k, v.i(3)), v.i(i))) for i in range(3)]
         # intersect.ray_offset with the point's error bound
         eps = v.load_f64(error_a, k)
-        facing = _dot(v, d, n)
+        facing = dot3(v, d, n)
         eps = b.select(v.lt(facing, v.f(0.0)), v.neg(eps), eps)
         o = [v.add(p[i], v.mul(eps, n[i])) for i in range(3)]
 
@@ -226,29 +168,29 @@ def shadow_block(typingctx, flags, point, gnormal, point_error, wdir, spheres, r
         counts = [cgutils.unpack_tuple(b, a.shape, nd)[0] for a, nd in ((spheres_a, 2), (rects_a, 2), (bounds_a, 3))]
 
         def sphere(i, blocked):
-            row = _row(v, spheres_a, i, 4, range(4))
+            row = splat_row(v, spheres_a, i, 4, range(4))
             return b.or_(blocked, _sphere_blocks(v, o, d, row[0:3], row[3]))
 
         def rect(i, blocked):
-            row = _row(v, rects_a, i, RECT_WIDTH, range(RECT_WIDTH))
+            row = splat_row(v, rects_a, i, RECT_WIDTH, range(RECT_WIDTH))
             return b.or_(blocked, v.lt(_rect_t(v, o, d, row, v.f(_INF)), v.f(_INF)))
 
         def mesh(i, carried):
             blocked, crossed = carried
-            corners = _row(v, bounds_a, i, 6, range(6))
-            proxy = _row(v, proxies_a, i, 5, range(5))
+            corners = splat_row(v, bounds_a, i, 6, range(6))
+            proxy = splat_row(v, proxies_a, i, 5, range(5))
             around = b.and_(_box_hit(v, o, d, corners[0:3], corners[3:6]), _ball_crossed(v, o, d, proxy[0:3], proxy[3]))
             return b.or_(blocked, _ball_crossed(v, o, d, proxy[0:3], proxy[4])), b.or_(crossed, around)
 
-        blocked = _loop(v, counts[0], none, sphere)
-        blocked = _loop(v, counts[1], blocked, rect)
-        blocked, crossed = _loop(v, counts[2], (blocked, none), mesh)
+        blocked = ir_loop(v, counts[0], none, sphere)
+        blocked = ir_loop(v, counts[1], blocked, rect)
+        blocked, crossed = ir_loop(v, counts[2], (blocked, none), mesh)
         result = b.select(
             blocked,
-            ir.Constant(_VI8, [BLOCKED] * LANES),
-            b.select(crossed, ir.Constant(_VI8, [TEST_MESH] * LANES), ir.Constant(_VI8, [VISIBLE] * LANES)),
+            ir.Constant(VI8, [BLOCKED] * LANES),
+            b.select(crossed, ir.Constant(VI8, [TEST_MESH] * LANES), ir.Constant(VI8, [VISIBLE] * LANES)),
         )
-        v.store(_I8, result, v.address(flags_a, read, 1), live)
+        v.store(I8, result, v.address(flags_a, read, 1), live)
         v.end_skip(skipped)
         return context.get_dummy_value()
 

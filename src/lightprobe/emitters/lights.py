@@ -1,0 +1,251 @@
+"""The one light contract: every kind of the light table behind the same sample / pdf / radiance functions.
+
+After pbrt-v4's ``Light::SampleLi / PDF_Li / L / Le`` and Mitsuba 3's ``sample_direction / pdf_direction / eval``.
+For a shading point p with normal n:
+
+* ``light_sample(lights, env, l, strategy, compensated, p, n, u0, u1)`` -> :class:`~.kinds.LightSample`: a direction
+  toward light l, the distance to the sampled point (inf for infinite lights), the radiance arriving, the density
+  per steradian (1 for a delta light), and whether it is a delta light;
+* ``light_pdf(lights, env, l, strategy, compensated, p, n, w)``: the density with which ``light_sample`` produces
+  direction w (0 for a delta light: no given direction is ever its);
+* ``escaped_radiance(lights, env, first, w)``: what a ray that leaves the scene along w sees: the environment's and
+  every directional light's radiance (rows ``first`` on are the infinite lights);
+* for area lights a BSDF ray has hit at a known point, ``emitted`` and ``area_pdf_at`` (module ``area``).
+
+``strategy`` is how area lights are sampled (:data:`~.area.STRATEGIES`); ``compensated`` whether the environment is
+sampled from its MIS-compensated density.  The environment's own data is its kernel ``env``
+(:class:`~.envmap.EnvKernel`); a scene without one passes a placeholder that no row refers to.  Which kind is
+which: :data:`~.kinds.KINDS`, the one table; ``tests/emitters/test_lights.py`` runs every kind through the contract
+(chi-square where it has a density, closed forms where it is a delta).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .._numba import jit, jit_inline, jit_parallel, prange
+from .area import light_normal, light_pdf, light_radiance
+from .area import light_pdf_at as area_pdf_at
+from .area import light_sample as area_sample
+from .directional import directional_pdf, directional_radiance, directional_sample
+from .envmap import env_eval, env_pdf, env_sample
+from .kinds import (
+    KINDS,
+    LIGHT_DIRECTIONAL,
+    LIGHT_ENVIRONMENT,
+    LIGHT_POINT,
+    LIGHT_SPOT,
+    ROW_WIDTH,
+    LightArrays,
+    LightSample,
+    concatenate,
+)
+from .punctual import punctual_sample
+
+__all__ = [
+    "area_pdf_at",
+    "emitted",
+    "escaped_batch",
+    "escaped_radiance",
+    "is_delta",
+    "light_arrays",
+    "light_pdf_of",
+    "light_sample_of",
+    "pdf_batch",
+    "sample_batch",
+]
+
+
+@jit_inline
+def is_delta(lights, l):
+    """Whether row l is a delta light: a point or spot light, or a directional light of angle 0."""
+    kind = lights.kind[l]
+    return kind == LIGHT_POINT or kind == LIGHT_SPOT or (kind == LIGHT_DIRECTIONAL and lights.geom[l, 4] <= 0.0)
+
+
+@jit
+def light_sample_of(lights, env, l, strategy, compensated, px, py, pz, nx, ny, nz, u0, u1):
+    """A :class:`LightSample` of light l from point p (normal n) with the pair (u0, u1)."""
+    kind = lights.kind[l]
+    if kind == LIGHT_ENVIRONMENT:
+        wx, wy, wz, pdf = env_sample(env, compensated, u0, u1)
+        r, g, b = env_eval(env, wx, wy, wz)
+        return LightSample(wx, wy, wz, math.inf, r, g, b, pdf, False)
+    if kind == LIGHT_DIRECTIONAL:
+        wx, wy, wz, dist, r, g, b, pdf, delta = directional_sample(lights.geom[l], lights.radiance[l], u0, u1)
+        return LightSample(wx, wy, wz, dist, r, g, b, pdf, delta)
+    if kind == LIGHT_POINT or kind == LIGHT_SPOT:
+        wx, wy, wz, dist, r, g, b, pdf = punctual_sample(
+            kind == LIGHT_SPOT, lights.geom[l], lights.radiance[l], px, py, pz
+        )
+        return LightSample(wx, wy, wz, dist, r, g, b, pdf, True)
+    wx, wy, wz, dist, r, g, b, pdf = area_sample(lights, l, strategy, px, py, pz, nx, ny, nz, u0, u1)
+    return LightSample(wx, wy, wz, dist, r, g, b, pdf, False)
+
+
+@jit
+def light_pdf_of(lights, env, l, strategy, compensated, px, py, pz, nx, ny, nz, wx, wy, wz):
+    """Density per steradian with which :func:`light_sample_of` produces unit direction w (0 for a delta light)."""
+    kind = lights.kind[l]
+    if kind == LIGHT_ENVIRONMENT:
+        return env_pdf(env, compensated, wx, wy, wz)
+    if kind == LIGHT_DIRECTIONAL:
+        return directional_pdf(lights.geom[l], wx, wy, wz)
+    if kind == LIGHT_POINT or kind == LIGHT_SPOT:
+        return 0.0
+    return light_pdf(lights, l, strategy, px, py, pz, nx, ny, nz, wx, wy, wz)
+
+
+@jit_inline
+def escaped_radiance(lights, env, first, wx, wy, wz):
+    """Radiance a ray leaving the scene along unit direction w sees: every infinite light's (rows ``first`` on),
+    the environment's from its map."""
+    r = g = b = 0.0
+    for l in range(first, lights.kind.shape[0]):
+        if lights.kind[l] == LIGHT_ENVIRONMENT:
+            lr, lg, lb = env_eval(env, wx, wy, wz)
+        else:
+            lr, lg, lb = directional_radiance(lights.geom[l], lights.radiance[l], wx, wy, wz)
+        r += lr
+        g += lg
+        b += lb
+    return r, g, b
+
+
+@jit_inline
+def emitted(lights, l, x, y, z, wx, wy, wz):
+    """Radiance leaving area light l at its point (x, y, z) toward a ray travelling along w (0 from its back)."""
+    n = light_normal(lights, l, x, y, z)
+    return light_radiance(lights, l, -(n[0] * wx + n[1] * wy + n[2] * wz))
+
+
+# --- batches for Python and the tests -------------------------------------------------------------------------------
+@jit_parallel
+def _sample_batch(lights, env, l, strategy, compensated, points, normals, u):
+    n = u.shape[0]
+    out = np.empty((n, 9))
+    for i in prange(n):
+        s = light_sample_of(
+            lights,
+            env,
+            l,
+            strategy,
+            compensated,
+            points[i, 0],
+            points[i, 1],
+            points[i, 2],
+            normals[i, 0],
+            normals[i, 1],
+            normals[i, 2],
+            u[i, 0],
+            u[i, 1],
+        )
+        out[i, 0], out[i, 1], out[i, 2], out[i, 3] = s.wx, s.wy, s.wz, s.distance
+        out[i, 4], out[i, 5], out[i, 6], out[i, 7] = s.r, s.g, s.b, s.pdf
+        out[i, 8] = 1.0 if s.delta else 0.0
+    return out
+
+
+@jit_parallel
+def _pdf_batch(lights, env, l, strategy, compensated, points, normals, dirs):
+    n = dirs.shape[0]
+    out = np.empty(n)
+    for i in prange(n):
+        out[i] = light_pdf_of(
+            lights,
+            env,
+            l,
+            strategy,
+            compensated,
+            points[i, 0],
+            points[i, 1],
+            points[i, 2],
+            normals[i, 0],
+            normals[i, 1],
+            normals[i, 2],
+            dirs[i, 0],
+            dirs[i, 1],
+            dirs[i, 2],
+        )
+    return out
+
+
+@jit_parallel
+def _escaped_batch(lights, env, first, dirs):
+    out = np.empty((dirs.shape[0], 3))
+    for i in prange(dirs.shape[0]):
+        out[i, 0], out[i, 1], out[i, 2] = escaped_radiance(lights, env, first, dirs[i, 0], dirs[i, 1], dirs[i, 2])
+    return out
+
+
+def _rows(a, n: int) -> np.ndarray:
+    a = np.asarray(a, dtype=np.float64)
+    return np.ascontiguousarray(np.broadcast_to(a.reshape(-1, 3) if a.ndim > 1 else a, (n, 3)))
+
+
+def _env_kernel(env):
+    if env is not None:
+        return env.kernel
+    from .envmap import placeholder_environment
+
+    return placeholder_environment().kernel
+
+
+def sample_batch(lights: LightArrays, l: int, points, normals, u, *, env=None, strategy="solid-angle",
+                 compensated=False) -> np.ndarray:  # fmt: skip
+    """Samples of row l for ``points``, ``normals`` (N, 3) and ``u`` (N, 2): an (N, 9) array of direction,
+    distance, radiance, pdf and delta (1.0 or 0.0); ``env`` the scene's EnvironmentMap when row l is its."""
+    from .area import STRATEGIES
+
+    u = np.ascontiguousarray(np.asarray(u, dtype=np.float64).reshape(-1, 2))
+    n = u.shape[0]
+    return _sample_batch(
+        lights, _env_kernel(env), l, STRATEGIES[strategy], bool(compensated), _rows(points, n), _rows(normals, n), u
+    )
+
+
+def pdf_batch(lights: LightArrays, l: int, points, normals, dirs, *, env=None, strategy="solid-angle",
+              compensated=False) -> np.ndarray:  # fmt: skip
+    """The density of row l's samples at ``dirs`` (N, 3) from ``points`` with ``normals``."""
+    from .area import STRATEGIES
+
+    d = np.ascontiguousarray(np.asarray(dirs, dtype=np.float64).reshape(-1, 3))
+    n = d.shape[0]
+    return _pdf_batch(
+        lights, _env_kernel(env), l, STRATEGIES[strategy], bool(compensated), _rows(points, n), _rows(normals, n), d
+    )
+
+
+def escaped_batch(lights: LightArrays, first: int, dirs, *, env=None) -> np.ndarray:
+    """What rays leaving the scene along ``dirs`` see from the infinite lights (rows ``first`` on)."""
+    d = np.ascontiguousarray(np.asarray(dirs, dtype=np.float64).reshape(-1, 3))
+    return _escaped_batch(lights, _env_kernel(env), int(first), d)
+
+
+def light_arrays(lights, *, environment: bool = False) -> LightArrays:
+    """The table of Python light objects (:class:`~.area.AreaLight`, :class:`~.punctual.PointLight`,
+    :class:`~.punctual.SpotLight`, :class:`~.directional.DirectionalLight`), in order, with a last row for the
+    scene's environment map when ``environment``."""
+    rows = [
+        LightArrays(
+            np.array([KINDS[x.kind].code], np.int64),
+            np.asarray(x.geom, dtype=np.float64).reshape(1, ROW_WIDTH),
+            np.asarray(x.radiance, dtype=np.float64).reshape(1, 3),
+            np.array([int(x.two_sided)], np.int64),
+            np.array([float(x.area)]),
+        )
+        for x in lights
+    ]
+    if environment:
+        rows.append(
+            LightArrays(
+                np.array([LIGHT_ENVIRONMENT], np.int64),
+                np.zeros((1, ROW_WIDTH)),
+                np.zeros((1, 3)),
+                np.zeros(1, np.int64),
+                np.zeros(1),
+            )
+        )
+    return concatenate(rows)

@@ -1,0 +1,207 @@
+"""The render core's stage table: which stages a render runs, in order, and the one parallel loop that runs them.
+
+Every scene goes through the same stages (``stages/``), each a plain function over a claimed range of a pass::
+
+    camera -> setup -> light samples -> BSDF rays -> (environment radiance) -> finish -> shadow rays -> accumulation
+
+A :class:`Plan` says what a scene needs and :meth:`Plan.stages` picks each stage's variant: where the environment map
+is the only light, the light-sample stage samples it without a selector (8 samples at a time in vector IR where its
+density allows), BSDF rays need only their lat-long coordinates and the radiance lookups get a stage of their own;
+with emissive surfaces a BSDF ray finds its nearest hit (analytic shapes, then Embree) to see what it meets; shadow
+rays go 8 at a time where every one is unbounded.  :data:`STAGES` is the one registry: each stage's body, what it
+counts (camera samples, slots, blocks of 8), and the scalar twin of a vector stage.
+
+:func:`run_stage` is the loop over a stage's items, written once (pbrt-v4's ``ForAllQueued``): a worker claims chunks
+of the items from a shared counter (``_worksharing.py``) and calls the stage's body on each; :class:`Launcher` runs
+one worker per thread.  The loop and every body compile once, whatever the scene (about two minutes on the 2-core
+machine, then loaded from the cache: decisions.md 77).
+"""
+
+from __future__ import annotations
+
+import warnings
+from concurrent.futures import ThreadPoolExecutor, wait
+from dataclasses import dataclass
+
+from numba import literal_unroll, njit, typeof
+
+from .._numba import FASTMATH
+from .._worksharing import claim_range, new_counter
+from .accumulation import accumulate, pass_pixels_count
+from .stages.bsdf_rays import (
+    environment_coords,
+    environment_coords_lanes,
+    infinite_lights,
+    nearest_analytic,
+    nearest_mesh,
+    non_light_blocks,
+    what_bsdf_rays_see,
+)
+from .stages.camera import camera_blocks, camera_lanes, camera_samples, camera_scalar
+from .stages.finish import finish
+from .stages.light_samples import (
+    environment_blocks,
+    environment_lanes,
+    environment_resampled,
+    environment_scalar,
+    light_samples,
+    slots_of_pass,
+)
+from .stages.radiance import environment_radiance, environment_radiance_lanes, slot_blocks
+from .stages.setup import shading_setup
+from .stages.shadows import analytic_shadows, analytic_shadows_lanes, mesh_shadows, mesh_shadows_single
+
+__all__ = ["STAGES", "Launcher", "Plan", "Stage", "run_stage", "stage_id"]
+
+
+@dataclass(frozen=True)
+class Stage:
+    """One stage: its body ``body(s, env, lights, sel, c, cams, slots, acc, lo, hi)`` over items [lo, hi), the
+    number of items of a pass ``items(c, cams, slots)``, and for a vector stage the name of its scalar twin."""
+
+    name: str
+    body: object
+    items: object
+    twin: str | None = None
+
+
+STAGES: tuple[Stage, ...] = (
+    Stage("camera", camera_lanes, camera_blocks, twin="camera_scalar"),
+    Stage("camera_scalar", camera_scalar, camera_samples),
+    Stage("setup", shading_setup, camera_samples),
+    Stage("light_samples", light_samples, slots_of_pass),
+    Stage("environment_samples_lanes", environment_lanes, environment_blocks, twin="environment_samples"),
+    Stage("environment_samples", environment_scalar, slots_of_pass),
+    Stage("environment_samples_resampled", environment_resampled, slots_of_pass),
+    Stage("environment_coords_lanes", environment_coords_lanes, non_light_blocks, twin="environment_coords"),
+    Stage("environment_coords", environment_coords, slots_of_pass),
+    Stage("infinite_lights", infinite_lights, slots_of_pass),
+    Stage("nearest_analytic", nearest_analytic, slots_of_pass),
+    Stage("nearest_mesh", nearest_mesh, slots_of_pass),
+    Stage("what_bsdf_rays_see", what_bsdf_rays_see, slots_of_pass),
+    Stage("environment_radiance_lanes", environment_radiance_lanes, slot_blocks, twin="environment_radiance"),
+    Stage("environment_radiance", environment_radiance, slots_of_pass),
+    Stage("finish", finish, camera_samples),
+    Stage("analytic_shadows_lanes", analytic_shadows_lanes, slot_blocks, twin="analytic_shadows"),
+    Stage("analytic_shadows", analytic_shadows, slots_of_pass),
+    Stage("mesh_shadows", mesh_shadows, slots_of_pass, twin="mesh_shadows_single"),
+    Stage("mesh_shadows_single", mesh_shadows_single, slots_of_pass),
+    Stage("accumulate", accumulate, pass_pixels_count),
+)
+_IDS = {stage.name: i for i, stage in enumerate(STAGES)}
+_BODIES = tuple(stage.body for stage in STAGES)
+_ITEMS = tuple(stage.items for stage in STAGES)
+
+
+# The stage loop's tuples of the stages' functions are Numba's "first-class functions", typed per stage by
+# literal_unroll, so that each iteration calls its body directly; Numba warns that the feature is experimental.
+warnings.filterwarnings("ignore", message="First-class function type feature is experimental")
+
+
+def jit_stage_loop(func):
+    """Compile the stage loop: no reference counting (as the bodies, ``_numba.jit_body``), the GIL released."""
+    return njit(cache=True, nogil=True, error_model="numpy", fastmath=FASTMATH, _nrt=False)(func)
+
+
+def stage_id(name: str) -> int:
+    return _IDS[name]
+
+
+@jit_stage_loop
+def run_stage(stage, s, env, lights, sel, c, cams, slots, acc, counter, worker):
+    """Worker ``worker``'s share of stage ``stage`` (its index in :data:`STAGES`): chunks of the stage's items
+    claimed from ``counter`` until none is left.  The stage's body and item count come from the table, unrolled:
+    the table is the dispatch."""
+    n = 0
+    i = 0
+    for items in literal_unroll(_ITEMS):
+        if i == stage:
+            n = items(c, cams, slots)
+        i += 1
+    lo, hi = claim_range(counter, n)
+    while lo < hi:
+        i = 0
+        for body in literal_unroll(_BODIES):
+            if i == stage:
+                body(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi)
+            i += 1
+        lo, hi = claim_range(counter, n)
+
+
+class Launcher:
+    """Runs stages with ``threads`` workers: the calling thread is worker 0, a shared pool's threads the others.
+    Each worker runs :func:`run_stage`, which releases the GIL, so the workers run in parallel; which worker takes
+    which chunk changes nothing in the image (every item of a stage is independent, and a worker's scratch rows
+    are its own).  Measured against Numba's parallel loops, decisions.md 77."""
+
+    _pool: ThreadPoolExecutor | None = None
+    _pool_size = 0
+
+    def __init__(self, threads: int):
+        self.threads = threads
+        if threads > 1 and Launcher._pool_size < threads - 1:
+            Launcher._pool = ThreadPoolExecutor(max_workers=threads - 1, thread_name_prefix="lightprobe-stage")
+            Launcher._pool_size = threads - 1
+        self.counter = new_counter()  # the chunk claims' shared counter (_worksharing.py)
+        self._entry = None
+
+    def run(self, stage: int, records: tuple) -> None:
+        """Stage ``stage`` over the pass whose ``records`` are (s, env, lights, sel, c, cams, slots, acc)."""
+        self.counter[0] = 0
+        call = self._entry or run_stage
+        futures = [Launcher._pool.submit(call, stage, *records, self.counter, w) for w in range(1, self.threads)]
+        try:
+            call(stage, *records, self.counter, 0)
+        finally:
+            wait(futures)  # never leave a worker writing into the pass after a Ctrl-C or an error
+        for f in futures:
+            f.result()
+        if self._entry is None:  # later calls skip the dispatcher's typing of ~150 arrays (a millisecond a call)
+            signature = tuple(typeof(x) for x in (stage, *records, self.counter, 0))
+            compiled = run_stage.overloads.get(signature)
+            self._entry = compiled.entry_point if compiled is not None else None
+
+
+@dataclass(frozen=True)
+class Plan:
+    """What a render needs, from its scene and settings, and so which stages it runs."""
+
+    environment_alone: bool  # the environment map is the only light (one light sample per pick)
+    bounded_lights: bool  # area, point or spot lights: shadow rays that end at a light
+    emissive_surfaces: bool  # BSDF rays must find their nearest hit to see what they meet
+    infinite_lights: bool  # an environment map or directional lights
+    meshes: bool
+    resampled: bool  # env_candidates > 1
+    lanes: bool  # this Numba's LLVM builds the vector intrinsics
+    environment_samples_in_lanes: bool
+    environment_coords_in_lanes: bool
+    environment_radiance_in_lanes: bool
+    packets: bool  # Embree's 8-ray packets are native
+
+    def stages(self) -> tuple[str, ...]:
+        """The names of this render's stages, in order."""
+        names = ["camera" if self.lanes else "camera_scalar", "setup"]
+        if self.environment_alone:
+            if self.resampled:
+                names.append("environment_samples_resampled")
+            elif self.environment_samples_in_lanes:
+                names.append("environment_samples_lanes")
+            else:
+                names.append("environment_samples")
+            names.append("environment_coords_lanes" if self.environment_coords_in_lanes else "environment_coords")
+            names.append("environment_radiance_lanes" if self.environment_radiance_in_lanes else "environment_radiance")
+        else:
+            names.append("light_samples")
+            if self.emissive_surfaces:
+                names.append("nearest_analytic")
+                if self.meshes:
+                    names.append("nearest_mesh")
+                names.append("what_bsdf_rays_see")
+            else:  # the infinite lights are all a BSDF ray can see (none: it is dropped)
+                names.append("infinite_lights")
+        names.append("finish")
+        names.append("analytic_shadows_lanes" if self.lanes and not self.bounded_lights else "analytic_shadows")
+        if self.meshes:
+            names.append("mesh_shadows" if self.packets else "mesh_shadows_single")
+        names.append("accumulate")
+        return tuple(names)

@@ -1,0 +1,124 @@
+"""Stage 2, shading setup: each camera sample's hit point, shading frame and material, what its camera ray sees
+directly, and its shading slots' directions.
+
+A camera ray that misses sees the infinite lights (the environment, directional lights' discs); one that hits an
+emitter sees its radiance (from the hit itself, never a second intersection, which from another origin can miss a
+small light's edge).  Then each of the camera sample's ``m`` slots gets its random numbers (under ``sobol`` 8 slots
+at a time in integer lanes, ``sobol_lanes.py``: the same bits as ``uniform_2d`` and ``uniform``) and either a
+direction from BSDF or hemisphere sampling (state ``SLOT_BSDF`` / ``SLOT_HEMI``, with its density and, for a BSDF
+sample, its weight f cos / pdf) or, for a light slot, its 2D pair for the light-sample stage (``SLOT_LIGHT``).
+"""
+
+from __future__ import annotations
+
+from ..._numba import jit, jit_body, jit_inline
+from ...emitters.lights import emitted, escaped_radiance
+from ...geometry.frame import to_world
+from ...geometry.intersect import MESH, MISS, RECT, SPHERE
+from ...sampling.rng import SOBOL, sample_state, uniform, uniform_2d
+from ...simd import LANES
+from ..techniques import (
+    BRDF,
+    ENV,
+    MIS,
+    SLOT_BSDF,
+    SLOT_LIGHT,
+    SLOT_NONE,
+    load_shading_frame,
+    sample_direction,
+    store_shading_frame,
+    technique_slot,
+)
+from .sobol_lanes import slot_numbers_block
+
+__all__ = ["emitter_of", "shading_setup"]
+
+
+@jit_inline
+def emitter_of(s, kind, index, prim):
+    """Row of the light table for a surface hit, or -1 if the surface does not emit."""
+    if kind == SPHERE:
+        return s.sphere_light[index]
+    if kind == RECT:
+        return s.rect_light[index]
+    if kind == MESH:
+        start = s.mesh_light_start[index]
+        return start + prim if start >= 0 else -1
+    return -1
+
+
+@jit
+def camera_samples(c, cams, slots):
+    """The stage's items: camera samples."""
+    return cams.t.shape[0]
+
+
+@jit_body
+def shading_setup(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
+    """Camera samples lo .. hi - 1."""
+    m, n_bsdf = c.m, c.n_bsdf
+    ox, oy, oz = c.cam[0], c.cam[1], c.cam[2]
+    state, wdir, tpdf = slots.state, slots.wdir, slots.tpdf
+    for k in range(lo, hi):
+        base = k * m
+        cams.material[k] = -1  # no shading for this camera sample (a miss, or the back of a one-sided surface)
+        for j in range(m):
+            state[base + j] = SLOT_NONE
+        dx, dy, dz = cams.dirs[k, 0], cams.dirs[k, 1], cams.dirs[k, 2]
+        if cams.kind[k] == MISS:
+            cams.direct[k, 0], cams.direct[k, 1], cams.direct[k, 2] = escaped_radiance(
+                lights, env, sel.n_bounded, dx, dy, dz
+            )
+            continue
+        hit = (cams.kind[k], cams.index[k], cams.prim[k], cams.b1[k], cams.b2[k], cams.t[k])
+        p, _, _, wo = store_shading_frame(
+            s, k, hit, ox, oy, oz, dx, dy, dz, cams.point, cams.gnormal, cams.point_error, cams.frame, cams.wo_local,
+            cams.material,
+        )  # fmt: skip
+        light = emitter_of(s, hit[0], hit[1], hit[2])
+        if light >= 0:
+            cams.direct[k, 0], cams.direct[k, 1], cams.direct[k, 2] = emitted(
+                lights, light, p[0], p[1], p[2], dx, dy, dz
+            )
+        else:
+            cams.direct[k, 0] = cams.direct[k, 1] = cams.direct[k, 2] = 0.0
+        if wo[2] <= 0.0:
+            continue
+        ts, tt, ns, wo = load_shading_frame(cams.frame, cams.wo_local, k)
+        mk, mp = s.material_kind[cams.material[k]], s.material_params[cams.material[k]]
+        rs = sample_state(c.sampler, c.seed, c.pixels[k // c.spp_pass], c.sample_start + k % c.spp_pass)
+        sobol = c.sampler == SOBOL
+        own = c.numbers[worker]
+        if sobol:
+            # the slots' Sobol' numbers 8 at a time (sobol_lanes.py): the same bits as uniform_2d and uniform below
+            for first in range(0, m, LANES):
+                slot_numbers_block(own, rs[2], rs[3], c.strategy == MIS, n_bsdf, m, first, first)
+        for j in range(m):
+            r = base + j
+            technique = c.strategy
+            if c.strategy == MIS:
+                technique = BRDF if j < n_bsdf else ENV
+            if sobol:
+                u0, u1, u2 = own[j, 0], own[j, 1], own[j, 2]
+            else:
+                rj, slot = technique_slot(rs, c.strategy, n_bsdf, m - n_bsdf, j)
+                u0, u1 = uniform_2d(rj, 2 + 3 * slot)
+                u2 = -1.0  # drawn below where a technique takes it
+            if technique == ENV:
+                slots.u[r, 0] = u0
+                slots.u[r, 1] = u1
+                state[r] = SLOT_LIGHT
+                continue
+            if not sobol:
+                u2 = uniform(rj, 4 + 3 * slot)
+            st, wi, pdf, w = sample_direction(technique, mk, mp, wo, u0, u1, u2)
+            if st == SLOT_NONE:
+                continue
+            if st == SLOT_BSDF:
+                slots.bweight[r, 0], slots.bweight[r, 1], slots.bweight[r, 2] = w
+            state[r] = st
+            wx, wy, wz = to_world(ts, tt, ns, wi[0], wi[1], wi[2])
+            wdir[r, 0], wdir[r, 1], wdir[r, 2] = wx, wy, wz
+            if st != SLOT_BSDF:  # the finish stage weighs a BSDF sample by bweight, the others by wi
+                slots.wloc[r, 0], slots.wloc[r, 1], slots.wloc[r, 2] = wi
+            tpdf[r] = pdf

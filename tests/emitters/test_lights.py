@@ -1,0 +1,146 @@
+"""The one light contract (emitters/lights.py): every kind of the light table sampled, weighed and evaluated through
+the same functions; the directional light's cone against its own pdf; its errors."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from lightprobe.analysis import chi2
+from lightprobe.emitters.area import AreaLight
+from lightprobe.emitters.directional import DirectionalLight
+from lightprobe.emitters.envmap import EnvironmentMap
+from lightprobe.emitters.kinds import KINDS
+from lightprobe.emitters.lights import escaped_batch, light_arrays, pdf_batch, sample_batch
+from lightprobe.emitters.procedural import sky_with_sun
+from lightprobe.emitters.punctual import PointLight, SpotLight
+from lightprobe.errors import ParameterError
+from lightprobe.geometry.frame import frame_matrix
+
+RNG = np.random.default_rng(11)
+POINT = np.array([0.2, 0.0, -0.3])
+NORMAL = np.array([0.0, 1.0, 0.0])
+SUN = DirectionalLight([-0.3, -1.0, 0.2], [3.0, 2.8, 2.5], angle=20.0)
+
+
+def _one_of_each():
+    """A light of every kind of the table, with the environment map it needs."""
+    env = EnvironmentMap.from_array(sky_with_sun(64, 32, sun_diameter_deg=8.0))
+    lights = {
+        "rectangle": AreaLight.rectangle([-0.5, 2.0, -0.5], [1, 0, 0], [0, 0, 1], 3.0),
+        "sphere": AreaLight.sphere([1.0, 2.0, 0.0], 0.4, 2.0),
+        "triangle": AreaLight.triangle([0, 2.5, 0], [1, 2.5, 0], [0, 2.5, 1], 4.0),  # facing down
+        "point": PointLight([0.0, 2.0, 1.0], 5.0),
+        "spot": SpotLight([0.0, 3.0, 0.0], [0.0, 0.0, 0.0], 6.0, cone_angle=40.0),
+        "directional": SUN,
+        "delta directional": DirectionalLight([0.0, -1.0, -1.0], 2.0),
+    }
+    return lights, env
+
+
+def test_every_kind_of_the_table_goes_through_the_contract():
+    """Each kind: unit directions, finite radiance, a positive density that pdf() gives back for the sampled
+    direction (0 for a delta light, whose flag is set), a distance for bounded lights and none for infinite
+    ones."""
+    lights, env = _one_of_each()
+    seen = set()
+    for name, light in lights.items():
+        table = light_arrays([light])
+        seen.add(light.kind)
+        _check_kind(
+            table, 0, env=None, delta=name in ("point", "spot", "delta directional"), infinite="directional" in name
+        )
+    table = light_arrays([], environment=True)
+    _check_kind(table, 0, env=env, delta=False, infinite=True)
+    seen.add("environment")
+    assert seen == set(KINDS), set(KINDS) - seen  # a new kind must join this test
+
+
+def _check_kind(table, row, *, env, delta, infinite):
+    n = 4000
+    u = RNG.random((n, 2))
+    out = sample_batch(table, row, np.tile(POINT, (n, 1)), np.tile(NORMAL, (n, 1)), u, env=env)
+    direction, distance, radiance, pdf, flag = out[:, :3], out[:, 3], out[:, 4:7], out[:, 7], out[:, 8]
+    live = pdf > 0
+    assert live.mean() > 0.5
+    np.testing.assert_allclose(np.linalg.norm(direction[live], axis=1), 1.0, atol=1e-9)
+    assert np.all(np.isfinite(radiance)) and np.all(radiance >= 0) and radiance.max() > 0
+    assert np.all(flag == (1.0 if delta else 0.0))
+    assert np.all(np.isinf(distance[live]) == infinite)
+    back = pdf_batch(table, row, np.tile(POINT, (n, 1)), np.tile(NORMAL, (n, 1)), direction, env=env)
+    if delta:
+        assert np.all(pdf[live] == 1.0) and np.all(back == 0.0)
+    else:
+        np.testing.assert_allclose(back[live], pdf[live], rtol=1e-9)
+
+
+@pytest.mark.parametrize("angle", [0.53, 5.0, 20.0, 120.0])
+def test_a_directional_lights_cone_matches_its_pdf(angle):
+    """Chi-square of the cone's samples against the light's own pdf (a quarter-degree sun to a 120-degree sky
+    patch), the pdf integrating to 1, and the radiance L = E / (pi sin^2 alpha)."""
+    light = DirectionalLight([0.2, -1.0, 0.4], 3.0, angle=angle)
+    table = light_arrays([light])
+    n = 200_000
+    out = sample_batch(table, 0, np.zeros((n, 3)), np.tile(NORMAL, (n, 1)), RNG.random((n, 2)))
+    frame = frame_matrix(-light.direction)
+
+    def density(v):
+        return pdf_batch(table, 0, np.zeros((v.shape[0], 3)), np.tile(NORMAL, (v.shape[0], 1)), v)
+
+    # rings inside the cone, the last one a hair past its rim (a sample on the rim may round either way), then
+    # the rest of the sphere: the pdf is constant in every cell but that one
+    rim = math.radians(angle) / 2 * (1 + 1e-6)
+    edges = np.concatenate([np.linspace(0.0, rim, 49), np.linspace(rim, math.pi, 17)[1:]])
+    result = chi2.spherical_test(
+        out[:, :3], density, frame=frame, theta_edges=edges, phi_edges=np.linspace(0, 2 * np.pi, 65), test_count=4
+    )
+    assert result.passed, str(result)
+    assert result.pdf_integral == pytest.approx(1.0, abs=2e-3)
+    alpha = math.radians(angle) / 2
+    np.testing.assert_allclose(out[:, 4], 3.0 / (math.pi * math.sin(alpha) ** 2), rtol=1e-12)
+    np.testing.assert_allclose(out[:, 7], 1.0 / (2 * math.pi * (1 - math.cos(alpha))), rtol=1e-9)
+
+
+def test_a_cone_of_the_wrong_width_fails_the_chi_square_test():
+    """Negative control: the samples of a 5-degree sun against the pdf of a 5.5-degree one."""
+    wide = light_arrays([DirectionalLight([0.2, -1.0, 0.4], 3.0, angle=5.5)])
+    narrow = light_arrays([DirectionalLight([0.2, -1.0, 0.4], 3.0, angle=5.0)])
+    n = 200_000
+    out = sample_batch(narrow, 0, np.zeros((n, 3)), np.tile(NORMAL, (n, 1)), RNG.random((n, 2)))
+    frame = frame_matrix(np.array([-0.2, 1.0, -0.4]) / np.linalg.norm([-0.2, 1.0, -0.4]))
+
+    def density(v):
+        return pdf_batch(wide, 0, np.zeros((v.shape[0], 3)), np.tile(NORMAL, (v.shape[0], 1)), v)
+
+    rim = math.radians(5.5) / 2 * (1 + 1e-6)
+    edges = np.concatenate([np.linspace(0.0, rim, 49), np.linspace(rim, math.pi, 17)[1:]])
+    assert not chi2.spherical_test(out[:, :3], density, frame=frame, theta_edges=edges).passed
+
+
+def test_rays_that_escape_see_the_environment_and_the_suns_disc():
+    """escaped_radiance sums every infinite light: the map's radiance everywhere, plus L inside the sun's cone."""
+    env = EnvironmentMap.from_array(np.full((8, 16, 3), 0.5, np.float32))
+    table = light_arrays([SUN], environment=True)
+    inside = -SUN.direction
+    outside = np.array([0.0, 1.0, 0.0])
+    seen = escaped_batch(table, 0, np.array([inside, outside]), env=env)
+    np.testing.assert_allclose(seen[0], 0.5 + SUN.radiance, rtol=1e-6)
+    np.testing.assert_allclose(seen[1], 0.5, rtol=1e-6)
+
+
+@pytest.mark.parametrize(
+    ("make", "message"),
+    [
+        (lambda: DirectionalLight([0, 0, 0], 1.0), "direction"),
+        (lambda: DirectionalLight([0, -1], 1.0), "direction"),
+        (lambda: DirectionalLight([0, -1, 0], -1.0), "irradiance"),
+        (lambda: DirectionalLight([0, -1, 0], "bright"), "irradiance"),
+        (lambda: DirectionalLight([0, -1, 0], 1.0, angle=180.0), "angle"),
+        (lambda: DirectionalLight([0, -1, 0], 1.0, angle=-1.0), "angle"),
+    ],
+)
+def test_bad_directional_lights_are_one_clear_error(make, message):
+    with pytest.raises(ParameterError, match=message):
+        make()
