@@ -7,11 +7,13 @@
 
 The scenes are :mod:`lightprobe.reference_scenes` ``area`` (a rectangle, a sphere and a 16-triangle ring light
 over a 16 m ground under a dim sky) and ``many`` (600 small rectangle lights over three decades of power, no sky),
-at ``--resolution``.  The reference of each is Mitsuba's own (``direct``, ``multijitter``, 1 + 1, ``--ref-passes``
-passes of 64 spp), made once and cached in ``--cache``; its relMSE floor, mean(var / (ref^2 + 0.01)), is printed
-and subtracted for ``true_efficiency``.  Each configuration renders ``--seeds`` images at ``--spp``; relMSE is their
-mean, seconds their median (the renderer's own timing, kernels compiled first).  Mitsuba runs every sampler at
-1 + 1 and 4 + 4 emitter + BSDF samples (its ``direct`` integrator); lightprobe every selector with its defaults.
+at ``--resolution``.  The reference of each is Mitsuba's own (``direct``, ``multijitter``, 1 + 1, passes of 64 spp:
+64 for ``area``, 128 for ``many``, whose error is larger; ``--ref-passes`` sets both), made once and cached in
+``--cache``; its relMSE floor, mean(var / (ref^2 + 0.01)), is printed and subtracted for ``true_efficiency`` (it is
+at most a fifteenth of every error measured).  Each configuration renders ``--seeds`` images at ``--spp``; relMSE
+is their mean, seconds their median (the renderer's own timing, kernels compiled first).  Mitsuba runs every sampler
+at 1 + 1 and 4 + 4 emitter + BSDF samples (its ``direct`` integrator), on ``many`` also with each emitter's
+``sampling_weight`` set to its power ("power"); lightprobe every selector with its defaults.
 Renderers run in alternating subprocesses (A B A B) so that drifting machine load hits both alike.  One JSON line
 per configuration, then the best of each renderer per scene and their ratio.
 """
@@ -64,7 +66,7 @@ def _mitsuba_worker(args) -> None:
 
     rs.RESOLUTION = tuple(args.resolution)
     desc = rs.describe(args.scene)
-    ref_file = Path(args.cache) / f"{args.scene}_{args.resolution[0]}x{args.resolution[1]}_mitsuba.npz"
+    ref_file = _reference_file(args, args.scene)
     with tempfile.TemporaryDirectory() as tmp:
         env_file = None
         image = rs.environment_image(desc)
@@ -72,25 +74,26 @@ def _mitsuba_worker(args) -> None:
             env_file = str(Path(tmp) / "env.exr")
             write_image(env_file, image)
         if args.reference:
-            print(json.dumps(mr.render(args.scene, 64, args.ref_passes, ref_file)), flush=True)
+            print(json.dumps(mr.render(args.scene, 64, _passes(args, args.scene), ref_file)), flush=True)
             return
         ref = np.load(ref_file)
         floor = float(np.mean(ref["variance"] / (ref["mean"].astype(np.float64) ** 2 + 0.01)))
         for sampler in MITSUBA_SAMPLERS:
             for n in (1, 4):
-                d = mr.scene_dict(mi, desc, env_file, args.spp, tmp)
-                d["integrator"] = {"type": "direct", "emitter_samples": n, "bsdf_samples": n}
-                d["sensor"]["sampler"] = {"type": sampler, "sample_count": args.spp}
-                scene = mi.load_dict(d)
-                mi.render(scene, spp=args.spp, seed=10_000)  # compile
-                errors, seconds = [], []
-                for s in range(args.seeds):
-                    start = time.perf_counter()
-                    x = np.array(mi.render(scene, spp=args.spp, seed=s + 1), dtype=np.float64)
-                    seconds.append(time.perf_counter() - start)
-                    errors.append(_relmse(x, ref["mean"]))
-                row = _row("mitsuba", args.scene, f"{sampler} {n}+{n}", errors, seconds, floor)
-                print(json.dumps(row), flush=True)
+                for weights in (False, True) if args.scene == "many" else (False,):
+                    d = mr.scene_dict(mi, desc, env_file, args.spp, tmp, power_weights=weights)
+                    d["integrator"] = {"type": "direct", "emitter_samples": n, "bsdf_samples": n}
+                    d["sensor"]["sampler"] = {"type": sampler, "sample_count": args.spp}
+                    scene = mi.load_dict(d)
+                    mi.render(scene, spp=args.spp, seed=10_000)  # compile
+                    errors, seconds = [], []
+                    for s in range(args.seeds):
+                        start = time.perf_counter()
+                        x = np.array(mi.render(scene, spp=args.spp, seed=s + 1), dtype=np.float64)
+                        seconds.append(time.perf_counter() - start)
+                        errors.append(_relmse(x, ref["mean"]))
+                    config = f"{sampler} {n}+{n}" + (" power" if weights else "")
+                    print(json.dumps(_row("mitsuba", args.scene, config, errors, seconds, floor)), flush=True)
 
 
 def _lightprobe_worker(args) -> None:
@@ -98,7 +101,7 @@ def _lightprobe_worker(args) -> None:
     from lightprobe.integrators.wavefront import RenderSettings, render
     from lightprobe.reference_scenes import build
 
-    ref = np.load(Path(args.cache) / f"{args.scene}_{args.resolution[0]}x{args.resolution[1]}_mitsuba.npz")
+    ref = np.load(_reference_file(args, args.scene))
     floor = float(np.mean(ref["variance"] / (ref["mean"].astype(np.float64) ** 2 + 0.01)))
     render(build(args.scene, resolution=(32, 24)), RenderSettings(spp=4))  # compile
     for selector in args.selectors:
@@ -109,6 +112,18 @@ def _lightprobe_worker(args) -> None:
             errors.append(_relmse(r.image.astype(np.float64), ref["mean"]))
             seconds.append(r.stats["seconds"])
         print(json.dumps(_row("lightprobe", args.scene, selector, errors, seconds, floor)), flush=True)
+
+
+REFERENCE_PASSES = {"area": 64, "many": 128}
+
+
+def _passes(args, scene: str) -> int:
+    return args.ref_passes or REFERENCE_PASSES[scene]
+
+
+def _reference_file(args, scene: str) -> Path:
+    w, h = args.resolution
+    return Path(args.cache) / f"{scene}_{w}x{h}_{64 * _passes(args, scene)}spp_mitsuba.npz"
 
 
 def _run(args, worker: str, scene: str, *extra: str) -> list[dict]:
@@ -127,8 +142,7 @@ def _run(args, worker: str, scene: str, *extra: str) -> list[dict]:
         *map(str, args.resolution),
         "--cache",
         args.cache,
-        "--ref-passes",
-        str(args.ref_passes),
+        *(["--ref-passes", str(args.ref_passes)] if args.ref_passes else []),
         "--selectors",
         *args.selectors,
         *extra,
@@ -150,7 +164,7 @@ def main() -> int:
     parser.add_argument("--seeds", type=int, default=4, help="images per configuration (relMSE: their mean)")
     parser.add_argument("--reps", type=int, default=2, help="repetitions of the A B sequence")
     parser.add_argument("--resolution", type=int, nargs=2, default=[320, 240])
-    parser.add_argument("--ref-passes", type=int, default=64, help="the reference's passes of 64 spp")
+    parser.add_argument("--ref-passes", type=int, help="the references' passes of 64 spp [area 64, many 128]")
     parser.add_argument("--cache", default=str(Path.home() / ".cache" / "lightprobe" / "lights_vs_mitsuba"))
     parser.add_argument("--worker", choices=["mitsuba", "lightprobe"], help=argparse.SUPPRESS)
     parser.add_argument("--scene", help=argparse.SUPPRESS)
@@ -165,8 +179,7 @@ def main() -> int:
     Path(args.cache).mkdir(parents=True, exist_ok=True)
     print(json.dumps({"cores": os.cpu_count(), "spp": args.spp, "resolution": args.resolution}), flush=True)
     for scene in args.scenes:
-        w, h = args.resolution
-        if not (Path(args.cache) / f"{scene}_{w}x{h}_mitsuba.npz").exists():
+        if not _reference_file(args, scene).exists():
             _run(args, "mitsuba", scene, "--reference")
         rows = []
         for _ in range(args.reps):

@@ -62,8 +62,25 @@ def _black() -> dict:
     return {"type": "diffuse", "reflectance": _rgb(0.0)}
 
 
-def scene_dict(mi, desc: dict, env_file: str | None, spp: int, folder: str) -> dict:
-    """Mitsuba's scene dictionary for a description of lightprobe.reference_scenes (meshes written to ``folder``)."""
+def _power(o: dict) -> float:
+    """pi A L of an emissive object of a scene description, L the luminance of its radiance."""
+    from lightprobe.color import luminance
+
+    if o["shape"] == "rectangle":
+        area = float(np.linalg.norm(np.cross(o["edge_u"], o["edge_v"])))
+    elif o["shape"] == "sphere":
+        area = 4.0 * np.pi * float(o["radius"]) ** 2
+    else:
+        v = np.asarray(o["vertices"], np.float64)[np.asarray(o["faces"])]
+        area = float(0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1).sum())
+    return float(np.pi * area * luminance(np.asarray(o["emission"], np.float64)))
+
+
+def scene_dict(mi, desc: dict, env_file: str | None, spp: int, folder: str, *, power_weights: bool = False) -> dict:
+    """Mitsuba's scene dictionary for a description of lightprobe.reference_scenes (meshes written to ``folder``).
+    ``power_weights``: each area emitter's ``sampling_weight`` is its power, pi A L (of the luminance), so that
+    ``direct`` picks emitters in proportion to power, as lightprobe's ``power`` selector does (Mitsuba picks them
+    uniformly by default)."""
     from lightprobe.reference_scenes import RESOLUTION
 
     transform = mi.ScalarTransform4f
@@ -128,6 +145,8 @@ def scene_dict(mi, desc: dict, env_file: str | None, spp: int, folder: str) -> d
             shape = {"type": "ply", "filename": ply, "bsdf": bsdf, "face_normals": "normals" not in o}
         if "emission" in o:
             shape["emitter"] = {"type": "area", "radiance": _rgb(o["emission"])}
+            if power_weights:
+                shape["emitter"]["sampling_weight"] = _power(o)
         d[f"object{i}"] = shape
     return d
 

@@ -12,7 +12,9 @@ a stratified pair stays stratified in each lobe.  Column 0, a number of its own,
 (it chose the lobe until decisions.md 67).
 
 Every material is a kind (an integer) and a fixed-size float64 parameter block; one dispatching kernel per
-operation (:mod:`lightprobe.bsdfs.dispatch`) serves these Python methods and the renderer alike.
+operation (:mod:`lightprobe.bsdfs.dispatch`) serves these Python methods and the renderer alike.  That module
+imports every material's; it hands its batch kernels to :data:`BATCHES` when it is imported (the package imports
+it), so that this module, which the materials import, imports none of them.
 """
 
 from __future__ import annotations
@@ -25,6 +27,9 @@ __all__ = ["BSDF", "PARAM_SIZE", "rgb_param"]
 
 #: Length of every material's parameter block.
 PARAM_SIZE = 80
+
+#: (eval_batch, pdf_batch, sample_batch) of :mod:`lightprobe.bsdfs.dispatch`, set when it is imported
+BATCHES: list = []
 
 
 def rgb_param(value, name: str, *, upper: float | None = None) -> np.ndarray:
@@ -61,15 +66,13 @@ class BSDF:
 
     def eval(self, wo, wi) -> np.ndarray:
         """BRDF value f(wo, wi), RGB (N, 3), without the cosine factor."""
-        from .dispatch import eval_batch
-
+        eval_batch = BATCHES[0]
         wi = _directions(wi, "wi")
         return eval_batch(self.kind, self.params, _directions(wo, "wo", wi.shape[0]), wi)
 
     def pdf(self, wo, wi) -> np.ndarray:
         """Density per steradian (N,) with which :meth:`sample` produces ``wi`` given ``wo``."""
-        from .dispatch import pdf_batch
-
+        pdf_batch = BATCHES[1]
         wi = _directions(wi, "wi")
         return pdf_batch(self.kind, self.params, _directions(wo, "wo", wi.shape[0]), wi)
 
@@ -80,8 +83,7 @@ class BSDF:
 
     def sample_weight(self, wo, u) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Like :meth:`sample`, plus the sample weight f(wo, wi) cos(theta_i) / pdf (N, 3), 0 when invalid."""
-        from .dispatch import sample_batch
-
+        sample_batch = BATCHES[2]
         uu = np.asarray(u, dtype=np.float64)
         if uu.ndim != 2 or uu.shape[1] != 3:
             raise ParameterError(f"u must be an (N, 3) array, got shape {uu.shape}")

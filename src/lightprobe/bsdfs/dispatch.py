@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._numba import jit_inline, jit_parallel, prange
+from .base import BATCHES
 from .conductor import GGX_CONDUCTOR, ggx_conductor_eval, ggx_conductor_pdf, ggx_conductor_sample
 from .lambert import LAMBERT, lambert_eval, lambert_pdf, lambert_sample
 from .phong import PHONG, phong_eval, phong_pdf, phong_sample
@@ -86,3 +87,6 @@ def sample_batch(kind, p, wo, u):
         pdf[i] = pr
         weight[i, 0], weight[i, 1], weight[i, 2] = w
     return wi, pdf, weight
+
+
+BATCHES[:] = [eval_batch, pdf_batch, sample_batch]  # the BSDF classes' methods run these (base.py)
