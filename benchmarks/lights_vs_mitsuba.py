@@ -5,15 +5,15 @@
     python benchmarks/lights_vs_mitsuba.py             # scenes area and many, 320x240, 64 spp, 4 seeds, 2 reps
     python benchmarks/lights_vs_mitsuba.py --scenes area --selectors bvh --reps 1
 
-The scenes are :mod:`lightprobe.reference_scenes` ``area`` (a rectangle, a sphere and a 16-triangle ring light
-over a 16 m ground under a dim sky) and ``many`` (600 small rectangle lights over three decades of power, no sky),
-at ``--resolution``.  The reference of each is Mitsuba's own (``direct``, ``multijitter``, 1 + 1, passes of 64 spp:
-64 for ``area``, 128 for ``many``, whose error is larger; ``--ref-passes`` sets both), made once and cached in
-``--cache``; its relMSE floor, mean(var / (ref^2 + 0.01)), is printed and subtracted for ``true_efficiency`` (it is
-at most a fifteenth of every error measured).  Each configuration renders ``--seeds`` images at ``--spp``; relMSE
-is their mean, seconds their median (the renderer's own timing, kernels compiled first).  Mitsuba runs every sampler
-at 1 + 1 and 4 + 4 emitter + BSDF samples (its ``direct`` integrator), on ``many`` also with each emitter's
-``sampling_weight`` set to its power ("power"); lightprobe every selector with its defaults.
+The scenes are :mod:`lightprobe.reference_scenes` ``area`` (a rectangle, a sphere and a 16-triangle ring light over a
+16 m ground under a dim sky) and ``many`` (``--many-lights`` small rectangle lights, 2,000 by default, over three
+decades of power, no sky), at ``--resolution``. The reference of each is Mitsuba's own (``direct``, ``multijitter``, 1
++ 1, passes of 64 spp: 64 for ``area``, 128 for ``many``, whose error is larger; ``--ref-passes`` sets both), made
+once and cached in ``--cache``; its relMSE floor, mean(var / (ref^2 + 0.01)), is printed and subtracted for
+``true_efficiency`` (it is at most a tenth of every error measured). Each configuration renders ``--seeds`` images at
+``--spp``; relMSE is their mean, seconds their median (the renderer's own timing, kernels compiled first). Mitsuba
+runs every sampler at 1 + 1 and 4 + 4 emitter + BSDF samples (its ``direct`` integrator), on ``many`` also with each
+emitter's ``sampling_weight`` set to its power ("power"); lightprobe every selector with its defaults.
 Renderers run in alternating subprocesses (A B A B) so that drifting machine load hits both alike.  One JSON line
 per configuration, then the best of each renderer per scene and their ratio.
 """
@@ -65,7 +65,7 @@ def _mitsuba_worker(args) -> None:
     from lightprobe.io.images import write_image
 
     rs.RESOLUTION = tuple(args.resolution)
-    desc = rs.describe(args.scene)
+    desc = rs.describe(args.scene, lights=_lights(args, args.scene))
     ref_file = _reference_file(args, args.scene)
     with tempfile.TemporaryDirectory() as tmp:
         env_file = None
@@ -74,7 +74,8 @@ def _mitsuba_worker(args) -> None:
             env_file = str(Path(tmp) / "env.exr")
             write_image(env_file, image)
         if args.reference:
-            print(json.dumps(mr.render(args.scene, 64, _passes(args, args.scene), ref_file)), flush=True)
+            passes = _passes(args, args.scene)
+            print(json.dumps(mr.render(args.scene, 64, passes, ref_file, lights=_lights(args, args.scene))), flush=True)
             return
         ref = np.load(ref_file)
         floor = float(np.mean(ref["variance"] / (ref["mean"].astype(np.float64) ** 2 + 0.01)))
@@ -103,11 +104,12 @@ def _lightprobe_worker(args) -> None:
 
     ref = np.load(_reference_file(args, args.scene))
     floor = float(np.mean(ref["variance"] / (ref["mean"].astype(np.float64) ** 2 + 0.01)))
-    render(build(args.scene, resolution=(32, 24)), RenderSettings(spp=4))  # compile
+    lights = _lights(args, args.scene)
+    render(build(args.scene, resolution=(32, 24), lights=lights), RenderSettings(spp=4))  # compile
     for selector in args.selectors:
         errors, seconds = [], []
         for s in range(args.seeds):
-            scene = build(args.scene, resolution=tuple(args.resolution))
+            scene = build(args.scene, resolution=tuple(args.resolution), lights=lights)
             r = render(scene, RenderSettings(spp=args.spp, seed=s + 20, light_sampler=selector))
             errors.append(_relmse(r.image.astype(np.float64), ref["mean"]))
             seconds.append(r.stats["seconds"])
@@ -121,9 +123,14 @@ def _passes(args, scene: str) -> int:
     return args.ref_passes or REFERENCE_PASSES[scene]
 
 
+def _lights(args, scene: str) -> int | None:
+    return args.many_lights if scene == "many" else None
+
+
 def _reference_file(args, scene: str) -> Path:
     w, h = args.resolution
-    return Path(args.cache) / f"{scene}_{w}x{h}_{64 * _passes(args, scene)}spp_mitsuba.npz"
+    name = f"many{args.many_lights}" if scene == "many" else scene
+    return Path(args.cache) / f"{name}_{w}x{h}_{64 * _passes(args, scene)}spp_mitsuba.npz"
 
 
 def _run(args, worker: str, scene: str, *extra: str) -> list[dict]:
@@ -145,6 +152,8 @@ def _run(args, worker: str, scene: str, *extra: str) -> list[dict]:
         *(["--ref-passes", str(args.ref_passes)] if args.ref_passes else []),
         "--selectors",
         *args.selectors,
+        "--many-lights",
+        str(args.many_lights),
         *extra,
     ]
     out = subprocess.run(cmd, capture_output=True, text=True, env=os.environ.copy())
@@ -164,6 +173,7 @@ def main() -> int:
     parser.add_argument("--seeds", type=int, default=4, help="images per configuration (relMSE: their mean)")
     parser.add_argument("--reps", type=int, default=2, help="repetitions of the A B sequence")
     parser.add_argument("--resolution", type=int, nargs=2, default=[320, 240])
+    parser.add_argument("--many-lights", type=int, default=2000, help="the many-light scene's lights [2000]")
     parser.add_argument("--ref-passes", type=int, help="the references' passes of 64 spp [area 64, many 128]")
     parser.add_argument("--cache", default=str(Path.home() / ".cache" / "lightprobe" / "lights_vs_mitsuba"))
     parser.add_argument("--worker", choices=["mitsuba", "lightprobe"], help=argparse.SUPPRESS)

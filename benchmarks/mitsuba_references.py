@@ -151,7 +151,7 @@ def scene_dict(mi, desc: dict, env_file: str | None, spp: int, folder: str, *, p
     return d
 
 
-def render(name: str, spp: int, passes: int, out: Path) -> dict:
+def render(name: str, spp: int, passes: int, out: Path, *, lights: int | None = None) -> dict:
     _prefer_llvm19()
     import mitsuba as mi
 
@@ -159,7 +159,7 @@ def render(name: str, spp: int, passes: int, out: Path) -> dict:
     from lightprobe.io.images import write_image
     from lightprobe.reference_scenes import describe, environment_image
 
-    desc = describe(name)
+    desc = describe(name, lights=lights)
     with tempfile.TemporaryDirectory() as tmp:
         image = environment_image(desc)
         env_file = None
@@ -177,7 +177,8 @@ def render(name: str, spp: int, passes: int, out: Path) -> dict:
     mean = total / passes
     variance = np.maximum(total2 / passes - mean**2, 0.0) * passes / (passes - 1) / passes
     floor = float(np.mean(variance / (mean**2 + 0.01)))
-    settings = {"scene": name, "spp": spp * passes, "passes": passes, "sampler": "multijitter", "integrator": "direct"}
+    settings = {"scene": name, "lights": lights, "spp": spp * passes, "passes": passes}
+    settings |= {"sampler": "multijitter", "integrator": "direct"}
     out.parent.mkdir(parents=True, exist_ok=True)
     np.savez_compressed(
         out, mean=mean.astype(np.float32), variance=variance.astype(np.float32), settings=json.dumps(settings)

@@ -14,8 +14,8 @@ strategies and light selectors against those images without needing Mitsuba.
     a rectangle light, a sphere light and a ring of 16 triangle lights over a 16 m ground under a dim constant sky,
     with a rough aluminium sphere, a diffuse sphere and a mesh (issue 33's area-light scene, small);
 ``many``
-    600 small rectangle lights facing down, their radiances spread over three decades, over a ground, a rough
-    aluminium sphere and a diffuse sphere; no environment.
+    600 small rectangle lights (``lights=`` another count) facing down, their radiances spread over three decades,
+    over a ground, a rough aluminium sphere and a diffuse sphere; no environment.
 
 Conventions shared with Mitsuba: the horizontal field of view (``fov_axis = "x"``), a box pixel filter, lat-long
 maps looked up as Mitsuba does, one-sided emitters that emit on the side of their normal (a rectangle's edge_u x
@@ -110,8 +110,14 @@ def _panels(n: int, seed: int) -> list[dict]:
     return panels
 
 
-def describe(name: str) -> dict:
-    """The renderer-neutral description of scene ``name`` (one of :data:`NAMES`)."""
+MANY_LIGHTS = 600  # the many-light scene's panels in the test references (the benchmarks take 2,000)
+
+
+def describe(name: str, *, lights: int | None = None) -> dict:
+    """The renderer-neutral description of scene ``name`` (one of :data:`NAMES`); ``lights``: the many-light
+    scene's number of panels (default :data:`MANY_LIGHTS`)."""
+    if lights is not None and (name != "many" or lights < 1):
+        raise ValueError(f"lights={lights!r}: only the many-light scene takes a count of lights, at least 1")
     materials = _materials()
     if name == "sky":
         return {
@@ -162,7 +168,7 @@ def describe(name: str) -> dict:
                 {**_ground(16.0), "material": "ground"},
                 {"shape": "sphere", "center": [-1.0, 0.5, 0.0], "radius": 0.5, "material": "aluminium"},
                 {"shape": "sphere", "center": [0.9, 0.4, 0.5], "radius": 0.4, "material": "green"},
-                *_panels(600, seed=17),
+                *_panels(lights or MANY_LIGHTS, seed=17),
             ],
         }
     raise ValueError(f"unknown reference scene {name!r}; known: {', '.join(NAMES)}")
@@ -188,10 +194,13 @@ def environment_image(desc: dict) -> np.ndarray | None:
     )
 
 
-def build(name: str, *, lights_as_mesh: bool = False, resolution: tuple[int, int] = RESOLUTION):
+def build(
+    name: str, *, lights_as_mesh: bool = False, resolution: tuple[int, int] = RESOLUTION, lights: int | None = None
+):
     """The lightprobe :class:`~lightprobe.geometry.scene.Scene` of reference scene ``name``.  ``lights_as_mesh``:
     the rectangle lights as one emissive mesh of two triangles each, one radiance per face (the same emitters);
-    ``resolution``: another image size (the benchmarks'; the references are 64 x 48)."""
+    ``resolution``: another image size (the benchmarks'; the references are 64 x 48); ``lights``: as
+    :func:`describe`."""
     from .bsdfs import GGXConductor, Lambert
     from .emitters.envmap import EnvironmentMap
     from .geometry.camera import Camera
@@ -199,7 +208,7 @@ def build(name: str, *, lights_as_mesh: bool = False, resolution: tuple[int, int
     from .geometry.scene import Scene
     from .geometry.shapes import Rectangle, Sphere
 
-    desc = describe(name)
+    desc = describe(name, lights=lights)
     cam = desc["camera"]
     camera = Camera(cam["origin"], cam["target"], fov=cam["fov"], fov_axis="x", resolution=resolution)
     image = environment_image(desc)

@@ -76,3 +76,19 @@ def test_lightprobe_agrees_with_mitsuba(scene, options):
         sigma = math.sqrt(ours_variance[..., c].sum() + variance[..., c].sum())
         assert sigma < 5e-3 * mean[..., c].sum(), (c, sigma / mean[..., c].sum())
         assert abs(difference) < 4 * sigma, (c, difference / mean[..., c].sum(), difference / sigma)
+
+
+def test_the_many_light_scene_takes_a_count_of_lights():
+    """The benchmarks' many-light scene is the test references' with more panels; a count elsewhere is an error."""
+    from lightprobe.reference_scenes import MANY_LIGHTS, describe
+
+    def emitters(desc):
+        return sum("emission" in o for o in desc["objects"])
+
+    assert emitters(describe("many")) == MANY_LIGHTS
+    assert emitters(describe("many", lights=2000)) == 2000
+    same, default = describe("many", lights=MANY_LIGHTS)["objects"], describe("many")["objects"]
+    assert all(np.array_equal(a["origin"], b["origin"]) for a, b in zip(same[3:], default[3:], strict=True))
+    for bad in ({"name": "area", "lights": 10}, {"name": "many", "lights": 0}):
+        with pytest.raises(ValueError, match="lights="):
+            describe(bad["name"], lights=bad["lights"])

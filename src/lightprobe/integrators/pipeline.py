@@ -13,7 +13,7 @@ counts (camera samples, slots, blocks of 8), and the scalar twin of a vector sta
 
 :func:`run_stage` is the loop over a stage's items, written once (pbrt-v4's ``ForAllQueued``): a worker claims chunks
 of the items from a shared counter (``_worksharing.py``) and calls the stage's body on each; :class:`Launcher` runs
-one worker per thread.  The loop and every body compile once, whatever the scene (about two minutes on the 2-core
+one worker per thread.  The loop and every body compile once, whatever the scene (about 95 s on the 2-core
 machine, then loaded from the cache: decisions.md 77).
 """
 
@@ -56,7 +56,7 @@ __all__ = ["STAGES", "Launcher", "Plan", "Stage", "run_stage", "stage_id"]
 
 @dataclass(frozen=True)
 class Stage:
-    """One stage: its body ``body(s, env, lights, sel, c, cams, slots, acc, lo, hi)`` over items [lo, hi), the
+    """One stage: its body ``body(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi)`` over items [lo, hi), the
     number of items of a pass ``items(c, cams, slots)``, and for a vector stage the name of its scalar twin."""
 
     name: str
@@ -169,7 +169,6 @@ class Plan:
     environment_alone: bool  # the environment map is the only light (one light sample per pick)
     bounded_lights: bool  # area, point or spot lights: shadow rays that end at a light
     emissive_surfaces: bool  # BSDF rays must find their nearest hit to see what they meet
-    infinite_lights: bool  # an environment map or directional lights
     meshes: bool
     resampled: bool  # env_candidates > 1
     lanes: bool  # this Numba's LLVM builds the vector intrinsics

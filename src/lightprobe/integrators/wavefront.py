@@ -100,7 +100,6 @@ def plan_for(scene: Scene, settings: RenderSettings) -> pipeline.Plan:
         environment_alone=alone,
         bounded_lights=bool(scene.emitters) or any(light.kind != "directional" for light in scene.lights),
         emissive_surfaces=bool(scene.emitters),
-        infinite_lights=k is not None or any(light.kind == "directional" for light in scene.lights),
         meshes=scene.triangle_count > 0,
         resampled=settings.env_candidates > 1,
         lanes=lanes,
