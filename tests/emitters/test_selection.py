@@ -172,3 +172,48 @@ def test_a_sphere_counts_by_the_disc_it_shows():
     assert lights.geom[1, 9:12] @ [0.0, -1.0, 0.0] == pytest.approx(1.0)  # the square faces down
     pmf = LightSampler("bvh", lights).pmf([0.0, 0.0, 0.0], [0.0, 1.0, 0.0])
     assert pmf[0] == pytest.approx(0.5, abs=0.05), pmf
+
+
+def test_a_light_facing_away_lends_no_light_its_power():
+    """issue 33: a bright rectangle facing up beside a ring of 16 small triangles facing down (the area-light
+    reference scene).  Median splits paired the rectangle with one triangle: their node's cone took every direction
+    and its bound the rectangle's power, and at a ground point, where the rectangle gives nothing, that triangle
+    got 0.36 of the picks and its 15 twins 0.01-0.02 each.  The light BVH's splits (pbrt-v4's surface area
+    orientation heuristic) keep lights that face apart in separate subtrees: the ring's picks follow what each
+    triangle gives the point (within 2x of one another here), and the rectangle gets none."""
+    from lightprobe.reference_scenes import build
+
+    scene = build("area", resolution=(8, 6))
+    table = scene.light_table()
+    sampler = LightSampler("bvh", table, env_irradiance=scene.environment.irradiance_terms)
+    point, normal = [0.3, 0.0, 0.8], [0.0, 1.0, 0.0]
+    pmf = sampler.pmf(point, normal)
+    ring = np.nonzero(table.kind == 2)[0]  # the triangles
+    (rectangle,) = np.nonzero(table.kind == 0)[0]
+    assert ring.size == 16 and pmf[rectangle] == 0.0
+    assert pmf[ring].max() < 2.0 * pmf[ring].min(), pmf[ring]
+    assert pmf.sum() == pytest.approx(1.0, abs=1e-12)
+
+
+@pytest.mark.parametrize("layout", ["one point", "a line"])
+def test_the_bvh_builds_where_no_split_separates_the_lights(layout):
+    """Thousands of lights at one place (no bucket split exists: median splits take over) or along a line keep the
+    tree within its bit trails' depth, and the pmf still sums to one."""
+    n = 5000
+    x = np.zeros(n) if layout == "one point" else np.linspace(0, 50, n)
+    lights = light_arrays([AreaLight.sphere([xi, 2.0, 0.0], 0.01, 1.0 + i % 7) for i, xi in enumerate(x)])
+    sampler = LightSampler("bvh", lights)
+    pmf = sampler.pmf([0.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+    assert pmf.sum() == pytest.approx(1.0, abs=1e-9) and np.all(pmf >= 0)
+    picked, p = sampler.select([0.0, 0.0, 0.0], [0.0, 1.0, 0.0], np.linspace(0, 1, 64, endpoint=False))
+    np.testing.assert_allclose(p, pmf[picked], rtol=1e-12)
+
+
+def test_the_orientation_measure_is_pbrts():
+    """pbrt-v4's M_omega: pi for a single direction emitting over its hemisphere, 4 pi for a cone of every normal
+    (the cost of pairing lights that face apart)."""
+    from lightprobe.emitters.selection import _orientation_measure
+
+    assert _orientation_measure(1.0, 0.0) == pytest.approx(np.pi)
+    assert _orientation_measure(-1.0, 0.0) == pytest.approx(4 * np.pi)
+    assert _orientation_measure(0.0, 0.0) > _orientation_measure(1.0, 0.0)

@@ -21,9 +21,10 @@ then the environment map, the last row).
     pi x the irradiance of a flat light of power phi facing the receiver.  So a sphere's phi is a quarter of its
     power (it faces every receiver with a disc, a quarter of its area) and a point or spot light's is pi I
     (decisions.md 75); pbrt-v4 takes their whole power and over-picks them 4x beside flat lights.
-    O(depth) per pick and per pmf.  Nodes split at the median centroid along the axis of largest extent (pbrt-v4
-    uses a surface-area-orientation cost; the median split is simpler and keeps the tree balanced: depth
-    ceil(log2 L)).
+    O(depth) per pick and per pmf.  Nodes split where pbrt-v4's surface area orientation heuristic puts the cost
+    lowest (12 buckets of centroids per axis; power x the measure of the normal cone x surface area per side), so
+    lights that face apart do not share a node; where no bucket split separates the lights, and below depth 32,
+    at the median centroid along the axis of largest extent (decisions.md 81).
 
 The infinite lights (``power`` and ``bvh``) are kept apart from the bounded ones, as pbrt-v4's ``BVHLightSampler``
 keeps them, and chosen *per shading point*: together with probability I_inf / (I_inf + I_area), each in proportion
@@ -227,16 +228,165 @@ def _build_bvh(lights: LightArrays):
     return nodes, trail, m
 
 
+SAOH_BUCKETS = 12  # pbrt-v4's
+SAOH_DEPTH = MAX_DEPTH - 30  # below it, median splits: 2^30 lights still fit the trail
+
+
+@jit
+def _orientation_measure(cos_o, cos_e):
+    """pbrt-v4's M_omega: the solid-angle measure of a cone of normals (theta_o) widened by the emission spread
+    (theta_e), the orientation factor of the split cost."""
+    theta_o = math.acos(max(-1.0, min(1.0, cos_o)))
+    theta_e = math.acos(max(-1.0, min(1.0, cos_e)))
+    theta_w = min(theta_o + theta_e, math.pi)
+    sin_o = math.sqrt(max(0.0, 1.0 - cos_o * cos_o))
+    return 2 * math.pi * (1 - cos_o) + math.pi / 2 * (
+        2 * theta_w * sin_o - math.cos(theta_o - 2 * theta_w) - 2 * theta_o * sin_o + cos_o
+    )
+
+
+@jit
+def _bounds_cost(dx, dy, dz, phi, cos_o, cos_e, kr):
+    """pbrt-v4's LightBVHAggregate::EvaluateCost for a box of extents (dx, dy, dz): power x orientation measure x
+    surface area x the box's aspect regulariser kr."""
+    area = 2 * (dx * dy + dy * dz + dz * dx)
+    return phi * _orientation_measure(cos_o, cos_e) * kr * area
+
+
+@jit
+def _cone_union(wx, wy, wz, cos_a, vx, vy, vz, cos_b):
+    """:func:`_union`, without its trigonometry where the answer is plain: an empty cone (cos > 1) takes the other,
+    equal cones stay, a cone of every direction stays so (the common cases among thousands of like lights)."""
+    if cos_a > 1.0:
+        return vx, vy, vz, cos_b
+    if cos_a <= -1.0 or (wx == vx and wy == vy and wz == vz and cos_b >= cos_a):
+        return wx, wy, wz, cos_a
+    return _union(wx, wy, wz, cos_a, vx, vy, vz, cos_b)
+
+
+@jit
+def _saoh_split(order, start, end, centroid, lo, hi, phi, w, cos_o, cos_e, scratch, side_scratch):
+    """Partition ``order[start:end]`` by the cheapest of pbrt-v4's bucket splits (12 buckets of centroid along each
+    axis; cost = sum over both sides of power x M_omega x surface area x the aspect regulariser) and return the
+    left side's count; 0 where no bucket split separates the lights.  A median split pairs lights that face apart
+    (on the area-light scene an upward rectangle with a downward triangle: the pair's cone takes every direction,
+    and the triangle inherited the rectangle's power, a third of all picks at ground points it barely lights).
+    ``scratch`` (12, 10) holds each bucket's box (lo, hi) and normal cone (axis, cos); ``side_scratch`` (12, 3) its
+    power, emission cosine and count."""
+    n = end - start
+    c_lo0 = c_lo1 = c_lo2 = np.inf
+    c_hi0 = c_hi1 = c_hi2 = -np.inf
+    b_lo0 = b_lo1 = b_lo2 = np.inf
+    b_hi0 = b_hi1 = b_hi2 = -np.inf
+    for j in range(start, end):
+        light = order[j]
+        c_lo0, c_hi0 = min(c_lo0, centroid[light, 0]), max(c_hi0, centroid[light, 0])
+        c_lo1, c_hi1 = min(c_lo1, centroid[light, 1]), max(c_hi1, centroid[light, 1])
+        c_lo2, c_hi2 = min(c_lo2, centroid[light, 2]), max(c_hi2, centroid[light, 2])
+        b_lo0, b_hi0 = min(b_lo0, lo[light, 0]), max(b_hi0, hi[light, 0])
+        b_lo1, b_hi1 = min(b_lo1, lo[light, 1]), max(b_hi1, hi[light, 1])
+        b_lo2, b_hi2 = min(b_lo2, lo[light, 2]), max(b_hi2, hi[light, 2])
+    c_lo = (c_lo0, c_lo1, c_lo2)
+    c_ext = (c_hi0 - c_lo0, c_hi1 - c_lo1, c_hi2 - c_lo2)
+    b_ext = (b_hi0 - b_lo0, b_hi1 - b_lo1, b_hi2 - b_lo2)
+    widest = max(b_ext[0], b_ext[1], b_ext[2])
+    nb = SAOH_BUCKETS
+    k = scratch
+    best_cost, best_axis, best_split = np.inf, -1, -1
+    for a in range(3):
+        extent = c_ext[a]
+        if not extent > 0.0:
+            continue
+        kr = widest / max(b_ext[a], 1e-300)
+        for x in range(nb):
+            k[x, 0] = k[x, 1] = k[x, 2] = np.inf
+            k[x, 3] = k[x, 4] = k[x, 5] = -np.inf
+            k[x, 6], k[x, 7], k[x, 8], k[x, 9] = 0.0, 0.0, 1.0, 2.0  # cos_o 2: no cone yet
+            side_scratch[x, 0] = 0.0  # power
+            side_scratch[x, 1] = 1.0  # cos_e
+            side_scratch[x, 2] = 0.0  # count
+        for j in range(start, end):
+            light = order[j]
+            x = min(nb - 1, int(nb * (centroid[light, a] - c_lo[a]) / extent))
+            for t in range(3):
+                k[x, t] = min(k[x, t], lo[light, t])
+                k[x, 3 + t] = max(k[x, 3 + t], hi[light, t])
+            k[x, 6], k[x, 7], k[x, 8], k[x, 9] = _cone_union(
+                k[x, 6], k[x, 7], k[x, 8], k[x, 9], w[light, 0], w[light, 1], w[light, 2], cos_o[light]
+            )
+            side_scratch[x, 0] += phi[light]
+            side_scratch[x, 1] = min(side_scratch[x, 1], cos_e[light])
+            side_scratch[x, 2] += 1.0
+        # the right sides' costs, from the last bucket down; then the left sides', accumulated as the split moves
+        right_cost = np.empty(nb)
+        r_lo0 = r_lo1 = r_lo2 = np.inf
+        r_hi0 = r_hi1 = r_hi2 = -np.inf
+        rw0, rw1, rw2, r_cos_o, r_phi, r_cos_e, r_count = 0.0, 0.0, 1.0, 2.0, 0.0, 1.0, 0.0
+        for x in range(nb - 1, 0, -1):
+            if side_scratch[x, 2] > 0:
+                r_lo0, r_lo1, r_lo2 = min(r_lo0, k[x, 0]), min(r_lo1, k[x, 1]), min(r_lo2, k[x, 2])
+                r_hi0, r_hi1, r_hi2 = max(r_hi0, k[x, 3]), max(r_hi1, k[x, 4]), max(r_hi2, k[x, 5])
+                rw0, rw1, rw2, r_cos_o = _cone_union(rw0, rw1, rw2, r_cos_o, k[x, 6], k[x, 7], k[x, 8], k[x, 9])
+                r_phi += side_scratch[x, 0]
+                r_cos_e = min(r_cos_e, side_scratch[x, 1])
+                r_count += side_scratch[x, 2]
+            right_cost[x] = (
+                _bounds_cost(r_hi0 - r_lo0, r_hi1 - r_lo1, r_hi2 - r_lo2, r_phi, r_cos_o, r_cos_e, kr)
+                if r_count > 0
+                else np.inf
+            )
+        l_lo0 = l_lo1 = l_lo2 = np.inf
+        l_hi0 = l_hi1 = l_hi2 = -np.inf
+        lw0, lw1, lw2, l_cos_o, l_phi, l_cos_e, l_count = 0.0, 0.0, 1.0, 2.0, 0.0, 1.0, 0.0
+        for split in range(nb - 1):  # buckets 0 .. split on the left
+            x = split
+            if side_scratch[x, 2] > 0:
+                l_lo0, l_lo1, l_lo2 = min(l_lo0, k[x, 0]), min(l_lo1, k[x, 1]), min(l_lo2, k[x, 2])
+                l_hi0, l_hi1, l_hi2 = max(l_hi0, k[x, 3]), max(l_hi1, k[x, 4]), max(l_hi2, k[x, 5])
+                lw0, lw1, lw2, l_cos_o = _cone_union(lw0, lw1, lw2, l_cos_o, k[x, 6], k[x, 7], k[x, 8], k[x, 9])
+                l_phi += side_scratch[x, 0]
+                l_cos_e = min(l_cos_e, side_scratch[x, 1])
+                l_count += side_scratch[x, 2]
+            if l_count == 0 or right_cost[split + 1] == np.inf:
+                continue
+            cost = _bounds_cost(l_hi0 - l_lo0, l_hi1 - l_lo1, l_hi2 - l_lo2, l_phi, l_cos_o, l_cos_e, kr)
+            cost += right_cost[split + 1]
+            if cost < best_cost:
+                best_cost, best_axis, best_split = cost, a, split
+    if best_axis < 0:
+        return 0
+    # stable partition: the left buckets' lights first, each side in its former order
+    a = best_axis
+    extent = c_ext[a]
+    right = np.empty(n, np.int64)
+    n_left = n_right = 0
+    for j in range(start, end):
+        light = order[j]
+        x = min(nb - 1, int(nb * (centroid[light, a] - c_lo[a]) / extent))
+        if x <= best_split:
+            order[start + n_left] = light  # never ahead of j: safe in place
+            n_left += 1
+        else:
+            right[n_right] = light
+            n_right += 1
+    for j in range(n_right):
+        order[start + n_left + j] = right[j]
+    return n_left
+
+
 @jit
 def _build_tree(
     lo, hi, phi, w, cos_o, cos_e, two, emitting, n_lo, n_hi, n_phi, n_w, n_cos_o, n_cos_e, n_two, second, leaf, trail
 ):
-    """Median splits along the axis of largest centroid extent, depth first: node i's first child is i + 1, its
-    second i + 2 |first child's lights| (that subtree has 2 k - 1 nodes); then the normal cones bottom-up."""
+    """Splits by pbrt-v4's surface area orientation heuristic (:func:`_saoh_split`; median splits along the axis of
+    largest centroid extent where it finds none), depth first: node i's first child is i + 1, its second
+    i + 2 |first child's lights| (that subtree has 2 k - 1 nodes); then the normal cones bottom-up."""
     order = emitting.copy()
     centroid = 0.5 * (lo + hi)
     m = n_phi.shape[0]
     stack = np.empty((MAX_DEPTH + 2, 5), np.int64)  # node, start, end, depth, bits
+    scratch = np.empty((SAOH_BUCKETS, 10))
+    side_scratch = np.empty((SAOH_BUCKETS, 3))
     stack[0, 0], stack[0, 1], stack[0, 2], stack[0, 3], stack[0, 4] = 0, 0, order.shape[0], 0, 0
     top = 1
     while top > 0:
@@ -264,8 +414,13 @@ def _build_tree(
             n_cos_o[node] = cos_o[light]
             trail[light] = bits
             continue
-        sort_along_widest_axis(centroid, order, start, end)
-        half = (end - start) // 2
+        if depth < SAOH_DEPTH:
+            half = _saoh_split(order, start, end, centroid, lo, hi, phi, w, cos_o, cos_e, scratch, side_scratch)
+        else:  # deep below (a degenerate layout): median splits keep the bit trail within MAX_DEPTH
+            half = 0
+        if half <= 0 or half >= end - start:
+            sort_along_widest_axis(centroid, order, start, end)
+            half = (end - start) // 2
         second[node] = node + 2 * half
         stack[top, 0], stack[top, 1], stack[top, 2], stack[top, 3], stack[top, 4] = (
             node + 2 * half,
