@@ -195,14 +195,23 @@ def test_a_light_facing_away_lends_no_light_its_power():
     assert pmf.sum() == pytest.approx(1.0, abs=1e-12)
 
 
-@pytest.mark.parametrize("layout", ["one point", "a line"])
+@pytest.mark.parametrize("layout", ["one point", "a line", "point lights"])
 def test_the_bvh_builds_where_no_split_separates_the_lights(layout):
-    """Thousands of lights at one place (no bucket split exists: median splits take over) or along a line keep the
-    tree within its bit trails' depth, and the pmf still sums to one."""
+    """Thousands of lights at one place (no bucket split exists: median splits take over), along a line, or point
+    lights (boxes of no area: every split costs 0) keep the tree within its bit trails' depth, and the pmf still
+    sums to one."""
     n = 5000
     x = np.zeros(n) if layout == "one point" else np.linspace(0, 50, n)
-    lights = light_arrays([AreaLight.sphere([xi, 2.0, 0.0], 0.01, 1.0 + i % 7) for i, xi in enumerate(x)])
+    if layout == "point lights":
+        lights = light_arrays([PointLight([xi, 2.0, (i % 5) * 0.5], 1.0 + i % 7) for i, xi in enumerate(x)])
+    else:
+        lights = light_arrays([AreaLight.sphere([xi, 2.0, 0.0], 0.01, 1.0 + i % 7) for i, xi in enumerate(x)])
     sampler = LightSampler("bvh", lights)
+    second = sampler.arrays.node_second
+    depth = np.zeros(second.shape[0], np.int64)  # node i's children are i + 1 and second[i]
+    for i in np.nonzero(second >= 0)[0]:
+        depth[i + 1] = depth[second[i]] = depth[i] + 1
+    assert depth.max() <= np.ceil(np.log2(n)) + 4, depth.max()  # balanced enough: no lopsided splits
     pmf = sampler.pmf([0.0, 0.0, 0.0], [0.0, 1.0, 0.0])
     assert pmf.sum() == pytest.approx(1.0, abs=1e-9) and np.all(pmf >= 0)
     picked, p = sampler.select([0.0, 0.0, 0.0], [0.0, 1.0, 0.0], np.linspace(0, 1, 64, endpoint=False))

@@ -268,11 +268,11 @@ def _cone_union(wx, wy, wz, cos_a, vx, vy, vz, cos_b):
 def _saoh_split(order, start, end, centroid, lo, hi, phi, w, cos_o, cos_e, scratch, side_scratch):
     """Partition ``order[start:end]`` by the cheapest of pbrt-v4's bucket splits (12 buckets of centroid along each
     axis; cost = sum over both sides of power x M_omega x surface area x the aspect regulariser) and return the
-    left side's count; 0 where no bucket split separates the lights.  A median split pairs lights that face apart
-    (on the area-light scene an upward rectangle with a downward triangle: the pair's cone takes every direction,
-    and the triangle inherited the rectangle's power, a third of all picks at ground points it barely lights).
-    ``scratch`` (12, 10) holds each bucket's box (lo, hi) and normal cone (axis, cos); ``side_scratch`` (12, 3) its
-    power, emission cosine and count."""
+    left side's count; 0 where no bucket split separates the lights or every split costs 0. A median split pairs
+    lights that face apart (on the area-light scene an upward rectangle with a downward triangle: the pair's cone
+    takes every direction, and the triangle inherited the rectangle's power, a third of all picks at ground
+    points it barely lights). ``scratch`` (12, 10) holds each bucket's box (lo, hi) and normal cone (axis, cos);
+    ``side_scratch`` (12, 3) its power, emission cosine and count."""
     n = end - start
     c_lo0 = c_lo1 = c_lo2 = np.inf
     c_hi0 = c_hi1 = c_hi2 = -np.inf
@@ -351,7 +351,7 @@ def _saoh_split(order, start, end, centroid, lo, hi, phi, w, cos_o, cos_e, scrat
                 continue
             cost = _bounds_cost(l_hi0 - l_lo0, l_hi1 - l_lo1, l_hi2 - l_lo2, l_phi, l_cos_o, l_cos_e, kr)
             cost += right_cost[split + 1]
-            if cost < best_cost:
+            if 0.0 < cost < best_cost:  # as pbrt-v4: boxes of no area (point lights) cost nothing, and say nothing
                 best_cost, best_axis, best_split = cost, a, split
     if best_axis < 0:
         return 0
