@@ -265,6 +265,29 @@ def _cone_union(wx, wy, wz, cos_a, vx, vy, vz, cos_b):
 
 
 @jit
+def _side_costs(k, side_scratch, kr, first, stop, step, plus, out):
+    """out[x] = the cost (:func:`_bounds_cost`) of buckets ``first`` .. x together, plus plus[x + 1], for x from
+    ``first`` toward ``stop`` (exclusive) by ``step``; inf while they hold no light.  Swept down from the last bucket
+    with ``plus`` 0 it gives the right sides' costs; swept up with ``plus`` those, each split's whole cost (split x
+    puts buckets 0 .. x on the left).  ``k`` and ``side_scratch`` as :func:`_saoh_split` fills them."""
+    lo0 = lo1 = lo2 = np.inf
+    hi0 = hi1 = hi2 = -np.inf
+    w0, w1, w2, cos_o, phi, cos_e, count = 0.0, 0.0, 1.0, 2.0, 0.0, 1.0, 0.0  # cos_o 2: no cone yet
+    for x in range(first, stop, step):
+        if side_scratch[x, 2] > 0:
+            lo0, lo1, lo2 = min(lo0, k[x, 0]), min(lo1, k[x, 1]), min(lo2, k[x, 2])
+            hi0, hi1, hi2 = max(hi0, k[x, 3]), max(hi1, k[x, 4]), max(hi2, k[x, 5])
+            w0, w1, w2, cos_o = _cone_union(w0, w1, w2, cos_o, k[x, 6], k[x, 7], k[x, 8], k[x, 9])
+            phi += side_scratch[x, 0]
+            cos_e = min(cos_e, side_scratch[x, 1])
+            count += side_scratch[x, 2]
+        if count > 0:
+            out[x] = _bounds_cost(hi0 - lo0, hi1 - lo1, hi2 - lo2, phi, cos_o, cos_e, kr) + plus[x + 1]
+        else:
+            out[x] = np.inf
+
+
+@jit
 def _saoh_split(order, start, end, centroid, lo, hi, phi, w, cos_o, cos_e, scratch, side_scratch):
     """Partition ``order[start:end]`` by the cheapest of pbrt-v4's bucket splits (12 buckets of centroid along each
     axis; cost = sum over both sides of power x M_omega x surface area x the aspect regulariser) and return the
@@ -292,6 +315,9 @@ def _saoh_split(order, start, end, centroid, lo, hi, phi, w, cos_o, cos_e, scrat
     widest = max(b_ext[0], b_ext[1], b_ext[2])
     nb = SAOH_BUCKETS
     k = scratch
+    none = np.zeros(nb + 1)
+    right_cost = np.full(nb + 1, np.inf)
+    split_cost = np.empty(nb)
     best_cost, best_axis, best_split = np.inf, -1, -1
     for a in range(3):
         extent = c_ext[a]
@@ -317,40 +343,10 @@ def _saoh_split(order, start, end, centroid, lo, hi, phi, w, cos_o, cos_e, scrat
             side_scratch[x, 0] += phi[light]
             side_scratch[x, 1] = min(side_scratch[x, 1], cos_e[light])
             side_scratch[x, 2] += 1.0
-        # the right sides' costs, from the last bucket down; then the left sides', accumulated as the split moves
-        right_cost = np.empty(nb)
-        r_lo0 = r_lo1 = r_lo2 = np.inf
-        r_hi0 = r_hi1 = r_hi2 = -np.inf
-        rw0, rw1, rw2, r_cos_o, r_phi, r_cos_e, r_count = 0.0, 0.0, 1.0, 2.0, 0.0, 1.0, 0.0
-        for x in range(nb - 1, 0, -1):
-            if side_scratch[x, 2] > 0:
-                r_lo0, r_lo1, r_lo2 = min(r_lo0, k[x, 0]), min(r_lo1, k[x, 1]), min(r_lo2, k[x, 2])
-                r_hi0, r_hi1, r_hi2 = max(r_hi0, k[x, 3]), max(r_hi1, k[x, 4]), max(r_hi2, k[x, 5])
-                rw0, rw1, rw2, r_cos_o = _cone_union(rw0, rw1, rw2, r_cos_o, k[x, 6], k[x, 7], k[x, 8], k[x, 9])
-                r_phi += side_scratch[x, 0]
-                r_cos_e = min(r_cos_e, side_scratch[x, 1])
-                r_count += side_scratch[x, 2]
-            right_cost[x] = (
-                _bounds_cost(r_hi0 - r_lo0, r_hi1 - r_lo1, r_hi2 - r_lo2, r_phi, r_cos_o, r_cos_e, kr)
-                if r_count > 0
-                else np.inf
-            )
-        l_lo0 = l_lo1 = l_lo2 = np.inf
-        l_hi0 = l_hi1 = l_hi2 = -np.inf
-        lw0, lw1, lw2, l_cos_o, l_phi, l_cos_e, l_count = 0.0, 0.0, 1.0, 2.0, 0.0, 1.0, 0.0
-        for split in range(nb - 1):  # buckets 0 .. split on the left
-            x = split
-            if side_scratch[x, 2] > 0:
-                l_lo0, l_lo1, l_lo2 = min(l_lo0, k[x, 0]), min(l_lo1, k[x, 1]), min(l_lo2, k[x, 2])
-                l_hi0, l_hi1, l_hi2 = max(l_hi0, k[x, 3]), max(l_hi1, k[x, 4]), max(l_hi2, k[x, 5])
-                lw0, lw1, lw2, l_cos_o = _cone_union(lw0, lw1, lw2, l_cos_o, k[x, 6], k[x, 7], k[x, 8], k[x, 9])
-                l_phi += side_scratch[x, 0]
-                l_cos_e = min(l_cos_e, side_scratch[x, 1])
-                l_count += side_scratch[x, 2]
-            if l_count == 0 or right_cost[split + 1] == np.inf:
-                continue
-            cost = _bounds_cost(l_hi0 - l_lo0, l_hi1 - l_lo1, l_hi2 - l_lo2, l_phi, l_cos_o, l_cos_e, kr)
-            cost += right_cost[split + 1]
+        _side_costs(k, side_scratch, kr, nb - 1, 0, -1, none, right_cost)  # buckets x .. 11: the right sides
+        _side_costs(k, side_scratch, kr, 0, nb - 1, 1, right_cost, split_cost)  # + buckets 0 .. x: each split
+        for split in range(nb - 1):
+            cost = split_cost[split]
             if 0.0 < cost < best_cost:  # as pbrt-v4: boxes of no area (point lights) cost nothing, and say nothing
                 best_cost, best_axis, best_split = cost, a, split
     if best_axis < 0:
