@@ -9,7 +9,7 @@ For a shading point p with normal n:
 * ``light_pdf(lights, env, l, strategy, compensated, p, n, w)``: the density with which ``light_sample`` produces
   direction w (0 for a delta light: no given direction is ever its);
 * ``escaped_radiance(lights, env, first, w)``: what a ray that leaves the scene along w sees: the environment's and
-  every directional light's radiance (rows ``first`` on are the infinite lights);
+  every directional light's radiance (rows ``first`` on are the infinite lights), each ``infinite_radiance``;
 * for area lights a BSDF ray has hit at a known point, ``emitted`` and ``area_pdf_at`` (module ``area``).
 
 ``strategy`` is how area lights are sampled (:data:`~.area.STRATEGIES`); ``compensated`` whether the environment is
@@ -49,6 +49,7 @@ __all__ = [
     "emitted",
     "escaped_batch",
     "escaped_radiance",
+    "infinite_radiance",
     "is_delta",
     "light_arrays",
     "light_pdf_of",
@@ -99,15 +100,21 @@ def light_pdf_of(lights, env, l, strategy, compensated, px, py, pz, nx, ny, nz, 
 
 
 @jit_inline
+def infinite_radiance(lights, env, l, wx, wy, wz):
+    """Radiance that infinite light l (the environment or a directional light) sends along -w, toward a ray leaving
+    the scene along unit direction w."""
+    if lights.kind[l] == LIGHT_ENVIRONMENT:
+        return env_eval(env, wx, wy, wz)
+    return directional_radiance(lights.geom[l], lights.radiance[l], wx, wy, wz)
+
+
+@jit_inline
 def escaped_radiance(lights, env, first, wx, wy, wz):
     """Radiance a ray leaving the scene along unit direction w sees: every infinite light's (rows ``first`` on),
     the environment's from its map."""
     r = g = b = 0.0
     for l in range(first, lights.kind.shape[0]):
-        if lights.kind[l] == LIGHT_ENVIRONMENT:
-            lr, lg, lb = env_eval(env, wx, wy, wz)
-        else:
-            lr, lg, lb = directional_radiance(lights.geom[l], lights.radiance[l], wx, wy, wz)
+        lr, lg, lb = infinite_radiance(lights, env, l, wx, wy, wz)
         r += lr
         g += lg
         b += lb

@@ -23,10 +23,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..._numba import jit, jit_body, jit_inline
-from ...emitters.directional import directional_radiance
-from ...emitters.envmap import env_coords, env_eval, env_pdf_at
-from ...emitters.kinds import LIGHT_ENVIRONMENT
-from ...emitters.lights import area_pdf_at, emitted, light_pdf_of
+from ...emitters.envmap import env_coords, env_pdf_at
+from ...emitters.lights import area_pdf_at, emitted, infinite_radiance, light_pdf_of
 from ...emitters.selection import selector_pmf
 from ...geometry.embree import FAR as MESH_FAR
 from ...geometry.embree import closest_mesh_hit
@@ -110,10 +108,7 @@ def _weigh_escaping(env, lights, sel, c, cams, slots, r, k):
     compensated = c.compensate[cams.material[k]]
     r_sum = g_sum = b_sum = 0.0
     for light in range(sel.n_bounded, lights.kind.shape[0]):
-        if lights.kind[light] == LIGHT_ENVIRONMENT:
-            lr, lg, lb = env_eval(env, wx, wy, wz)
-        else:
-            lr, lg, lb = directional_radiance(lights.geom[light], lights.radiance[light], wx, wy, wz)
+        lr, lg, lb = infinite_radiance(lights, env, light, wx, wy, wz)
         if lr == 0.0 and lg == 0.0 and lb == 0.0:
             continue
         share = 1.0 / c.m
