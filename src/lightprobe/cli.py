@@ -34,8 +34,12 @@ experiment_app = typer.Typer(
 envmap_app = typer.Typer(
     rich_markup_mode=PLAIN_HELP, no_args_is_help=True, help="Inspect and convert environment maps."
 )
+exercise_app = typer.Typer(
+    rich_markup_mode=PLAIN_HELP, no_args_is_help=True, help="The Krivanek exercise: write the sampling, get it graded."
+)
 app.add_typer(experiment_app, name="experiment")
 app.add_typer(envmap_app, name="envmap")
+app.add_typer(exercise_app, name="exercise")
 
 # options shared by the experiment commands (one declaration, one help text)
 SeedOption = Annotated[int, typer.Option(help="Random seed.")]
@@ -441,7 +445,8 @@ def compare_command(
         reference=ref_image,
         command=command,
         settings=settings,
-        notes=f"{w}x{h}, equal {equal}: {budget}. Reference: {settings['reference']}.",
+        notes=f"{w}x{h}, equal {equal}: {budget}. Reference: {settings['reference']}."
+        + "".join(f" Strategy {r.label} stopped early at {r.spp:g} spp: {r.error}" for r in runs if r.error),
     )
     for r in runs:
         m = r.metrics
@@ -459,6 +464,76 @@ def compare_command(
         if as_json:
             typer.echo(json.dumps(row))
     _echo_err(f"wrote {output}")
+    failed = [r for r in runs if r.error]
+    if failed:  # the report keeps what every strategy rendered; the failure is still an error
+        raise LightprobeError(f"strategy {failed[0].label!r} stopped at {failed[0].spp:g} spp: {failed[0].error}")
+
+
+@app.command("check")
+def check_command(
+    technique: Annotated[str, typer.Argument(metavar="FILE.py[:NAME]", help="The technique to check.")],
+    samples: Annotated[int, typer.Option(help="Samples per context [200000].")] = 200_000,
+    seed: SeedOption = 0,
+    material: Annotated[
+        str | None,
+        typer.Option(
+            help="Material of a BSDF technique's contexts, TYPE:key=value,... as in a scene file "
+            "[phong:rho_d=0.3,rho_s=0.6,exponent=20]."
+        ),
+    ] = None,
+    envmap: Annotated[
+        Path | None, typer.Option(help="Map of a light technique's context [a 64x32 sky with a 12-degree sun].")
+    ] = None,
+    output: Annotated[Path, typer.Option("--output", "-o", help="The HTML page; the PNG goes beside it.")] = Path(
+        "check.html"
+    ),
+    time_limit: Annotated[float, typer.Option(help="Seconds one call of the technique may take [60].")] = 60.0,
+    as_json: Annotated[bool, typer.Option("--json", help="Print the checks as JSON.")] = False,
+) -> None:
+    """Check a sampling technique written in Python against its own pdf: it runs and returns finite, unit
+    directions; nothing below the surface (hemisphere techniques); sample()'s pdf equals pdf(); the pdf integrates
+    to 1; a chi-square test of the samples. Exit status 0 when every check passes, 1 when one fails."""
+    from .lab.check import check_technique, figure_png, write_html
+    from .lab.techniques import load_technique
+
+    if output.suffix.lower() not in (".html", ".htm"):
+        raise LightprobeError(f"{output}: the page is an .html file")
+    tech = load_technique(technique, time_limit=time_limit)
+    report = check_technique(
+        tech, samples=samples, seed=seed, material=_material_option(material), environment=_envmap_option(envmap)
+    )
+    png = output.with_suffix(".png")
+    write_html(report, output)
+    png.write_bytes(figure_png(report))
+    typer.echo(json.dumps(report.as_dict()) if as_json else report.text())
+    _echo_err(f"wrote {output} and {png}")
+    if not report.passed:
+        raise typer.Exit(1)
+
+
+def _material_option(text: str | None):
+    """A BSDF from TYPE:key=value,... (scene-file keys), or None."""
+    if text is None:
+        return None
+    from .experiments.compare import _value
+    from .io.scene_file import material_from_table
+
+    kind, _, rest = text.partition(":")
+    table = {"type": kind.strip()}
+    for item in filter(None, (p.strip() for p in rest.split(","))):
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise LightprobeError(f"--material: {item!r} is not key=value")
+        table[key.strip()] = _value(value)
+    return material_from_table(table, "--material")
+
+
+def _envmap_option(path: Path | None):
+    if path is None:
+        return None
+    from .emitters.envmap import EnvironmentMap
+
+    return EnvironmentMap.load(path)
 
 
 def _settings_dict(settings) -> dict:

@@ -10,6 +10,11 @@ last round stops at the time budget (at the end of a short pass), so every strat
 rendering; in ``spp`` mode every strategy gets the same samples.  Metrics (``lightprobe.analysis.metrics``) are
 taken against the reference after every round.
 
+A strategy may also be a user's sampling technique (``lightprobe.lab``): ``FILE.py[:NAME]`` alone,
+``mis:FILE.py[:NAME]`` under MIS with lightprobe's technique of the other kind, ``mis:A.py:X+B.py:Y`` two of the
+user's; it renders with the laboratory's estimator (``lab/render.py``), in rounds like any other, and may take
+``/key=value`` overrides (seed, sampler, bsdf_samples, env_samples, heuristic).
+
 An adaptive strategy (``/adaptive=true``, integrators/adaptive.py) cannot continue a render: its counts need the
 whole pilot.  Its rounds are separate renders, each timed on its own, so its curve costs about twice its final
 image: 4, 8, ... spp, then spp on average in ``spp`` mode; an eighth, a quarter, half and all of the budget in
@@ -64,13 +69,30 @@ def parse_strategy(
 ) -> tuple[str, RenderSettings]:
     """(label, settings) for a strategy token, to be compared at ``equal`` samples (``spp`` of them, if given) or
     time; a :class:`LightprobeError` names a bad token."""
+    label, settings, _ = parse_any_strategy(token, base, equal, spp)
+    return label, settings
+
+
+#: the render keys a user technique's strategy may override
+LAB_KEYS = ("seed", "sampler", "bsdf_samples", "env_samples", "heuristic")
+
+
+def parse_any_strategy(token: str, base: RenderSettings, equal: str = "spp", spp: int | None = None):
+    """(label, settings, lab strategy or None) for a strategy token: see :func:`parse_strategy`."""
     from ..integrators.settings import options, settings_from_table
+    from ..lab.render import is_lab_token, parse_lab_token
 
     keys = {o.key for o in options().values() if o.key is not None} - {"spp"}
-    name, *overrides = [part.strip() for part in token.strip().split("/")]
-    if name not in PRESETS:
-        raise LightprobeError(f"unknown strategy {name!r} in {token!r}; use {', '.join(PRESETS)}")
-    changes = dict(PRESETS[name])
+    lab = None
+    if is_lab_token(token):
+        lab, overrides = parse_lab_token(token)
+        keys = set(LAB_KEYS)
+        changes = {}
+    else:
+        name, *overrides = [part.strip() for part in token.strip().split("/")]
+        if name not in PRESETS:
+            raise LightprobeError(f"unknown strategy {name!r} in {token!r}; use {', '.join(PRESETS)} or FILE.py:NAME")
+        changes = dict(PRESETS[name])
     for item in overrides:
         key, sep, value = item.partition("=")
         if not sep or key.strip() not in keys:
@@ -84,7 +106,9 @@ def parse_strategy(
         (dataclasses.replace(settings, spp=max(settings.spp, 4)) if settings.adaptive else settings).validate()
     except LightprobeError as exc:
         raise LightprobeError(f"strategy {token!r}: {exc}") from None
-    return token.strip(), settings
+    if lab is not None:
+        lab.heuristic = settings.heuristic
+    return token.strip(), settings, lab
 
 
 @dataclass
@@ -99,6 +123,8 @@ class StrategyRun:
     spp: float = 0.0
     rounds: list[dict] = field(default_factory=list)
     metrics: dict = field(default_factory=dict)
+    #: why the strategy stopped early (a user technique that failed mid-render), or None; its rounds so far count
+    error: str | None = None
 
 
 def _measure(image, variance, reference, reference_variance, mask=None) -> dict:
@@ -126,9 +152,22 @@ def run_strategy(
     seconds: float,
     progress: Callable[[str, float], None] | None = None,
     masks: dict[str, np.ndarray] | None = None,
+    lab=None,
 ) -> StrategyRun:
     """Render one strategy in doubling rounds up to ``spp`` samples (``equal='spp'``) or ``seconds`` of rendering
-    (``equal='time'``), measuring after each round; ``masks`` (name -> (H, W) bool) add per-object metrics."""
+    (``equal='time'``), measuring after each round; ``masks`` (name -> (H, W) bool) add per-object metrics;
+    ``lab``: a user technique's strategy (:class:`lightprobe.lab.render.LabStrategy`), rendered by the laboratory."""
+    if lab is not None:
+        from ..lab.render import render_lab
+
+        def renderer(scene, part, resume):
+            return render_lab(scene, lab, part, resume=resume)
+
+    else:
+
+        def renderer(scene, part, resume):
+            return render(scene, part, resume=resume)
+
     width, height = scene.camera.resolution
     acc = None
     done = 0
@@ -156,7 +195,19 @@ def run_strategy(
                 break
             n = max(target - done, 1)
         part = dataclasses.replace(settings, spp=n, first_sample=done, time_limit=limit, pass_samples=pass_samples)
-        result = render(scene, part, resume=acc)
+        try:
+            result = renderer(scene, part, acc)
+        except LightprobeError as exc:
+            partial = getattr(exc, "result", None)
+            if acc is None and partial is None:
+                raise
+            run.error = str(exc)  # keep the rounds so far (and the failing round's samples, if any)
+            if partial is not None:
+                acc = partial.accumulator
+                spent += partial.stats["seconds"]
+                final = result_from(acc, width, height)
+                run.image, run.variance = final.image, final.variance
+            break
         acc = result.accumulator
         spent += result.stats["seconds"]
         done = int(acc.count.min())
@@ -244,9 +295,9 @@ def compare(
     if reference.shape[:2] != (height, width):
         raise LightprobeError(f"the reference is {reference.shape[1]}x{reference.shape[0]}, the scene {width}x{height}")
     base = base or RenderSettings()
-    parsed = [parse_strategy(token, base, equal, spp) for token in strategies]
+    parsed = [parse_any_strategy(token, base, equal, spp) for token in strategies]
     runs = []
-    for label, settings in parsed:
+    for label, settings, lab in parsed:
         start = time.perf_counter()
         runs.append(
             run_strategy(
@@ -260,6 +311,7 @@ def compare(
                 seconds=seconds,
                 progress=progress,
                 masks=masks,
+                lab=lab,
             )
         )
         runs[-1].metrics["wall_seconds"] = time.perf_counter() - start

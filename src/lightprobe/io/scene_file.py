@@ -138,7 +138,7 @@ from ..geometry.scene import Scene
 from ..geometry.shapes import Rectangle, Sphere
 from ..integrators.settings import read_render_table
 
-__all__ = ["load_scene"]
+__all__ = ["load_scene", "material_from_table"]
 
 
 class _Table:
@@ -292,6 +292,11 @@ def _material(t: _Table):
         raise SceneError(f"{t.where}: unknown material type {kind!r}; use lambert, phong, conductor or plastic")
     t.done()
     return bsdf
+
+
+def material_from_table(data: dict, where: str):
+    """A material from a ``[materials.NAME]`` table's keys (``type`` and its parameters); errors name ``where``."""
+    return _within(where, lambda w: _material(_Table(data, w)))
 
 
 def _face_emission(t: _Table, base: Path):

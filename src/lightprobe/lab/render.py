@@ -1,0 +1,320 @@
+"""Render a scene with user techniques: the laboratory's estimator, in NumPy, one batch of shading points at a time.
+
+A :class:`LabStrategy` is one technique alone (``n_bsdf + n_env`` directions of it per camera sample, as the
+renderer's single-technique strategies) or two under MIS, a BSDF technique and a light technique (``n_bsdf`` and
+``n_env`` directions), weighted by a heuristic (balance, power, or the user's own function). Either technique may be
+lightprobe's own (:func:`~lightprobe.lab.techniques.builtin`) or a user's. Per camera sample, with f the scene's
+material and L the environment (Krivanek eqs. 2 and 16)::
+
+    value = sum over techniques t, samples i of  w_t(wi) f(wo, wi) cos(theta_i) L(wi) V(wi) / (n_t p_t(wi))
+
+The scene must be lit by its environment map alone (the exercise's setting). Camera rays, hit points and shading
+frames come from the render core's own routines (``store_shading_frame``), shadow rays from its ray tracer
+(``RayTracer.occluded``, origins offset as the core does), random numbers from its samplers: a pure function of
+(seed, pixel, sample index, dimension). Each pass is one sample of every pixel, added in sample order to the
+core's :class:`~lightprobe.integrators.accumulation.Accumulator`, so the image is the same bit for bit whether it is
+rendered at once or continued (``resume``), and ``compare`` can treat it like any render. A technique that fails
+mid-render raises a :class:`LabRenderError` that carries what was accumulated before the failing pass.
+"""
+
+from __future__ import annotations
+
+import re
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._numba import jit_parallel, prange
+from ..geometry.camera import camera_ray
+from ..geometry.intersect import MISS
+from ..geometry.raytracer import RayTracer
+from ..integrators.accumulation import Accumulator, RenderResult, result_from
+from ..integrators.settings import RenderSettings
+from ..integrators.techniques import store_shading_frame
+from ..sampling.mis import balance_heuristic, power_heuristic
+from ..sampling.rng import SAMPLERS, sampler_batch
+from .techniques import Context, GuardedTechnique, Heuristic, TechniqueError
+
+__all__ = ["LabRenderError", "LabStrategy", "render_lab"]
+
+#: camera samples per batch (memory: about 2 kB each with 8 directions)
+BATCH = 1 << 15
+
+
+class LabRenderError(TechniqueError):
+    """A technique failed during a render; ``result`` holds the samples accumulated before the failing pass."""
+
+    def __init__(self, message: str, result: RenderResult | None):
+        super().__init__(message)
+        self.result = result
+
+
+@dataclass
+class LabStrategy:
+    """One technique alone, or a BSDF and a light technique under MIS with ``heuristic`` (a name or a function
+    weight(n_f, p_f, n_g, p_g))."""
+
+    techniques: tuple[GuardedTechnique, ...]
+    heuristic: str | Heuristic | None = None
+
+    def __post_init__(self):
+        kinds = [t.kind for t in self.techniques]
+        if len(self.techniques) == 2 and sorted(kinds) != ["bsdf", "light"]:
+            raise TechniqueError(f"MIS combines a BSDF technique and a light technique, got {kinds}")
+        if len(self.techniques) not in (1, 2):
+            raise TechniqueError(f"a strategy has one technique or two under MIS, got {len(self.techniques)}")
+
+    @property
+    def label(self) -> str:
+        names = "+".join(t.label for t in self.techniques)
+        return f"mis:{names}" if len(self.techniques) == 2 else names
+
+    def counts(self, settings: RenderSettings) -> list[int]:
+        """Directions per camera sample of each technique."""
+        if len(self.techniques) == 1:
+            return [settings.n_bsdf + settings.light_samples]
+        return [settings.n_bsdf if t.kind == "bsdf" else settings.light_samples for t in self.techniques]
+
+
+def _weight(heuristic, n_f, p_f, n_g, p_g) -> np.ndarray:
+    if heuristic is None or heuristic == "balance":
+        return balance_heuristic(p_f, p_g, n_f=n_f, n_g=n_g)
+    if heuristic == "power":
+        return power_heuristic(p_f, p_g, n_f=n_f, n_g=n_g)
+    w = np.asarray(heuristic(n_f, p_f, n_g, p_g), dtype=np.float64)
+    if w.shape != np.shape(p_f) or not np.all(np.isfinite(w)) or np.any(w < 0) or np.any(w > 1 + 1e-9):
+        name = getattr(heuristic, "__name__", "the heuristic")
+        raise TechniqueError(f"{name}: returned weights outside [0, 1], not finite or of shape {w.shape} (expected "
+                             f"{np.shape(p_f)}) (check: MIS weights)")  # fmt: skip
+    return w
+
+
+@jit_parallel
+def _camera_batch(cam, pixels, jitter):
+    out = np.empty((pixels.shape[0], 3))
+    for i in prange(pixels.shape[0]):
+        out[i, 0], out[i, 1], out[i, 2] = camera_ray(cam, pixels[i], jitter[i, 0], jitter[i, 1])
+    return out
+
+
+@jit_parallel
+def _shading_batch(s, kind, index, prim, b1, b2, t, cam_origin, dirs):
+    """Point, geometric normal, error bound, shading frame (N, 9), local wo and material (-1: nothing to shade)."""
+    n = dirs.shape[0]
+    point = np.zeros((n, 3))
+    gnormal = np.zeros((n, 3))
+    error = np.zeros(n)
+    frame = np.zeros((n, 9))
+    wo_local = np.zeros((n, 3))
+    material = np.full(n, -1, np.int64)
+    ox, oy, oz = cam_origin[0], cam_origin[1], cam_origin[2]
+    for k in prange(n):
+        if kind[k] == MISS:
+            continue
+        hit = (kind[k], index[k], prim[k], b1[k], b2[k], t[k])
+        store_shading_frame(
+            s, k, hit, ox, oy, oz, dirs[k, 0], dirs[k, 1], dirs[k, 2], point, gnormal, error, frame, wo_local, material
+        )
+    return point, gnormal, error, frame, wo_local, material
+
+
+def _check_scene(scene) -> None:
+    if scene.environment is None:
+        raise TechniqueError(f"scene {scene.name!r}: user techniques need an environment map; this scene has none")
+    emitting = len(scene.emitters) + len(scene.lights)
+    if emitting:
+        raise TechniqueError(
+            f"scene {scene.name!r}: user techniques render scenes lit by an environment map alone (the exercise's "
+            f"setting); this one has {emitting} other light(s)"
+        )
+
+
+class _Shader:
+    """Everything one render needs between passes."""
+
+    def __init__(self, scene, strategy: LabStrategy, settings: RenderSettings):
+        self.scene = scene
+        self.strategy = strategy
+        self.settings = settings
+        self.arrays = scene.compile()
+        self.tracer = RayTracer(self.arrays)
+        self.cam = scene.camera.kernel_array()
+        self.origin = np.asarray(scene.camera.origin, dtype=np.float64)
+        self.env = scene.environment
+        self.materials = list(scene.materials.values())
+        self.counts = strategy.counts(settings)
+        self.dims = [t.dimensions for t in strategy.techniques]
+        self.sampler = SAMPLERS[settings.sampler]
+
+    def close(self):
+        self.tracer.close()
+
+    def values(self, pixels: np.ndarray, sample: int) -> np.ndarray:
+        """Each pixel's value (N, 3) for one sample index."""
+        n = pixels.shape[0]
+        total_dims = 2 + sum(c * d for c, d in zip(self.counts, self.dims, strict=True))
+        samples = np.full(n, sample, dtype=np.int64)
+        u = sampler_batch(self.sampler, self.settings.seed, pixels, samples, total_dims)
+        dirs = _camera_batch(self.cam, pixels, np.ascontiguousarray(u[:, :2]))
+        t, kind, index, prim, b1, b2 = self.tracer.intersect(np.broadcast_to(self.origin, dirs.shape), dirs)
+        value = np.zeros((n, 3))
+        miss = kind == MISS
+        if miss.any():
+            value[miss] = self.env.eval(dirs[miss])
+        point, gnormal, error, frame, wo, material = _shading_batch(
+            self.arrays, kind, index, prim, b1, b2, t, self.origin, dirs
+        )
+        frame = frame.reshape(n, 3, 3)
+        offset = 2
+        blocks = []
+        for count, dims in zip(self.counts, self.dims, strict=True):
+            blocks.append((offset, count, dims))
+            offset += count * dims
+        for m in np.unique(material[material >= 0]):
+            rows = np.nonzero(material == m)[0]
+            ctx = Context(wo[rows], frame[rows, 2], frame[rows], point[rows], self.materials[m], self.env)
+            value[rows] += self._shade(ctx, u[rows], blocks, gnormal[rows], error[rows])
+        return value
+
+    def _shade(self, ctx: Context, u: np.ndarray, blocks, gnormal, error) -> np.ndarray:
+        """The estimator of the module docstring at the points of ``ctx`` (one material)."""
+        techniques = self.strategy.techniques
+        n = len(ctx)
+        out = np.zeros((n, 3))
+        for j, (tech, (offset, count, dims)) in enumerate(zip(techniques, blocks, strict=True)):
+            for i in range(count):
+                uu = np.ascontiguousarray(u[:, offset + i * dims : offset + (i + 1) * dims])
+                wi, pdf = tech.sample(uu, ctx)
+                if tech.kind == "bsdf":
+                    local, world = wi, np.einsum("nk,nkj->nj", wi, ctx.frame)
+                else:
+                    world, local = wi, np.einsum("nkj,nj->nk", ctx.frame, wi)
+                weight = np.ones(n)
+                if len(techniques) == 2:
+                    other = techniques[1 - j]
+                    p_other = other.pdf(local if other.kind == "bsdf" else world, ctx)
+                    weight = _weight(self.strategy.heuristic, count, pdf, self.counts[1 - j], p_other)
+                f = ctx.material.eval(ctx.wo, local)
+                cos = np.maximum(local[:, 2], 0.0)
+                live = (pdf > 0) & (cos > 0) & (weight > 0) & np.any(f > 0, axis=1)
+                if not live.any():
+                    continue
+                rows = np.nonzero(live)[0]
+                d = world[rows] / np.linalg.norm(world[rows], axis=1, keepdims=True)
+                ng = gnormal[rows]
+                side = np.where(np.einsum("nk,nk->n", d, ng) < 0.0, -1.0, 1.0)
+                origin = ctx.position[rows] + (side * error[rows])[:, None] * ng
+                visible = ~self.tracer.occluded(origin, d)
+                rows, d = rows[visible], d[visible]
+                radiance = self.env.eval(d)
+                scale = weight[rows] * cos[rows] / (count * pdf[rows])
+                out[rows] += f[rows] * radiance * scale[:, None]
+        return out
+
+
+def render_lab(scene, strategy: LabStrategy, settings: RenderSettings | None = None, *, resume=None) -> RenderResult:
+    """Render ``settings.spp`` samples per pixel from ``settings.first_sample`` (continuing ``resume``, an
+    :class:`Accumulator` at that count) with the techniques of ``strategy``; ``settings.time_limit`` stops between
+    passes. See the module docstring."""
+    from ..integrators.wavefront import settings_for
+
+    _check_scene(scene)
+    settings = settings_for(scene, settings or RenderSettings())
+    settings.validate()
+    width, height = scene.camera.resolution
+    acc = resume.copy() if resume is not None else Accumulator(width * height)
+    first = settings.first_sample
+    if resume is not None and not np.all(resume.count == first):
+        raise TechniqueError(f"resume: the accumulator holds {resume.count.min()}..{resume.count.max()} samples per "
+                             f"pixel, the render starts at sample {first}")  # fmt: skip
+    shader = _Shader(scene, strategy, settings)
+    start = time.perf_counter()
+    stopped = interrupted = False
+    pixels_all = np.arange(width * height, dtype=np.int64)
+    done = 0
+    pass_seconds = 0.0
+    try:
+        for sample in range(first, first + settings.spp):
+            spent = time.perf_counter() - start
+            if settings.time_limit is not None and done > 0 and spent + pass_seconds > settings.time_limit:
+                stopped = True
+                break
+            t0 = time.perf_counter()
+            values = np.empty((width * height, 3))
+            for lo in range(0, pixels_all.size, BATCH):
+                block = pixels_all[lo : lo + BATCH]
+                values[lo : lo + BATCH] = shader.values(block, sample)
+            _accumulate(acc, values)
+            done += 1
+            pass_seconds = time.perf_counter() - t0
+    except KeyboardInterrupt:
+        interrupted = True
+    except TechniqueError as exc:
+        partial = (
+            result_from(acc, width, height, _stats(settings, strategy, start, done, False, False)) if done else None
+        )
+        raise LabRenderError(
+            f"{exc} (during sample {first + done}; {done} sample(s) per pixel kept)", partial
+        ) from None
+    finally:
+        shader.close()
+    return result_from(acc, width, height, _stats(settings, strategy, start, done, stopped, interrupted))
+
+
+def _stats(settings, strategy, start, done, stopped, interrupted) -> dict:
+    seconds = time.perf_counter() - start
+    return {
+        "seconds": seconds,
+        "spp": done,
+        "strategy": strategy.label,
+        "directions_per_sample": sum(strategy.counts(settings)),
+        "stopped_by_time_limit": stopped,
+        "interrupted": interrupted,
+        "seed": settings.seed,
+        "sampler": settings.sampler,
+    }
+
+
+def _accumulate(acc: Accumulator, values: np.ndarray) -> None:
+    """One sample per pixel, Welford's update in float64 (the core's accumulate, for whole-image passes)."""
+    finite = np.all(np.isfinite(values), axis=1)
+    values = np.where(finite[:, None], values, 0.0)
+    acc.nonfinite += ~finite
+    acc.count += 1
+    n = acc.count[:, None].astype(np.float64)
+    delta = values - acc.mean
+    acc.mean += delta / n
+    acc.m2 += delta * (values - acc.mean)
+
+
+# --- strategy tokens of `lightprobe compare` -------------------------------------------------------------------------
+_TOKEN = re.compile(r"^(?P<mis>mis:)?(?P<specs>.+?\.py(?::\w+)?(?:\+.+?\.py(?::\w+)?)*)(?P<overrides>(?:/[^/]*)*)$")
+
+
+def is_lab_token(token: str) -> bool:
+    """Does a strategy token name a user technique (``FILE.py[:NAME]``, ``mis:FILE.py[:NAME][+FILE.py[:NAME]]``)?"""
+    return ".py" in token
+
+
+def parse_lab_token(token: str) -> tuple[LabStrategy, list[str]]:
+    """The strategy of a token and its ``/key=value`` overrides. ``FILE.py[:NAME]``: the technique alone;
+    ``mis:SPEC``: SPEC under MIS with lightprobe's technique of the other kind; ``mis:SPEC+SPEC``: a user BSDF
+    technique and a user light technique under MIS."""
+    from .techniques import builtin, load_technique
+
+    match = _TOKEN.match(token.strip())
+    if match is None:
+        raise TechniqueError(f"strategy {token!r}: expected FILE.py[:NAME] or mis:FILE.py[:NAME][+FILE.py[:NAME]]")
+    techniques = [load_technique(spec) for spec in match["specs"].split("+")]
+    overrides = [part for part in match["overrides"].split("/") if part]
+    if match["mis"]:
+        if len(techniques) == 1:
+            other = "light" if techniques[0].kind == "bsdf" else "bsdf"
+            techniques = [techniques[0], builtin(other)] if other == "light" else [builtin(other), techniques[0]]
+        elif sorted(t.kind for t in techniques) != ["bsdf", "light"]:
+            kinds = ", ".join(f"{t.label} ({t.kind})" for t in techniques)
+            raise TechniqueError(f"strategy {token!r}: MIS needs one BSDF and one light technique, got {kinds}")
+    elif len(techniques) != 1:
+        raise TechniqueError(f"strategy {token!r}: two techniques need the mis: prefix")
+    return LabStrategy(tuple(techniques)), overrides

@@ -1,0 +1,405 @@
+"""Sampling techniques written by users, in plain Python: the contract, loading them from a file, and calling them
+safely.
+
+A *technique* draws directions at a batch of shading points and says how dense they are::
+
+    class CosineHemisphere:
+        kind = "bsdf"            # "bsdf": directions in the local shading frame (normal +z, wo toward the viewer)
+                                 # "light": directions toward the environment map, in world space
+        dimensions = 2           # random numbers per sample (2 or 3)
+        support = "hemisphere"   # bsdf only: "hemisphere" (never below the surface) or "sphere" (a lobe may dip
+                                 # below it, like a Phong lobe about the mirror direction)
+
+        def sample(self, u, ctx):      # u: (N, dimensions) in [0, 1)
+            ...
+            return wi, pdf             # (N, 3) unit directions, (N,) density per steradian (0: no sample)
+
+        def pdf(self, wi, ctx):        # the density with which sample() produces wi, (N,)
+            ...
+
+Arrays in, arrays out: one call serves a whole batch (NumPy; the methods may call ``numba.njit`` functions for
+speed). ``ctx`` (:class:`Context`) describes the batch's shading points; a batch shares one material. An optional
+``prepare(self, environment)`` is called once per environment map before a light technique is used (build the
+map's distributions there, not in every call).
+
+:func:`load_technique` reads ``FILE.py[:NAME]``; :class:`GuardedTechnique` calls a technique and turns every way it
+can go wrong (an exception, NaN or Inf, a negative pdf, the wrong shape or dtype, non-unit directions, a call that
+takes too long) into one :class:`TechniqueError` naming the function, the check and the first offending sample.
+:class:`BuiltinBSDF` and :class:`BuiltinEnvironment` are lightprobe's own techniques behind the same contract.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import inspect
+import signal
+import sys
+import threading
+from collections.abc import Callable
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import LightprobeError
+
+__all__ = [
+    "KINDS",
+    "BuiltinBSDF",
+    "BuiltinEnvironment",
+    "Context",
+    "GuardedTechnique",
+    "TechniqueError",
+    "direction_to_uv",
+    "load_technique",
+    "uv_to_direction",
+]
+
+KINDS = ("bsdf", "light")
+SUPPORTS = ("hemisphere", "sphere")
+#: |wi| may differ from 1 by this much
+UNIT_TOLERANCE = 1e-4
+#: seconds one call may take before it is stopped (per batch; batches hold at most a few hundred thousand samples)
+DEFAULT_TIME_LIMIT = 60.0
+
+
+class TechniqueError(LightprobeError):
+    """A user technique failed a check or could not be loaded; the message names the function and the sample."""
+
+
+@dataclass
+class Context:
+    """The shading points of one batch, as a technique sees them (N points).
+
+    Attributes
+    ----------
+    wo : (N, 3)
+        Direction toward the viewer in the local shading frame (normal +z).
+    normal : (N, 3)
+        Shading normal, world space.
+    frame : (N, 3, 3)
+        Rows s, t, n of the shading frame in world space: ``local = frame @ world``, ``world = local @ frame``.
+    position : (N, 3)
+        Hit points, world space.
+    material : lightprobe BSDF
+        The batch's material (one per batch), e.g. :class:`lightprobe.Phong` with ``rho_d``, ``rho_s`` (RGB arrays),
+        ``exponent``; its own ``eval``, ``pdf`` and ``sample`` are there too.
+    environment : lightprobe EnvironmentMap or None
+        The map: ``luminance`` (H, W) of the texels (lat-long, row 0 the zenith), ``radiance`` (H, W, 3),
+        ``to_world`` (3 x 3, the map's rotation), ``eval(dirs)``. :func:`uv_to_direction` and
+        :func:`direction_to_uv` convert between lat-long (u, v) and world directions with its rotation.
+    """
+
+    wo: np.ndarray
+    normal: np.ndarray
+    frame: np.ndarray
+    position: np.ndarray
+    material: object = None
+    environment: object = None
+
+    def __len__(self) -> int:
+        return self.wo.shape[0]
+
+    def subset(self, rows) -> Context:
+        """The context of some of the points (a boolean mask or indices)."""
+        return Context(self.wo[rows], self.normal[rows], self.frame[rows], self.position[rows], self.material,
+                       self.environment)  # fmt: skip
+
+    @classmethod
+    def local(cls, wo, n: int, material=None, environment=None) -> Context:
+        """N copies of one local ``wo`` at the origin with normal +z (world = local): what ``check`` uses."""
+        w = np.asarray(wo, dtype=np.float64).reshape(3)
+        w = w / np.linalg.norm(w)
+        frame = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
+        return cls(np.tile(w, (n, 1)), np.tile([0.0, 0.0, 1.0], (n, 1)), frame, np.zeros((n, 3)), material,
+                   environment)  # fmt: skip
+
+
+# --- lat-long coordinates (the README's convention, Mitsuba 3's) ----------------------------------------------------
+def uv_to_direction(environment, u, v) -> np.ndarray:
+    """World directions (N, 3) of lat-long coordinates (u, v) in [0, 1]^2 of ``environment`` (its rotation applied):
+    theta = pi v from +Y, phi = 2 pi u, local (sin phi sin theta, cos theta, -cos phi sin theta)."""
+    theta = np.pi * np.asarray(v, dtype=np.float64)
+    phi = 2.0 * np.pi * np.asarray(u, dtype=np.float64)
+    st = np.sin(theta)
+    local = np.stack([np.sin(phi) * st, np.cos(theta), -np.cos(phi) * st], axis=-1)
+    rotation = np.eye(3) if environment is None else environment.to_world
+    return local @ rotation.T
+
+
+def direction_to_uv(environment, dirs) -> tuple[np.ndarray, np.ndarray]:
+    """Lat-long (u, v) of world directions (N, 3): the inverse of :func:`uv_to_direction`."""
+    rotation = np.eye(3) if environment is None else environment.to_world
+    local = np.asarray(dirs, dtype=np.float64) @ rotation
+    u = np.mod(np.arctan2(local[:, 0], -local[:, 2]) / (2.0 * np.pi), 1.0)
+    v = np.arccos(np.clip(local[:, 1], -1.0, 1.0)) / np.pi
+    return u, v
+
+
+# --- loading ----------------------------------------------------------------------------------------------------
+def _is_technique(obj) -> bool:
+    return callable(getattr(obj, "sample", None)) and callable(getattr(obj, "pdf", None)) and not inspect.ismodule(obj)
+
+
+def _module_techniques(module) -> dict[str, object]:
+    return {
+        name: obj
+        for name, obj in vars(module).items()
+        if not name.startswith("_")
+        and _is_technique(obj)
+        and getattr(obj, "__module__", module.__name__) == module.__name__
+    }
+
+
+def load_module(path: str | Path, *, what: str = "technique file"):
+    """Import a user's Python file; a missing file or an error while importing it is one line naming the file."""
+    file = Path(path)
+    if not file.is_file():
+        raise TechniqueError(f"{file}: no such {what}")
+    name = f"lightprobe_user_{abs(hash(str(file.resolve())))}"
+    spec = importlib.util.spec_from_file_location(name, file)
+    if spec is None or spec.loader is None:
+        raise TechniqueError(f"{file}: not a Python file")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    try:
+        spec.loader.exec_module(module)
+    except SyntaxError as exc:
+        raise TechniqueError(f"{file}: line {exc.lineno}: syntax error: {exc.msg}") from None
+    except Exception as exc:  # the user's code: any error it raises on import is reported, not a traceback
+        raise TechniqueError(
+            f"{file}{_user_line(exc, file)}: importing it raised {type(exc).__name__}: {exc}"
+        ) from None
+    return module
+
+
+_PACKAGE = Path(__file__).resolve().parents[1]
+
+
+def _user_line(exc: BaseException, file: Path | None = None) -> str:
+    """': line N of NAME' for the deepest frame of the traceback in ``file`` (default: any file outside
+    lightprobe), or ''."""
+    tb = exc.__traceback__
+    found = ""
+    while tb is not None:
+        name = Path(tb.tb_frame.f_code.co_filename)
+        mine = name.resolve() == file.resolve() if file is not None else _PACKAGE not in name.resolve().parents
+        if mine and name.suffix == ".py":
+            found = f": line {tb.tb_lineno} of {name.name}"
+        tb = tb.tb_next
+    return found
+
+
+def load_technique(spec: str, *, time_limit: float = DEFAULT_TIME_LIMIT) -> GuardedTechnique:
+    """The technique ``FILE.py:NAME`` (``FILE.py`` alone when the file defines exactly one): a class is
+    instantiated without arguments, an instance (or any object with ``sample`` and ``pdf``) used as it is."""
+    file, name = (spec, "") if spec.endswith(".py") or ":" not in spec else spec.rsplit(":", 1)
+    module = load_module(file)
+    found = _module_techniques(module)
+    if name:
+        if not hasattr(module, name):
+            listed = ", ".join(found) or "none"
+            raise TechniqueError(f"{file}: no technique named {name!r} (techniques found: {listed})")
+        obj = getattr(module, name)
+        if not _is_technique(obj):
+            raise TechniqueError(f"{file}: {name} is not a technique: it needs sample(u, ctx) and pdf(wi, ctx) methods")
+    else:
+        if len(found) != 1:
+            listed = ", ".join(found) or "none"
+            raise TechniqueError(f"{file}: name one technique as {file}:NAME (techniques found: {listed})")
+        name, obj = next(iter(found.items()))
+    if inspect.isclass(obj):
+        try:
+            obj = obj()
+        except Exception as exc:
+            raise TechniqueError(f"{file}:{name}: creating it raised {type(exc).__name__}: {exc}") from None
+    return GuardedTechnique(obj, f"{Path(file).name}:{name}", time_limit=time_limit)
+
+
+# --- calling a technique safely -----------------------------------------------------------------------------------
+class _TooLong(Exception):
+    pass
+
+
+@contextmanager
+def _time_limit(seconds: float):
+    """Raise _TooLong in the main thread after ``seconds`` (SIGALRM); elsewhere, no limit."""
+    if not (seconds and seconds > 0) or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, frame):
+        raise _TooLong
+
+    previous = signal.signal(signal.SIGALRM, handler)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0.0)
+        signal.signal(signal.SIGALRM, previous)
+
+
+def _row(a: np.ndarray, i: int) -> str:
+    return np.array2string(np.asarray(a[i]), precision=6, separator=", ", suppress_small=False)
+
+
+class GuardedTechnique:
+    """A technique whose every call is checked: see the module docstring."""
+
+    def __init__(self, technique, label: str, *, time_limit: float = DEFAULT_TIME_LIMIT):
+        self.technique = technique
+        self.label = label
+        self.time_limit = time_limit
+        self.kind = getattr(technique, "kind", "bsdf")
+        if self.kind not in KINDS:
+            raise TechniqueError(f"{label}: kind must be one of {KINDS}, got {self.kind!r}")
+        self.dimensions = getattr(technique, "dimensions", 2)
+        if not isinstance(self.dimensions, int) or not 1 <= self.dimensions <= 4:
+            raise TechniqueError(f"{label}: dimensions must be an integer from 1 to 4, got {self.dimensions!r}")
+        self.support = getattr(technique, "support", "hemisphere" if self.kind == "bsdf" else "sphere")
+        if self.support not in SUPPORTS:
+            raise TechniqueError(f"{label}: support must be one of {SUPPORTS}, got {self.support!r}")
+        self._prepared: set[int] = set()
+
+    def __repr__(self) -> str:
+        return f"GuardedTechnique({self.label}, kind={self.kind})"
+
+    def _call(self, method: str, check: str, args, first_input: np.ndarray, input_name: str):
+        fn = getattr(self.technique, method)
+        try:
+            with _time_limit(self.time_limit):
+                return fn(*args)
+        except _TooLong:
+            raise TechniqueError(
+                f"{self.label}.{method}: took longer than {self.time_limit:g} s on a batch of {len(first_input)} "
+                f"(check: time limit; first sample {input_name} = {_row(first_input, 0)})"
+            ) from None
+        except TechniqueError:
+            raise
+        except Exception as exc:
+            line = _user_line(exc).lstrip(": ") or "no line"
+            raise TechniqueError(
+                f"{self.label}.{method} raised {type(exc).__name__}: {exc} ({line}; "
+                f"check: {check}; batch of {len(first_input)}, first sample {input_name} = {_row(first_input, 0)})"
+            ) from None
+
+    def prepare(self, environment) -> None:
+        hook = getattr(self.technique, "prepare", None)
+        if hook is None or environment is None or id(environment) in self._prepared:
+            return
+        self._call("prepare", "prepare", (environment,), np.zeros((1, 1)), "environment")
+        self._prepared.add(id(environment))
+
+    def _array(self, value, shape: tuple, method: str, what: str, inputs, input_name: str) -> np.ndarray:
+        """``value`` as float64 of ``shape``, or an error naming the problem and the first offending sample."""
+        where = f"{self.label}.{method}"
+        try:
+            a = np.asarray(value)
+        except Exception as exc:
+            raise TechniqueError(f"{where}: {what} is not an array ({exc})") from None
+        if a.dtype == object or not (np.issubdtype(a.dtype, np.floating) or np.issubdtype(a.dtype, np.integer)):
+            raise TechniqueError(f"{where}: {what} has dtype {a.dtype}, expected float (check: shape and dtype)")
+        if len(shape) == 1 and a.shape == (shape[0], 1):
+            a = a[:, 0]
+        if a.shape != shape:
+            raise TechniqueError(
+                f"{where}: {what} has shape {a.shape}, expected {shape} (check: shape and dtype; a batch of "
+                f"{shape[0]} went in)"
+            )
+        a = a.astype(np.float64)
+        bad = ~np.isfinite(a) if a.ndim == 1 else ~np.all(np.isfinite(a), axis=1)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise TechniqueError(
+                f"{where}: {what} is not finite at sample {i} ({_row(a, i)}) (check: finite values; "
+                f"{input_name} = {_row(inputs, i)}; {int(bad.sum())} of {shape[0]} samples)"
+            )
+        return a
+
+    def sample(self, u: np.ndarray, ctx: Context) -> tuple[np.ndarray, np.ndarray]:
+        """Checked ``sample``: (wi (N, 3), pdf (N,)), finite, unit where pdf > 0, pdf >= 0."""
+        n = u.shape[0]
+        if self.kind == "light":
+            self.prepare(ctx.environment)
+        out = self._call("sample", "sample runs", (u, ctx), u, "u")
+        if not isinstance(out, tuple | list) or len(out) != 2:
+            raise TechniqueError(f"{self.label}.sample must return (wi, pdf), got {type(out).__name__}")
+        wi = self._array(out[0], (n, 3), "sample", "wi", u, "u")
+        pdf = self._array(out[1], (n,), "sample", "pdf", u, "u")
+        self._nonnegative(pdf, "sample", u, "u")
+        norm = np.linalg.norm(wi, axis=1)
+        bad = (np.abs(norm - 1.0) > UNIT_TOLERANCE) & (pdf > 0)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise TechniqueError(
+                f"{self.label}.sample: wi is not a unit vector at sample {i}: |wi| = {norm[i]:.6g} "
+                f"(check: unit directions; u = {_row(u, i)}, wi = {_row(wi, i)}; {int(bad.sum())} of {n} samples)"
+            )
+        return wi, pdf
+
+    def pdf(self, wi: np.ndarray, ctx: Context) -> np.ndarray:
+        """Checked ``pdf``: (N,), finite, >= 0."""
+        if self.kind == "light":
+            self.prepare(ctx.environment)
+        out = self._call("pdf", "pdf runs", (wi, ctx), wi, "wi")
+        pdf = self._array(out, (wi.shape[0],), "pdf", "the result", wi, "wi")
+        self._nonnegative(pdf, "pdf", wi, "wi")
+        return pdf
+
+    def _nonnegative(self, pdf, method, inputs, input_name) -> None:
+        bad = pdf < 0.0
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise TechniqueError(
+                f"{self.label}.{method}: negative pdf {pdf[i]:.6g} at sample {i} (check: pdf >= 0; "
+                f"{input_name} = {_row(inputs, i)}; {int(bad.sum())} of {len(pdf)} samples)"
+            )
+
+
+# --- lightprobe's own techniques behind the same contract -----------------------------------------------------------
+class BuiltinBSDF:
+    """The material's own importance sampling (its ``sample``/``pdf``, lobes chosen by u[:, 2])."""
+
+    kind = "bsdf"
+    dimensions = 3
+    support = "sphere"
+
+    def sample(self, u, ctx):
+        return ctx.material.sample(ctx.wo, u)
+
+    def pdf(self, wi, ctx):
+        return ctx.material.pdf(ctx.wo, wi)
+
+
+class BuiltinEnvironment:
+    """The environment map's own importance sampling (its ``sample``/``pdf``)."""
+
+    kind = "light"
+    dimensions = 2
+    support = "sphere"
+
+    def sample(self, u, ctx):
+        return ctx.environment.sample(u)
+
+    def pdf(self, wi, ctx):
+        return ctx.environment.pdf(wi)
+
+
+def builtin(kind: str) -> GuardedTechnique:
+    """lightprobe's technique of ``kind`` ("bsdf" or "light"), guarded like a user's."""
+    obj = BuiltinBSDF() if kind == "bsdf" else BuiltinEnvironment()
+    return GuardedTechnique(obj, "lightprobe:" + ("brdf" if kind == "bsdf" else "env"), time_limit=0.0)
+
+
+def balance_heuristic(n_f, p_f, n_g, p_g):
+    """Veach's balance heuristic n_f p_f / (n_f p_f + n_g p_g) (Krivanek eq. 17)."""
+    num = n_f * np.asarray(p_f, dtype=np.float64)
+    den = num + n_g * np.asarray(p_g, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(den > 0, num / den, 0.0)
+
+
+#: a MIS heuristic: weight(n_f, p_f, n_g, p_g) of a sample of technique f (n_f samples) against technique g
+Heuristic = Callable[[float, np.ndarray, float, np.ndarray], np.ndarray]
