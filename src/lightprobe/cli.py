@@ -511,6 +511,36 @@ def check_command(
         raise typer.Exit(1)
 
 
+@exercise_app.command("init")
+def exercise_init_command(
+    directory: Annotated[Path, typer.Argument(metavar="DIR", help="Where to write the exercise.")],
+    force: Annotated[bool, typer.Option("--force", help="Overwrite the exercise's files if they exist.")] = False,
+) -> None:
+    """Write the Krivanek exercise into DIR: sampling.py (the techniques to write, with their maths), scene.toml
+    and README.md."""
+    from .lab.exercise import init_exercise
+
+    for path in init_exercise(directory, force=force):
+        typer.echo(f"wrote {path}")
+    typer.echo(f"next: fill in step 1 of {directory / 'sampling.py'}, then `lightprobe exercise check {directory}`")
+
+
+@exercise_app.command("check")
+def exercise_check_command(
+    directory: Annotated[Path, typer.Argument(metavar="DIR", help="The exercise's directory.")] = Path("."),
+    samples: Annotated[int, typer.Option(help="Samples per context of each technique's check [100000].")] = 100_000,
+) -> None:
+    """Grade the exercise in DIR step by step: each technique checked against its own pdf, the balance heuristic
+    against its formula, then a render with your techniques z-tested against lightprobe's. Exit status 0 when all
+    six steps pass, 1 otherwise."""
+    from .lab.exercise import grade
+
+    result = grade(directory, samples=samples, progress=_echo_err)
+    typer.echo(result.text())
+    if not result.passed:
+        raise typer.Exit(1)
+
+
 def _material_option(text: str | None):
     """A BSDF from TYPE:key=value,... (scene-file keys), or None."""
     if text is None:

@@ -299,10 +299,14 @@ def _integral_hint(integral, tech, density, frame, theta, phi, material, environ
                 return f": {text}"
     exponent = getattr(material, "exponent", None)
     if tech.kind == "bsdf" and exponent is not None:
-        if abs(integral - (exponent + 2.0) / (exponent + 1.0)) < 0.2 * (1.0 / (exponent + 1.0)):
+        # a Phong lobe whose pdf carries the BRDF's (n + 2) / (2 pi): the lobe integrates to (n + 2) / (n + 1), a
+        # mixture of it with a right diffuse lobe to something between 1 and that
+        top = (exponent + 2.0) / (exponent + 1.0)
+        if 1.0 + INTEGRAL_TOLERANCE < integral <= top + 0.005:
             return (
-                f": {integral:.4g} = (n + 2) / (n + 1) for exponent n = {exponent:g}: the lobe's pdf uses the BRDF's "
-                "normalisation (n + 2) / (2 pi) instead of (n + 1) / (2 pi) (Krivanek eq. 12)"
+                f": between 1 and (n + 2) / (n + 1) = {top:.4g} for exponent n = {exponent:g}, as when the "
+                "specular lobe's pdf uses the BRDF's normalisation (n + 2) / (2 pi) instead of (n + 1) / (2 pi) "
+                "(Krivanek eq. 12)"
             )
     return f": off by a factor {near[0]}" if near else ""
 

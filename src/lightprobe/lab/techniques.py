@@ -186,7 +186,7 @@ def _user_line(exc: BaseException, file: Path | None = None) -> str:
         name = Path(tb.tb_frame.f_code.co_filename)
         mine = name.resolve() == file.resolve() if file is not None else _PACKAGE not in name.resolve().parents
         if mine and name.suffix == ".py":
-            found = f": line {tb.tb_lineno} of {name.name}"
+            found = f": line {tb.tb_lineno}" + ("" if file is not None else f" of {name.name}")
         tb = tb.tb_next
     return found
 

@@ -1,0 +1,127 @@
+"""The laboratory's estimator: built-in and user techniques rendered like the render core, deterministic, resumable,
+and a failing user technique keeps what was rendered."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from lightprobe.experiments.compare import compare
+from lightprobe.integrators.settings import RenderSettings
+from lightprobe.integrators.wavefront import render
+from lightprobe.io.scene_file import load_scene
+from lightprobe.lab.exercise import init_exercise, z_test
+from lightprobe.lab.render import LabRenderError, LabStrategy, parse_lab_token, render_lab
+from lightprobe.lab.techniques import TechniqueError, builtin
+
+HERE = Path(__file__).parent
+SOLUTIONS = HERE / "solutions" / "sampling.py"
+TECHNIQUES = HERE / "user_techniques.py"
+
+
+@pytest.fixture(scope="module")
+def exercise_scene(tmp_path_factory):
+    root = tmp_path_factory.mktemp("exercise")
+    init_exercise(root)
+    scene, _ = load_scene(root / "scene.toml")
+    scene.camera = scene.camera.with_resolution(48, 36)
+    reference = render(scene, RenderSettings(spp=1024, seed=99, heuristic="balance"))
+    return scene, reference
+
+
+def _z(result, reference, block=6):
+    return z_test(result.image, result.variance, reference.image, reference.variance, block=block)
+
+
+@pytest.mark.parametrize(
+    "token",
+    [
+        "builtin",
+        f"mis:{SOLUTIONS}:PhongLobes",
+        f"mis:{SOLUTIONS}:EnvironmentMapSampler",
+        f"mis:{SOLUTIONS}:PhongLobes+{SOLUTIONS}:EnvironmentMapSampler",
+    ],
+)
+@pytest.mark.parametrize("seed", [1, 2])
+def test_user_techniques_under_mis_match_the_render_core(exercise_scene, token, seed):
+    scene, reference = exercise_scene
+    if token == "builtin":
+        strategy = LabStrategy((builtin("bsdf"), builtin("light")), "balance")
+    else:
+        strategy, _ = parse_lab_token(token)
+        strategy.heuristic = "balance"
+    result = render_lab(scene, strategy, RenderSettings(spp=32, seed=seed))
+    verdict = _z(result, reference)
+    assert abs(verdict["pooled_z"]) < 4.0 and verdict["outliers"] <= 0.05, verdict
+    assert np.isfinite(result.image).all() and result.counts.min() == 32
+
+
+def test_a_technique_alone_matches_too(exercise_scene):
+    scene, reference = exercise_scene
+    strategy, _ = parse_lab_token(f"{SOLUTIONS}:EnvironmentMapSampler")
+    result = render_lab(scene, strategy, RenderSettings(spp=32, seed=3))
+    assert result.stats["directions_per_sample"] == 8  # the 4 + 4 of an environment-lit scene, all its own
+    verdict = _z(result, reference)
+    assert abs(verdict["pooled_z"]) < 4.0, verdict
+
+
+def test_the_test_sees_a_biased_heuristic(exercise_scene):
+    """Weights that sum to 1.1 (each +0.05) brighten the image by a few per cent: the z-test must fail."""
+    scene, reference = exercise_scene
+
+    def over(n_f, p_f, n_g, p_g):
+        return np.minimum(n_f * p_f / np.maximum(n_f * p_f + n_g * p_g, 1e-300) + 0.05, 1.0)
+
+    result = render_lab(scene, LabStrategy((builtin("bsdf"), builtin("light")), over), RenderSettings(spp=32, seed=1))
+    assert _z(result, reference)["pooled_z"] > 4.0
+
+
+def test_deterministic_and_resumable(exercise_scene):
+    scene, _ = exercise_scene
+    strategy, _ = parse_lab_token(f"mis:{SOLUTIONS}:PhongLobes")
+    whole = render_lab(scene, strategy, RenderSettings(spp=4, seed=5))
+    again = render_lab(scene, strategy, RenderSettings(spp=4, seed=5))
+    first = render_lab(scene, strategy, RenderSettings(spp=1, seed=5))
+    rest = render_lab(scene, strategy, RenderSettings(spp=3, seed=5, first_sample=1), resume=first.accumulator)
+    assert np.array_equal(whole.image, again.image)
+    assert np.array_equal(whole.image, rest.image) and np.array_equal(whole.variance, rest.variance)
+    other = render_lab(scene, strategy, RenderSettings(spp=4, seed=6))
+    assert not np.array_equal(whole.image, other.image)
+
+
+def test_a_failing_technique_keeps_what_was_rendered(exercise_scene):
+    scene, _ = exercise_scene
+    strategy, _ = parse_lab_token(f"{TECHNIQUES}:FailsLater")
+    with pytest.raises(LabRenderError, match="ran out of luck") as info:
+        render_lab(scene, strategy, RenderSettings(spp=8, seed=1))
+    kept = info.value.result
+    assert kept is not None and kept.counts.min() == 1 and np.isfinite(kept.image).all()
+    assert "1 sample(s) per pixel kept" in str(info.value)
+
+
+def test_strategy_tokens_and_scene_checks(exercise_scene):
+    with pytest.raises(TechniqueError, match="MIS needs one BSDF and one light"):
+        parse_lab_token(f"mis:{SOLUTIONS}:PhongLobes+{SOLUTIONS}:CosineHemisphere")
+    with pytest.raises(TechniqueError, match="two techniques need the mis: prefix"):
+        parse_lab_token(f"{SOLUTIONS}:PhongLobes+{SOLUTIONS}:EnvironmentMapSampler")
+    strategy, overrides = parse_lab_token(f"mis:{SOLUTIONS}:PhongLobes/seed=3/heuristic=power")
+    assert overrides == ["seed=3", "heuristic=power"] and strategy.label.startswith("mis:sampling.py:PhongLobes+")
+    from lightprobe.reference_scenes import build
+
+    area = build("area")
+    with pytest.raises(TechniqueError, match="environment map alone"):
+        render_lab(area, strategy, RenderSettings(spp=1))
+
+
+def test_compare_takes_user_strategies(exercise_scene):
+    scene, reference = exercise_scene
+    runs = compare(
+        scene,
+        ["mis", f"mis:{SOLUTIONS}:PhongLobes", f"{TECHNIQUES}:FailsLater"],
+        reference.image,
+        reference.variance,
+        spp=4,
+    )
+    assert runs[0].label == "mis" and runs[0].error is None
+    assert runs[1].spp == 4 and runs[1].error is None and runs[1].metrics["relmse"] > 0
+    assert runs[2].error is not None and "ran out of luck" in runs[2].error and runs[2].rounds
