@@ -1,0 +1,81 @@
+"""The laboratory's commands as a user runs them: `check`, `exercise init/check`, and `compare` with a user
+strategy (exit statuses, files written, one-line errors)."""
+
+import json
+import shutil
+from pathlib import Path
+
+from lightprobe.cli import main
+
+HERE = Path(__file__).parent
+SOLUTIONS = HERE / "solutions" / "sampling.py"
+TECHNIQUES = HERE / "user_techniques.py"
+
+
+def test_check_passes_and_writes_page_and_picture(tmp_path, capsys):
+    out = tmp_path / "phong.html"
+    args = ["check", f"{SOLUTIONS}:PhongLobes", "--samples", "50000", "-o", str(out), "--json"]
+    assert main(args) == 0
+    row = json.loads(capsys.readouterr().out)
+    assert row["passed"] and row["technique"] == "sampling.py:PhongLobes"
+    assert out.read_text().count("<tr class='ok'>") == len(row["checks"])
+    assert (tmp_path / "phong.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_check_failure_is_exit_1_with_the_verdict(tmp_path, capsys):
+    out = tmp_path / "c.html"
+    assert main(["check", f"{TECHNIQUES}:CosineUnnormalised", "--samples", "20000", "-o", str(out)]) == 1
+    text = capsys.readouterr().out
+    assert "FAIL" in text and "verdict: FAILED (integrates to 1" in text
+
+
+def test_check_options_and_user_errors(tmp_path, capsys):
+    out = str(tmp_path / "c.html")
+    assert main(["check", f"{TECHNIQUES}:Cosine", "--samples", "20000", "-o", out,
+                 "--material", "phong:rho_d=0.1,rho_s=0.8,exponent=200"]) == 0  # fmt: skip
+    for args, message in [
+        (["check", str(tmp_path / "none.py"), "-o", out], "none.py: no such technique file"),
+        (["check", f"{TECHNIQUES}:Nope", "-o", out], "no technique named 'Nope'"),
+        (["check", f"{TECHNIQUES}:Cosine", "-o", str(tmp_path / "c.txt")], "c.txt: the page is an .html file"),
+        (["check", f"{TECHNIQUES}:Cosine", "--material", "phong:shiny=3", "-o", out], "--material: unknown key"),
+        (["check", f"{TECHNIQUES}:Cosine", "--samples", "10", "-o", out], "samples must be >= 1000"),
+    ]:
+        capsys.readouterr()
+        assert main(args) == 2, args
+        err = capsys.readouterr().err.strip()
+        assert err.startswith("lightprobe: error:") and message in err and "\n" not in err, err
+
+
+def test_exercise_commands(tmp_path, capsys):
+    target = tmp_path / "ex"
+    assert main(["exercise", "init", str(target)]) == 0
+    assert (target / "sampling.py").exists() and (target / "README.md").exists()
+    assert main(["exercise", "init", str(target)]) == 2
+    assert "already exists" in capsys.readouterr().err
+    assert main(["exercise", "check", str(target), "--samples", "20000"]) == 1
+    assert "step 1 (UniformHemisphere) is wrong" in capsys.readouterr().out
+    shutil.copyfile(SOLUTIONS, target / "sampling.py")
+    assert main(["exercise", "check", str(target), "--samples", "50000"]) == 0
+    assert "all six steps pass" in capsys.readouterr().out
+
+
+def test_compare_with_user_strategies_writes_the_report(tmp_path, capsys):
+    target = tmp_path / "ex"
+    main(["exercise", "init", str(target)])
+    capsys.readouterr()
+    report = tmp_path / "r.html"
+    strategies = f"mis,mis:{SOLUTIONS}:PhongLobes,{SOLUTIONS}:EnvironmentMapSampler"
+    args = ["compare", str(target / "scene.toml"), "--strategies", strategies, "--spp", "2", "--reference-spp", "8",
+            "--width", "32", "-o", str(report), "--json", "-q"]  # fmt: skip
+    assert main(args) == 0
+    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
+    assert [r["strategy"] for r in rows][1:] == [f"mis:{SOLUTIONS}:PhongLobes", f"{SOLUTIONS}:EnvironmentMapSampler"]
+    assert "EnvironmentMapSampler" in report.read_text()
+    # a technique that fails mid-render: the report keeps what it rendered, the command says so and exits 2
+    args[3] = f"mis,{TECHNIQUES}:FailsLater"
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert "ran out of luck" in err and report.exists() and "stopped early" in report.read_text()
+    args[3] = f"mis:{SOLUTIONS}:PhongLobes/bogus=1"
+    assert main(args) == 2
+    assert "'bogus=1' is not key=value with a key among" in capsys.readouterr().err
