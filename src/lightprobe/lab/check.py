@@ -318,6 +318,7 @@ def figure_png(report: CheckReport) -> bytes:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.colors import LogNorm
 
     rows = max(1, len(report.histograms))
     fig, axes = plt.subplots(rows, 3, figsize=(11, 2.9 * rows), squeeze=False)
@@ -327,9 +328,18 @@ def figure_png(report: CheckReport) -> bytes:
             z = np.where(h.expected > 0, (h.observed - h.expected) / np.sqrt(h.expected), 0.0)
         panels = [(h.observed, "observed", "viridis", 0.0, top), (h.expected, "expected", "viridis", 0.0, top),
                   (z, "(obs - exp) / sqrt(exp)", "RdBu_r", -4.0, 4.0)]  # fmt: skip
+        positive = h.expected[h.expected > 0]
+        wide = positive.size and top / max(float(positive.min()), 1e-300) > 100.0  # a sun: counts on a log scale
         for c, (data, title, cmap, lo, hi) in enumerate(panels):
             ax = axes[r, c]
-            image = ax.imshow(data, aspect="auto", cmap=cmap, vmin=lo, vmax=hi, interpolation="nearest")
+            if c < 2 and wide:
+                norm = LogNorm(vmin=max(0.5, float(positive.min())), vmax=top)
+                image = ax.imshow(
+                    np.maximum(data, norm.vmin), aspect="auto", cmap=cmap, norm=norm, interpolation="nearest"
+                )
+                title += " (log)"
+            else:
+                image = ax.imshow(data, aspect="auto", cmap=cmap, vmin=lo, vmax=hi, interpolation="nearest")
             ax.set_title(f"{h.context}: {title}", fontsize=8)
             ax.set_xlabel("phi cell", fontsize=7)
             ax.set_ylabel(f"theta cell (from the {h.axis})", fontsize=7)
