@@ -208,6 +208,14 @@ def render_command(
         typer.Option(help="Also write an object-id pass here (.exr, channel object_id; -1 = background)."),
     ] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+    techniques: Annotated[
+        str | None,
+        typer.Option(
+            help="Render with your own sampling techniques (lightprobe.lab): FILE.py[:NAME] alone, or "
+            "mis:FILE.py[:NAME][+FILE.py[:NAME]] under MIS with lightprobe's technique of the other kind "
+            "(scenes lit by an environment map alone)."
+        ),
+    ] = None,
     render_options: dict | None = None,
 ) -> None:
     """Render a scene (or a built-in demo) with direct illumination from its environment map and lights.  A
@@ -243,7 +251,20 @@ def render_command(
     settings = _render_settings(defaults, chosen)
     check_output(output, variance=variance, png=png, resolution=scene.camera.resolution)
     typer.echo(scene.summary(), err=True)
-    result = _render_with_progress(scene, settings, render, quiet=quiet)
+    if techniques is not None:
+        from .lab.render import LabRenderError
+
+        render = _lab_renderer(scene, settings, techniques)
+        try:
+            result = _render_with_progress(scene, settings, render, quiet=quiet, core=False)
+        except LabRenderError as exc:  # a technique failed mid-render: keep the passes done before it
+            if exc.result is None:
+                raise
+            files = write_render(output, exc.result, variance=variance, exposure=exposure, png=png)
+            kept = int(exc.result.counts.min())
+            raise LightprobeError(f"{exc}; {files[0]} holds the {kept} spp rendered before it") from None
+    else:
+        result = _render_with_progress(scene, settings, render, quiet=quiet)
     stats = result.stats
     if not result.counts.any():
         raise LightprobeError(f"interrupted before the first sample was taken; {output} was not written")
@@ -632,13 +653,30 @@ def _render_settings(defaults: dict, chosen: dict):
     return settings
 
 
-def _render_with_progress(scene, settings, render, *, quiet: bool):
+def _lab_renderer(scene, settings, token: str):
+    """``render(scene, settings, progress=...)`` with the user techniques of a ``--techniques`` token."""
+    from .integrators.wavefront import settings_for
+    from .lab.render import parse_lab_token, render_lab
+
+    strategy, overrides = parse_lab_token(token)
+    if overrides:
+        raise LightprobeError(f"--techniques {token!r}: give settings as options (--seed, --heuristic ...)")
+    strategy.heuristic = settings_for(scene, settings).heuristic
+
+    def run(scene, settings, progress=None):
+        return render_lab(scene, strategy, settings, progress=progress)
+
+    return run
+
+
+def _render_with_progress(scene, settings, render, *, quiet: bool, core: bool = True):
     """Render with a progress bar (unless ``quiet``).  The first run compiles the kernels for about half a minute
     before the first pass: that is announced (a spinner with the elapsed time on a terminal, one line elsewhere,
-    and the time it took), since a silent half minute looks like a hang."""
+    and the time it took), since a silent half minute looks like a hang.  ``core``: ``render`` is the render
+    core's (whose kernels' cache can be looked up)."""
     from .integrators.wavefront import kernels_cached
 
-    compiling = not kernels_cached(scene, settings)
+    compiling = core and not kernels_cached(scene, settings)
     started = time.perf_counter()
     interactive = not quiet and sys.stderr.isatty()
     if compiling and not interactive:

@@ -79,3 +79,22 @@ def test_compare_with_user_strategies_writes_the_report(tmp_path, capsys):
     args[3] = f"mis:{SOLUTIONS}:PhongLobes/bogus=1"
     assert main(args) == 2
     assert "'bogus=1' is not key=value with a key among" in capsys.readouterr().err
+
+
+def test_render_with_user_techniques(tmp_path, capsys):
+    target = tmp_path / "ex"
+    main(["exercise", "init", str(target)])
+    out = tmp_path / "mine.exr"
+    token = f"mis:{SOLUTIONS}:PhongLobes+{SOLUTIONS}:EnvironmentMapSampler"
+    args = ["render", str(target / "scene.toml"), "--techniques", token, "--spp", "2", "--width", "24", "-o", str(out)]
+    assert main([*args, "-q"]) == 0
+    sidecar = json.loads((tmp_path / "mine.exr.json").read_text())
+    assert sidecar["strategy"].startswith("mis:sampling.py:PhongLobes+") and sidecar["spp_done"] == 2
+    # a technique that fails on the second pass: the first pass is written, the command says so and exits 2
+    capsys.readouterr()
+    args[3] = f"{TECHNIQUES}:FailsLater"
+    args[9] = str(tmp_path / "kept.exr")
+    assert main([*args, "--spp", "8", "-q"]) == 2
+    err = capsys.readouterr().err
+    assert "ran out of luck" in err and "holds the 1 spp rendered before it" in err
+    assert (tmp_path / "kept.exr").exists()

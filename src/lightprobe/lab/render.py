@@ -33,7 +33,7 @@ from ..integrators.accumulation import Accumulator, RenderResult, result_from
 from ..integrators.settings import RenderSettings
 from ..integrators.techniques import store_shading_frame
 from ..sampling.mis import balance_heuristic, power_heuristic
-from ..sampling.rng import SAMPLERS, sampler_batch
+from ..sampling.rng import SAMPLERS, group_slot, sample_state, sampler_batch, uniform
 from .techniques import Context, GuardedTechnique, Heuristic, TechniqueError
 
 __all__ = ["LabRenderError", "LabStrategy", "render_lab"]
@@ -99,6 +99,23 @@ def _camera_batch(cam, pixels, jitter):
 
 
 @jit_parallel
+def _technique_numbers(sampler, seed, pixels, sample, first, count, dims):
+    """(count, N, dims) numbers of a technique's ``count`` samples per camera sample, laid out as the core lays out
+    a group of shading slots (``integrators.techniques.technique_slot``): under ``sobol`` the group shares the first
+    slot's dimensions and member i of sample k takes sample index k count + i, so a pixel's samples of one technique
+    are one stratified Sobol' set; under ``independent`` member i takes slot ``first + i``."""
+    n = pixels.shape[0]
+    out = np.empty((count, n, dims))
+    for k in prange(n):
+        state = sample_state(sampler, seed, pixels[k], sample)
+        for i in range(count):
+            member, slot = group_slot(state, first, count, i)
+            for d in range(dims):
+                out[i, k, d] = uniform(member, 2 + 3 * slot + d)
+    return out
+
+
+@jit_parallel
 def _shading_batch(s, kind, index, prim, b1, b2, t, cam_origin, dirs):
     """Point, geometric normal, error bound, shading frame (N, 9), local wo and material (-1: nothing to shade)."""
     n = dirs.shape[0]
@@ -146,6 +163,7 @@ class _Shader:
         self.counts = strategy.counts(settings)
         self.dims = [t.dimensions for t in strategy.techniques]
         self.sampler = SAMPLERS[settings.sampler]
+        self.rays = 0  # shadow rays traced
 
     def close(self):
         self.tracer.close()
@@ -153,10 +171,10 @@ class _Shader:
     def values(self, pixels: np.ndarray, sample: int) -> np.ndarray:
         """Each pixel's value (N, 3) for one sample index."""
         n = pixels.shape[0]
-        total_dims = 2 + sum(c * d for c, d in zip(self.counts, self.dims, strict=True))
         samples = np.full(n, sample, dtype=np.int64)
-        u = sampler_batch(self.sampler, self.settings.seed, pixels, samples, total_dims)
-        dirs = _camera_batch(self.cam, pixels, np.ascontiguousarray(u[:, :2]))
+        seed = self.settings.seed
+        jitter = sampler_batch(self.sampler, seed, pixels, samples, 2)
+        dirs = _camera_batch(self.cam, pixels, jitter)
         t, kind, index, prim, b1, b2 = self.tracer.intersect(np.broadcast_to(self.origin, dirs.shape), dirs)
         value = np.zeros((n, 3))
         miss = kind == MISS
@@ -166,25 +184,26 @@ class _Shader:
             self.arrays, kind, index, prim, b1, b2, t, self.origin, dirs
         )
         frame = frame.reshape(n, 3, 3)
-        offset = 2
-        blocks = []
+        # each technique's numbers, (count, N, dims), its group of slots starting after the previous technique's
+        numbers, first = [], 0
         for count, dims in zip(self.counts, self.dims, strict=True):
-            blocks.append((offset, count, dims))
-            offset += count * dims
+            numbers.append(_technique_numbers(self.sampler, seed, pixels, sample, first, count, dims))
+            first += count
         for m in np.unique(material[material >= 0]):
             rows = np.nonzero(material == m)[0]
             ctx = Context(wo[rows], frame[rows, 2], frame[rows], point[rows], self.materials[m], self.env)
-            value[rows] += self._shade(ctx, u[rows], blocks, gnormal[rows], error[rows])
+            value[rows] += self._shade(ctx, [u[:, rows] for u in numbers], gnormal[rows], error[rows])
         return value
 
-    def _shade(self, ctx: Context, u: np.ndarray, blocks, gnormal, error) -> np.ndarray:
-        """The estimator of the module docstring at the points of ``ctx`` (one material)."""
+    def _shade(self, ctx: Context, numbers: list[np.ndarray], gnormal, error) -> np.ndarray:
+        """The estimator of the module docstring at the points of ``ctx`` (one material); ``numbers[t]`` holds
+        technique t's random numbers, (count, N, dims)."""
         techniques = self.strategy.techniques
         n = len(ctx)
         out = np.zeros((n, 3))
-        for j, (tech, (offset, count, dims)) in enumerate(zip(techniques, blocks, strict=True)):
+        for j, (tech, count) in enumerate(zip(techniques, self.counts, strict=True)):
             for i in range(count):
-                uu = np.ascontiguousarray(u[:, offset + i * dims : offset + (i + 1) * dims])
+                uu = np.ascontiguousarray(numbers[j][i])
                 wi, pdf = tech.sample(uu, ctx)
                 if tech.kind == "bsdf":
                     local, world = wi, np.einsum("nk,nkj->nj", wi, ctx.frame)
@@ -206,6 +225,7 @@ class _Shader:
                 side = np.where(np.einsum("nk,nk->n", d, ng) < 0.0, -1.0, 1.0)
                 origin = ctx.position[rows] + (side * error[rows])[:, None] * ng
                 visible = ~self.tracer.occluded(origin, d)
+                self.rays += d.shape[0]
                 rows, d = rows[visible], d[visible]
                 radiance = self.env.eval(d)
                 scale = weight[rows] * cos[rows] / (count * pdf[rows])
@@ -213,10 +233,13 @@ class _Shader:
         return out
 
 
-def render_lab(scene, strategy: LabStrategy, settings: RenderSettings | None = None, *, resume=None) -> RenderResult:
+def render_lab(
+    scene, strategy: LabStrategy, settings: RenderSettings | None = None, *, resume=None, progress=None
+) -> RenderResult:
     """Render ``settings.spp`` samples per pixel from ``settings.first_sample`` (continuing ``resume``, an
     :class:`Accumulator` at that count) with the techniques of ``strategy``; ``settings.time_limit`` stops between
-    passes. See the module docstring."""
+    passes, Ctrl-C keeps the passes done; ``progress(stats)`` after each pass (the render core's stats keys). See
+    the module docstring."""
     from ..integrators.wavefront import settings_for
 
     _check_scene(scene)
@@ -248,25 +271,41 @@ def render_lab(scene, strategy: LabStrategy, settings: RenderSettings | None = N
             _accumulate(acc, values)
             done += 1
             pass_seconds = time.perf_counter() - t0
+            if progress is not None:
+                progress(_stats(settings, strategy, start, done, False, False, shader.rays, acc))
     except KeyboardInterrupt:
         interrupted = True
     except TechniqueError as exc:
         partial = (
-            result_from(acc, width, height, _stats(settings, strategy, start, done, False, False)) if done else None
+            result_from(acc, width, height, _stats(settings, strategy, start, done, False, False, shader.rays, acc))
+            if done
+            else None
         )
         raise LabRenderError(
             f"{exc} (during sample {first + done}; {done} sample(s) per pixel kept)", partial
         ) from None
     finally:
         shader.close()
-    return result_from(acc, width, height, _stats(settings, strategy, start, done, stopped, interrupted))
+    stats = _stats(settings, strategy, start, done, stopped, interrupted, shader.rays, acc)
+    return result_from(acc, width, height, stats)
 
 
-def _stats(settings, strategy, start, done, stopped, interrupted) -> dict:
+def _stats(settings, strategy, start, done, stopped, interrupted, rays, acc) -> dict:
+    """The render core's stats keys that apply (the CLI's progress bar, sidecar and summary read them)."""
     seconds = time.perf_counter() - start
+    camera = done * acc.count.size
     return {
         "seconds": seconds,
         "spp": done,
+        "spp_done": int(acc.count.min()),
+        "spp_max": int(acc.count.max()),
+        "passes": done,
+        "camera_rays": camera,
+        "samples_per_s": camera / max(seconds, 1e-9),
+        "rays_per_s": (camera + rays) / max(seconds, 1e-9),
+        "nonfinite_samples": int(acc.nonfinite.sum()),
+        "adaptive": False,
+        "estimator": "lightprobe.lab (user techniques)",
         "strategy": strategy.label,
         "directions_per_sample": sum(strategy.counts(settings)),
         "stopped_by_time_limit": stopped,

@@ -6,7 +6,7 @@ A *technique* draws directions at a batch of shading points and says how dense t
     class CosineHemisphere:
         kind = "bsdf"            # "bsdf": directions in the local shading frame (normal +z, wo toward the viewer)
                                  # "light": directions toward the environment map, in world space
-        dimensions = 2           # random numbers per sample (2 or 3)
+        dimensions = 2           # random numbers per sample: 1, 2 or 3 (under sobol the first two are one pair)
         support = "hemisphere"   # bsdf only: "hemisphere" (never below the surface) or "sphere" (a lobe may dip
                                  # below it, like a Phong lobe about the mirror direction)
 
@@ -256,8 +256,8 @@ class GuardedTechnique:
         if self.kind not in KINDS:
             raise TechniqueError(f"{label}: kind must be one of {KINDS}, got {self.kind!r}")
         self.dimensions = getattr(technique, "dimensions", 2)
-        if not isinstance(self.dimensions, int) or not 1 <= self.dimensions <= 4:
-            raise TechniqueError(f"{label}: dimensions must be an integer from 1 to 4, got {self.dimensions!r}")
+        if not isinstance(self.dimensions, int) or not 1 <= self.dimensions <= 3:
+            raise TechniqueError(f"{label}: dimensions must be 1, 2 or 3, got {self.dimensions!r}")
         self.support = getattr(technique, "support", "hemisphere" if self.kind == "bsdf" else "sphere")
         if self.support not in SUPPORTS:
             raise TechniqueError(f"{label}: support must be one of {SUPPORTS}, got {self.support!r}")
@@ -367,7 +367,8 @@ class BuiltinBSDF:
     support = "sphere"
 
     def sample(self, u, ctx):
-        return ctx.material.sample(ctx.wo, u)
+        # the materials take their 2D pair from columns 1 and 2 (bsdfs/base.py); a technique's u has it in 0 and 1
+        return ctx.material.sample(ctx.wo, np.ascontiguousarray(u[:, [2, 0, 1]]))
 
     def pdf(self, wi, ctx):
         return ctx.material.pdf(ctx.wo, wi)
