@@ -197,39 +197,43 @@ class _Shader:
 
     def _shade(self, ctx: Context, numbers: list[np.ndarray], gnormal, error) -> np.ndarray:
         """The estimator of the module docstring at the points of ``ctx`` (one material); ``numbers[t]`` holds
-        technique t's random numbers, (count, N, dims)."""
+        technique t's random numbers, (count, N, dims). Each technique is called once for all its samples of the
+        batch (count x N rows, sample-major); the samples are added in the core's order, technique by technique,
+        sample by sample, so that lightprobe's own techniques give the core's image bit for bit."""
         techniques = self.strategy.techniques
         n = len(ctx)
         out = np.zeros((n, 3))
         for j, (tech, count) in enumerate(zip(techniques, self.counts, strict=True)):
-            for i in range(count):
-                uu = np.ascontiguousarray(numbers[j][i])
-                wi, pdf = tech.sample(uu, ctx)
-                if tech.kind == "bsdf":
-                    local, world = wi, np.einsum("nk,nkj->nj", wi, ctx.frame)
-                else:
-                    world, local = wi, np.einsum("nkj,nj->nk", ctx.frame, wi)
-                weight = np.ones(n)
-                if len(techniques) == 2:
-                    other = techniques[1 - j]
-                    p_other = other.pdf(local if other.kind == "bsdf" else world, ctx)
-                    weight = _weight(self.strategy.heuristic, count, pdf, self.counts[1 - j], p_other)
-                f = ctx.material.eval(ctx.wo, local)
-                cos = np.maximum(local[:, 2], 0.0)
-                live = (pdf > 0) & (cos > 0) & (weight > 0) & np.any(f > 0, axis=1)
-                if not live.any():
-                    continue
-                rows = np.nonzero(live)[0]
+            rows_of = np.tile(np.arange(n), count)
+            every = ctx.subset(rows_of) if count > 1 else ctx
+            uu = np.ascontiguousarray(numbers[j].reshape(count * n, -1))
+            wi, pdf = tech.sample(uu, every)
+            if tech.kind == "bsdf":
+                local, world = wi, np.einsum("nk,nkj->nj", wi, every.frame)
+            else:
+                world, local = wi, np.einsum("nkj,nj->nk", every.frame, wi)
+            weight = np.ones(count * n)
+            if len(techniques) == 2:
+                other = techniques[1 - j]
+                p_other = other.pdf(local if other.kind == "bsdf" else world, every)
+                weight = _weight(self.strategy.heuristic, count, pdf, self.counts[1 - j], p_other)
+            f = every.material.eval(every.wo, local)
+            cos = np.maximum(local[:, 2], 0.0)
+            live = (pdf > 0) & (cos > 0) & (weight > 0) & np.any(f > 0, axis=1)
+            contribution = np.zeros((count * n, 3))
+            rows = np.nonzero(live)[0]
+            if rows.size:
                 d = world[rows] / np.linalg.norm(world[rows], axis=1, keepdims=True)
-                ng = gnormal[rows]
+                ng = gnormal[rows_of[rows]]
                 side = np.where(np.einsum("nk,nk->n", d, ng) < 0.0, -1.0, 1.0)
-                origin = ctx.position[rows] + (side * error[rows])[:, None] * ng
+                origin = every.position[rows] + (side * error[rows_of[rows]])[:, None] * ng
                 visible = ~self.tracer.occluded(origin, d)
                 self.rays += d.shape[0]
                 rows, d = rows[visible], d[visible]
-                radiance = self.env.eval(d)
                 scale = weight[rows] * cos[rows] / (count * pdf[rows])
-                out[rows] += f[rows] * radiance * scale[:, None]
+                contribution[rows] = f[rows] * self.env.eval(d) * scale[:, None]
+            for i in range(count):
+                out += contribution[i * n : (i + 1) * n]
         return out
 
 
