@@ -130,11 +130,13 @@ def test_compare_takes_user_strategies(exercise_scene):
     scene, reference = exercise_scene
     runs = compare(
         scene,
-        ["mis", f"mis:{SOLUTIONS}:PhongLobes", f"{TECHNIQUES}:FailsLater"],
+        ["mis", f"mis:{SOLUTIONS}:PhongLobes", f"{TECHNIQUES}:FailsLater", "lab:mis"],
         reference.image,
         reference.variance,
         spp=4,
     )
+    # lightprobe's techniques through the laboratory: the core's image, so the same error (at the lab's speed)
+    assert runs[3].metrics["mse"] == runs[0].metrics["mse"] and np.array_equal(runs[3].image, runs[0].image)
     assert runs[0].label == "mis" and runs[0].error is None
     assert runs[1].spp == 4 and runs[1].error is None and runs[1].metrics["relmse"] > 0
     assert runs[2].error is not None and "ran out of luck" in runs[2].error and runs[2].rounds

@@ -335,9 +335,15 @@ def _accumulate(acc: Accumulator, values: np.ndarray) -> None:
 _TOKEN = re.compile(r"^(?P<mis>mis:)?(?P<specs>.+?\.py(?::\w+)?(?:\+.+?\.py(?::\w+)?)*)(?P<overrides>(?:/[^/]*)*)$")
 
 
+#: lightprobe's own techniques through the laboratory's estimator: the render core's image, at the laboratory's
+#: speed, for comparisons with user techniques at equal time
+BUILTIN_TOKENS = {"lab:mis": ("bsdf", "light"), "lab:brdf": ("bsdf",), "lab:env": ("light",)}
+
+
 def is_lab_token(token: str) -> bool:
-    """Does a strategy token name a user technique (``FILE.py[:NAME]``, ``mis:FILE.py[:NAME][+FILE.py[:NAME]]``)?"""
-    return ".py" in token
+    """Does a strategy token name a user technique (``FILE.py[:NAME]``, ``mis:FILE.py[:NAME][+FILE.py[:NAME]]``) or
+    lightprobe's techniques through the laboratory (``lab:mis``, ``lab:brdf``, ``lab:env``)?"""
+    return ".py" in token or token.strip().split("/")[0] in BUILTIN_TOKENS
 
 
 def parse_lab_token(token: str) -> tuple[LabStrategy, list[str]]:
@@ -346,6 +352,9 @@ def parse_lab_token(token: str) -> tuple[LabStrategy, list[str]]:
     technique and a user light technique under MIS."""
     from .techniques import builtin, load_technique
 
+    name, *overrides = token.strip().split("/")
+    if name in BUILTIN_TOKENS:
+        return LabStrategy(tuple(builtin(kind) for kind in BUILTIN_TOKENS[name])), [o for o in overrides if o]
     match = _TOKEN.match(token.strip())
     if match is None:
         raise TechniqueError(f"strategy {token!r}: expected FILE.py[:NAME] or mis:FILE.py[:NAME][+FILE.py[:NAME]]")
