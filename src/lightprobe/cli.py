@@ -359,7 +359,10 @@ def compare_command(
     demo: Annotated[bool, typer.Option("--demo", help="Compare on the built-in demo scene.")] = False,
     strategies: Annotated[
         str,
-        typer.Option(help="Comma-separated: env, brdf, mis-balance, mis-power, ..., each with /key=value overrides."),
+        typer.Option(
+            help="Comma-separated: env, brdf, mis-balance, mis-power, ..., each with /key=value overrides; your "
+            "techniques as FILE.py[:NAME] or mis:FILE.py[:NAME][+FILE.py[:NAME]]; lab:mis, lab:brdf, lab:env."
+        ),
     ] = "env,brdf,mis-balance,mis-power",
     equal: Annotated[str, typer.Option(help="spp (equal samples) or time (equal seconds).")] = "spp",
     spp: Annotated[int, typer.Option(help="Samples per pixel of each strategy (--equal spp).")] = 64,
