@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from lightprobe.analysis import chi2
-from lightprobe.bsdfs import GGXConductor, Lambert, Phong, RoughPlastic
+from lightprobe.bsdfs import GGXConductor, Lambert, MetallicRoughness, Phong, RoughPlastic
 from lightprobe.bsdfs.conductor import CONDUCTOR_PRESETS
 from lightprobe.bsdfs.fresnel import fresnel_conductor, fresnel_dielectric
 from lightprobe.bsdfs.microfacet import ggx_d
@@ -31,6 +31,9 @@ MATERIALS = {
     **{f"ggx alpha={a:g}": GGXConductor(a) for a in (0.01, 0.05, 0.1, 0.3, 1.0)},
     "ggx no fresnel": GGXConductor(0.2, fresnel=False),
     **{f"plastic alpha={a:g}": RoughPlastic([0.6, 0.15, 0.1], a) for a in (0.02, 0.3, 1.0)},
+    "gltf dielectric roughness=0.5": MetallicRoughness([0.8, 0.2, 0.1], 0.0, 0.5),
+    "gltf metal roughness=0.1": MetallicRoughness([0.9, 0.6, 0.2], 1.0, 0.1),
+    "gltf half metal roughness=0.8": MetallicRoughness(0.5, 0.5, 0.8),
 }
 CASES = [(m, a) for m in MATERIALS for a in ANGLES]
 

@@ -4,7 +4,8 @@ from . import dispatch  # noqa: F401 - gives the BSDF classes their batch kernel
 from .base import BSDF
 from .conductor import GGXConductor
 from .lambert import Lambert
+from .metallic_roughness import MetallicRoughness
 from .phong import Phong
 from .plastic import RoughPlastic
 
-__all__ = ["BSDF", "GGXConductor", "Lambert", "Phong", "RoughPlastic"]
+__all__ = ["BSDF", "GGXConductor", "Lambert", "MetallicRoughness", "Phong", "RoughPlastic"]

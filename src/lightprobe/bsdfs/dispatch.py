@@ -12,6 +12,12 @@ from .._numba import jit_inline, jit_parallel, prange
 from .base import BATCHES
 from .conductor import GGX_CONDUCTOR, ggx_conductor_eval, ggx_conductor_pdf, ggx_conductor_sample
 from .lambert import LAMBERT, lambert_eval, lambert_pdf, lambert_sample
+from .metallic_roughness import (
+    METALLIC_ROUGHNESS,
+    metallic_roughness_eval,
+    metallic_roughness_pdf,
+    metallic_roughness_sample,
+)
 from .phong import PHONG, phong_eval, phong_pdf, phong_sample
 from .plastic import PLASTIC, plastic_eval, plastic_pdf, plastic_sample
 
@@ -28,6 +34,8 @@ def bsdf_eval(kind, p, wo, wi):
         return ggx_conductor_eval(p, wo, wi)
     if kind == PLASTIC:
         return plastic_eval(p, wo, wi)
+    if kind == METALLIC_ROUGHNESS:
+        return metallic_roughness_eval(p, wo, wi)
     return 0.0, 0.0, 0.0
 
 
@@ -41,6 +49,8 @@ def bsdf_pdf(kind, p, wo, wi):
         return ggx_conductor_pdf(p, wo, wi)
     if kind == PLASTIC:
         return plastic_pdf(p, wo, wi)
+    if kind == METALLIC_ROUGHNESS:
+        return metallic_roughness_pdf(p, wo, wi)
     return 0.0
 
 
@@ -55,6 +65,8 @@ def bsdf_sample(kind, p, wo, u0, u1, u2):
         return ggx_conductor_sample(p, wo, u0, u1, u2)
     if kind == PLASTIC:
         return plastic_sample(p, wo, u0, u1, u2)
+    if kind == METALLIC_ROUGHNESS:
+        return metallic_roughness_sample(p, wo, u0, u1, u2)
     return (0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0)
 
 

@@ -38,6 +38,11 @@ Example (every key shown; optional ones have their default)::
     rho_d = 0.2
     rho_s = 0.7
     exponent = 200
+    [materials.painted]
+    type = "metallic_roughness"         # glTF 2.0's: base_color, metallic, roughness (defaults 1, 1, 1)
+    base_color = [0.8, 0.1, 0.1]
+    metallic = 0.0
+    roughness = 0.4
 
     [[objects]]
     type = "mesh"                       # OBJ, PLY, PLY.GZ, glTF/GLB
@@ -126,7 +131,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..bsdfs import GGXConductor, Lambert, Phong, RoughPlastic
+from ..bsdfs import GGXConductor, Lambert, MetallicRoughness, Phong, RoughPlastic
 from ..emitters.directional import DirectionalLight
 from ..emitters.envmap import EnvironmentMap
 from ..emitters.procedural import constant, sky_with_sun
@@ -288,8 +293,12 @@ def _material(t: _Table):
         )
     elif kind == "plastic":
         bsdf = RoughPlastic(t.get("diffuse", 0.5), t.number("alpha", 0.1), eta=t.number("eta", 1.49 / 1.000277))
+    elif kind == "metallic_roughness":
+        bsdf = MetallicRoughness(t.get("base_color", 1.0), t.number("metallic", 1.0), t.number("roughness", 1.0))
     else:
-        raise SceneError(f"{t.where}: unknown material type {kind!r}; use lambert, phong, conductor or plastic")
+        raise SceneError(
+            f"{t.where}: unknown material type {kind!r}; use lambert, phong, conductor, plastic or metallic_roughness"
+        )
     t.done()
     return bsdf
 
