@@ -208,6 +208,10 @@ def render_command(
         typer.Option(help="Also write an object-id pass here (.exr, channel object_id; -1 = background)."),
     ] = None,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+    camera: Annotated[
+        str | None,
+        typer.Option(help="Render from this camera of the scene's glTF objects (keeps the resolution)."),
+    ] = None,
     techniques: Annotated[
         str | None,
         typer.Option(
@@ -242,6 +246,12 @@ def render_command(
         scene, defaults = load_scene(scene_file, require_light=not lamps)
     for lamp in lamps:
         scene.add_light(lamp)
+    if camera is not None:
+        if camera not in scene.cameras:
+            known = ", ".join(scene.cameras) or "none (no glTF object has one)"
+            raise LightprobeError(f"--camera {camera!r}: no such camera; the scene's glTF cameras: {known}")
+        asset, key = scene.cameras[camera]
+        scene.camera = asset.camera(key, scene.camera.resolution)
     if width is not None:
         if width < 1:
             raise LightprobeError(f"--width must be >= 1, got {width}")

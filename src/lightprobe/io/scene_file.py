@@ -337,10 +337,24 @@ def _object(scene: Scene, t: _Table, base: Path) -> None:
     emission = t.rgb("emission")
     if emission is not None:
         emission = emission * t.number("emission_scale", 1.0)
-    material = t.string("material", required=emission is None and "face_emission" not in t.data)
+    material = t.string("material", required=kind != "gltf" and emission is None and "face_emission" not in t.data)
     two_sided = t.boolean("two_sided", False)
     name = t.string("name", t.where)
     extra = {"emission": emission} if emission is not None else {}
+    if kind == "gltf":
+        from .gltf import load_gltf
+
+        file = _path(base, t.get("file", required=True), t.where)
+        transform = t.get("transform")
+        if transform is not None and not isinstance(transform, dict):
+            raise SceneError(f"{t.where}: transform must be a table")
+        if "material" in t.data or emission is not None:
+            raise SceneError(f"{t.where}: a glTF object takes its materials and emission from its file")
+        t.done()
+        asset = load_gltf(file, transform=transform)
+        asset.add_to(scene, name=name if "name" in t.data else file.name)
+        scene.cameras.update({n: (asset, n) for n in asset.cameras})
+        return
     if kind == "mesh":
         file = _path(base, t.get("file", required=True), t.where)
         face_values = _face_emission(t, base)

@@ -1,0 +1,360 @@
+"""glTF 2.0 scenes (``.gltf`` with its buffers and images, or ``.glb``): meshes with their node transforms and
+metallic-roughness materials, cameras and ``KHR_lights_punctual`` lights.
+
+The JSON is read here and the accessors decoded with NumPy, as the specification lays them out (component type,
+count, element type, byte offset and stride, normalized integers); trimesh's glTF loader rounds base colours to 8
+bits and does not say which material a primitive had, so it serves to write test assets and to cross-check the
+geometry, not to read (decisions.md 84).
+
+What becomes what:
+
+- every node of the default scene (``scene``, else the first), with its world transform (``matrix`` or
+  translation x rotation x scale, parents first), that holds a mesh: one lightprobe mesh per triangle primitive,
+  with the file's normals (else flat), in the node's world frame and then the include's ``transform``;
+- a primitive's material: :class:`~lightprobe.bsdfs.MetallicRoughness` with ``baseColorFactor``, ``metallicFactor``,
+  ``roughnessFactor`` (the specification's defaults 1, 1, 1, and its default material when there is none);
+  ``emissiveFactor`` x ``KHR_materials_emissive_strength`` makes the primitive an area light; ``doubleSided``;
+  textures are not applied yet: a material with one is rendered with its factors, with a warning naming it;
+- cameras (perspective): :class:`~lightprobe.geometry.Camera` at the node, looking down its -Z with +Y up, ``yfov``
+  vertical; orthographic cameras are refused by name;
+- ``KHR_lights_punctual``: point (intensity in candela, taken as W/sr), spot (cone angles), directional (lux, as
+  W/m^2, a delta light); ``range`` is ignored with a warning.
+
+Refused, each in one line naming the file and the item: a missing or short buffer, a data URI that is not base64,
+``extensionsRequired`` outside what is read here (Draco: ``KHR_draco_mesh_compression``, by name), primitives that
+are not triangles (points, lines, strips and fans), sparse accessors, indices out of range.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+import math
+import struct
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import SceneError, warn_once
+
+__all__ = ["GltfAsset", "load_gltf"]
+
+SUPPORTED_REQUIRED = {"KHR_lights_punctual", "KHR_materials_emissive_strength"}
+_COMPONENTS = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
+_WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
+_MODES = {0: "points", 1: "lines", 2: "line loop", 3: "line strip", 4: "triangles", 5: "triangle strip", 6: "fan"}
+
+
+@dataclass
+class GltfMesh:
+    """One triangle primitive in world space, with its material and emission."""
+
+    mesh: object  # TriangleMesh
+    material: object  # MetallicRoughness
+    name: str
+    two_sided: bool
+    emission: np.ndarray | None = None
+
+
+@dataclass
+class GltfAsset:
+    path: Path
+    meshes: list[GltfMesh] = field(default_factory=list)
+    cameras: dict = field(default_factory=dict)  # name -> (origin, target, up, yfov degrees)
+    lights: list = field(default_factory=list)
+
+    def add_to(self, scene, *, name: str | None = None) -> None:
+        """Add the meshes (with their materials) and the lights to ``scene``."""
+        prefix = name or self.path.name
+        for item in self.meshes:
+            scene.add(item.mesh, item.material, two_sided=item.two_sided, name=f"{prefix}: {item.name}",
+                      emission=item.emission)  # fmt: skip
+        for light in self.lights:
+            scene.add_light(light)
+
+    def camera(self, name: str, resolution):
+        """The file's camera ``name`` as a lightprobe Camera of ``resolution``."""
+        from ..geometry import Camera
+
+        if name not in self.cameras:
+            known = ", ".join(self.cameras) or "none"
+            raise SceneError(f"{self.path}: no camera named {name!r} (cameras: {known})")
+        origin, target, up, fov = self.cameras[name]
+        return Camera(origin, target, up, fov=fov, resolution=resolution)
+
+
+class _Reader:
+    def __init__(self, path: Path):
+        self.path = path
+        try:
+            raw = path.read_bytes()
+        except FileNotFoundError:
+            raise SceneError(f"{path}: no such file") from None
+        except OSError as exc:
+            raise SceneError(f"{path}: cannot be read ({exc.strerror})") from None
+        self.blob = None
+        if raw[:4] == b"glTF":
+            self.doc, self.blob = self._glb(raw)
+        else:
+            try:
+                self.doc = json.loads(raw.decode("utf-8"))
+            except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+                raise SceneError(f"{path}: not glTF (neither a GLB file nor JSON: {exc})") from None
+        if not isinstance(self.doc, dict) or "asset" not in self.doc:
+            raise SceneError(f"{path}: not glTF (no 'asset' object)")
+        version = str(self.doc["asset"].get("version", ""))
+        if not version.startswith("2."):
+            raise SceneError(f"{path}: glTF version {version!r}; only 2.x is read")
+        required = set(self.doc.get("extensionsRequired", []))
+        if "KHR_draco_mesh_compression" in required:
+            raise SceneError(f"{path}: Draco-compressed meshes (KHR_draco_mesh_compression) are not supported; "
+                             "export without compression")  # fmt: skip
+        unsupported = sorted(required - SUPPORTED_REQUIRED)
+        if unsupported:
+            raise SceneError(f"{path}: requires unsupported extension(s) {', '.join(unsupported)}")
+        self._buffers: dict[int, bytes] = {}
+
+    def _glb(self, raw: bytes):
+        if len(raw) < 20:
+            raise SceneError(f"{self.path}: truncated GLB header")
+        _, version, length = struct.unpack_from("<4sII", raw, 0)
+        if version != 2:
+            raise SceneError(f"{self.path}: GLB version {version}; only 2 is read")
+        if length > len(raw):
+            raise SceneError(f"{self.path}: truncated GLB ({len(raw)} of {length} bytes)")
+        offset, doc, blob = 12, None, None
+        while offset + 8 <= length:
+            size, kind = struct.unpack_from("<II", raw, offset)
+            chunk = raw[offset + 8 : offset + 8 + size]
+            if len(chunk) < size:
+                raise SceneError(f"{self.path}: truncated GLB chunk")
+            if kind == 0x4E4F534A:  # JSON
+                try:
+                    doc = json.loads(chunk.decode("utf-8"))
+                except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+                    raise SceneError(f"{self.path}: the GLB's JSON chunk is corrupt ({exc})") from None
+            elif kind == 0x004E4942 and blob is None:  # BIN
+                blob = chunk
+            offset += 8 + size + (-size % 4)
+        if doc is None:
+            raise SceneError(f"{self.path}: GLB without a JSON chunk")
+        return doc, blob
+
+    def buffer(self, index: int) -> bytes:
+        if index in self._buffers:
+            return self._buffers[index]
+        buffers = self.doc.get("buffers", [])
+        if not 0 <= index < len(buffers):
+            raise SceneError(f"{self.path}: buffer {index} does not exist")
+        spec = buffers[index]
+        uri = spec.get("uri")
+        if uri is None:
+            if self.blob is None:
+                raise SceneError(f"{self.path}: buffer {index} has no uri and the file has no binary chunk")
+            data = self.blob
+        elif uri.startswith("data:"):
+            head, _, payload = uri.partition(",")
+            if not head.endswith(";base64"):
+                raise SceneError(f"{self.path}: buffer {index}: only base64 data URIs are read")
+            data = base64.b64decode(payload)
+        else:
+            file = self.path.parent / uri
+            try:
+                data = file.read_bytes()
+            except FileNotFoundError:
+                raise SceneError(f"{file}: no such file (buffer {index} of {self.path.name})") from None
+        if len(data) < spec.get("byteLength", 0):
+            source = "binary chunk" if uri is None else ("data URI" if uri.startswith("data:") else uri)
+            raise SceneError(f"{self.path}: buffer {index} ({source}) holds {len(data)} bytes, "
+                             f"expected {spec['byteLength']}")  # fmt: skip
+        self._buffers[index] = data
+        return data
+
+    def accessor(self, index: int, what: str) -> np.ndarray:
+        """Accessor ``index`` as an (count, width) float64 or int64 array."""
+        accessors = self.doc.get("accessors", [])
+        if not 0 <= index < len(accessors):
+            raise SceneError(f"{self.path}: {what}: accessor {index} does not exist")
+        acc = accessors[index]
+        if "sparse" in acc:
+            raise SceneError(f"{self.path}: {what}: sparse accessors are not supported")
+        dtype = _COMPONENTS.get(acc.get("componentType"))
+        width = _WIDTH.get(acc.get("type"))
+        if dtype is None or width is None:
+            raise SceneError(f"{self.path}: {what}: accessor {index} has an unknown component or element type")
+        count = int(acc.get("count", 0))
+        if "bufferView" not in acc:
+            return np.zeros((count, width))
+        view = self.doc["bufferViews"][acc["bufferView"]]
+        data = self.buffer(view["buffer"])
+        start = view.get("byteOffset", 0) + acc.get("byteOffset", 0)
+        item = np.dtype(dtype).itemsize * width
+        stride = view.get("byteStride") or item
+        end = start + (count - 1) * stride + item if count else start
+        if end > view.get("byteOffset", 0) + view["byteLength"] or end > len(data):
+            raise SceneError(f"{self.path}: {what}: accessor {index} runs past its buffer view")
+        if stride == item:
+            array = np.frombuffer(data, dtype=dtype, count=count * width, offset=start).reshape(count, width)
+        else:
+            rows = np.lib.stride_tricks.as_strided(
+                np.frombuffer(data, dtype=np.uint8, offset=start), shape=(count, item), strides=(stride, 1)
+            )
+            array = np.ascontiguousarray(rows).view(dtype).reshape(count, width)
+        if acc.get("normalized") and dtype is not np.float32:
+            info = np.iinfo(dtype)
+            return np.maximum(array.astype(np.float64) / info.max, -1.0)
+        return array.astype(np.float64 if dtype is np.float32 else np.int64)
+
+
+def _node_matrix(node: dict) -> np.ndarray:
+    if "matrix" in node:
+        return np.asarray(node["matrix"], dtype=np.float64).reshape(4, 4).T  # column-major in the file
+    t = np.asarray(node.get("translation", [0.0, 0.0, 0.0]), dtype=np.float64)
+    x, y, z, w = (float(c) for c in node.get("rotation", [0.0, 0.0, 0.0, 1.0]))
+    s = np.asarray(node.get("scale", [1.0, 1.0, 1.0]), dtype=np.float64)
+    r = np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])  # fmt: skip
+    m = np.eye(4)
+    m[:3, :3] = r * s[None, :]
+    m[:3, 3] = t
+    return m
+
+
+def _world_nodes(doc: dict, path: Path):
+    """(node index, world matrix) of every node of the default scene, parents before children."""
+    nodes = doc.get("nodes", [])
+    scenes = doc.get("scenes")
+    if scenes:
+        roots = scenes[doc.get("scene", 0)].get("nodes", [])
+    else:  # no scene: every node that is nobody's child
+        children = {c for n in nodes for c in n.get("children", [])}
+        roots = [i for i in range(len(nodes)) if i not in children]
+    out, stack, seen = [], [(r, np.eye(4)) for r in reversed(roots)], set()
+    while stack:
+        index, parent = stack.pop()
+        if index in seen:
+            raise SceneError(f"{path}: node {index} is its own ancestor (the node graph has a cycle)")
+        seen.add(index)
+        world = parent @ _node_matrix(nodes[index])
+        out.append((index, world))
+        stack.extend((c, world) for c in reversed(nodes[index].get("children", [])))
+    return out
+
+
+def _material(doc: dict, index: int | None, path: Path, where: str):
+    from ..bsdfs import MetallicRoughness
+
+    if index is None:
+        return MetallicRoughness(1.0, 1.0, 1.0), None, False, "default material"
+    spec = doc["materials"][index]
+    name = spec.get("name") or f"material {index}"
+    pbr = spec.get("pbrMetallicRoughness", {})
+    base = pbr.get("baseColorFactor", [1.0, 1.0, 1.0, 1.0])
+    textures = [k for k in ("baseColorTexture", "metallicRoughnessTexture") if k in pbr]
+    textures += [k for k in ("normalTexture", "emissiveTexture", "occlusionTexture") if k in spec]
+    if textures:
+        warn_once(f"{path}: material {name!r}: textures are not applied yet ({', '.join(textures)}); its factors are "
+                  "used")  # fmt: skip
+    if spec.get("alphaMode", "OPAQUE") != "OPAQUE":
+        warn_once(f"{path}: material {name!r}: alphaMode {spec['alphaMode']} is rendered as OPAQUE")
+    try:
+        material = MetallicRoughness(base[:3], pbr.get("metallicFactor", 1.0), pbr.get("roughnessFactor", 1.0))
+    except Exception as exc:
+        raise SceneError(f"{path}: {where}: material {name!r}: {exc}") from None
+    emissive = np.asarray(spec.get("emissiveFactor", [0.0, 0.0, 0.0]), dtype=np.float64)
+    strength = spec.get("extensions", {}).get("KHR_materials_emissive_strength", {}).get("emissiveStrength", 1.0)
+    emission = emissive * float(strength) if np.any(emissive > 0) else None
+    return material, emission, bool(spec.get("doubleSided", False)), name
+
+
+def load_gltf(path, *, transform=None) -> GltfAsset:
+    """Read a glTF 2.0 file; ``transform`` (4x4 or a scene-file transform table) places the whole asset."""
+    from ..geometry.mesh import TriangleMesh
+    from ..geometry.transform import make_transform
+
+    file = Path(path)
+    reader = _Reader(file)
+    doc = reader.doc
+    place = np.asarray(transform, dtype=np.float64) if isinstance(transform, np.ndarray) else make_transform(transform)
+    asset = GltfAsset(file)
+    lights = doc.get("extensions", {}).get("KHR_lights_punctual", {}).get("lights", [])
+    for node_index, world in _world_nodes(doc, file):
+        node = doc["nodes"][node_index]
+        matrix = place @ world
+        if "mesh" in node:
+            mesh_spec = doc["meshes"][node["mesh"]]
+            mesh_name = mesh_spec.get("name") or f"mesh {node['mesh']}"
+            for k, prim in enumerate(mesh_spec.get("primitives", [])):
+                where = f"mesh {mesh_name!r} primitive {k}"
+                mode = prim.get("mode", 4)
+                if mode != 4:
+                    raise SceneError(f"{file}: {where} is {_MODES.get(mode, f'mode {mode}')}; only triangles are "
+                                     "read (re-export with triangulation)")  # fmt: skip
+                attributes = prim.get("attributes", {})
+                if "POSITION" not in attributes:
+                    raise SceneError(f"{file}: {where} has no POSITION")
+                vertices = reader.accessor(attributes["POSITION"], where)
+                normals = reader.accessor(attributes["NORMAL"], where) if "NORMAL" in attributes else None
+                if "indices" in prim:
+                    faces = reader.accessor(prim["indices"], where).reshape(-1)
+                else:
+                    faces = np.arange(vertices.shape[0])
+                if faces.size % 3:
+                    raise SceneError(f"{file}: {where}: {faces.size} indices are not whole triangles")
+                if faces.size and (faces.min() < 0 or faces.max() >= vertices.shape[0]):
+                    raise SceneError(f"{file}: {where}: indices out of range (0 to {vertices.shape[0] - 1})")
+                label = f"{mesh_name}" + (f" #{k}" if len(mesh_spec["primitives"]) > 1 else "")
+                mesh = TriangleMesh.from_arrays(vertices, faces.reshape(-1, 3), normals, smooth=False,
+                                                name=f"{file.name}: {label}")  # fmt: skip
+                material, emission, two_sided, _ = _material(doc, prim.get("material"), file, where)
+                asset.meshes.append(GltfMesh(mesh.transformed(matrix), material, label, two_sided, emission))
+        if "camera" in node:
+            spec = doc["cameras"][node["camera"]]
+            name = spec.get("name") or f"camera {node['camera']}"
+            if spec.get("type") != "perspective":
+                raise SceneError(f"{file}: camera {name!r} is {spec.get('type')}; only perspective cameras are read")
+            origin = matrix[:3, 3]
+            forward = -matrix[:3, 2] / np.linalg.norm(matrix[:3, 2])
+            up = matrix[:3, 1] / np.linalg.norm(matrix[:3, 1])
+            fov = math.degrees(float(spec["perspective"]["yfov"]))
+            asset.cameras[name] = (origin, origin + forward, up, fov)
+        light_ref = node.get("extensions", {}).get("KHR_lights_punctual", {}).get("light")
+        if light_ref is not None:
+            asset.lights.append(_light(lights, light_ref, matrix, file))
+    if not asset.meshes and not asset.lights:
+        raise SceneError(f"{file}: no triangle meshes or lights in its scene")
+    return asset
+
+
+def _light(lights: list, index: int, matrix: np.ndarray, path: Path):
+    from ..emitters.directional import DirectionalLight
+    from ..emitters.punctual import PointLight, SpotLight
+
+    if not 0 <= index < len(lights):
+        raise SceneError(f"{path}: KHR_lights_punctual light {index} does not exist")
+    spec = lights[index]
+    name = spec.get("name") or f"light {index}"
+    color = np.asarray(spec.get("color", [1.0, 1.0, 1.0]), dtype=np.float64)
+    power = color * float(spec.get("intensity", 1.0))
+    if "range" in spec:
+        warn_once(f"{path}: light {name!r}: range is ignored (lights fall off with the inverse square)")
+    position = matrix[:3, 3]
+    direction = -matrix[:3, 2] / np.linalg.norm(matrix[:3, 2])  # lights shine down the node's -Z
+    kind = spec.get("type")
+    try:
+        if kind == "point":
+            return PointLight(position, power)
+        if kind == "spot":
+            spot = spec.get("spot", {})
+            outer = math.degrees(float(spot.get("outerConeAngle", math.pi / 4)))
+            inner = math.degrees(float(spot.get("innerConeAngle", 0.0)))
+            return SpotLight(position, position + direction, power, cone_angle=outer, falloff_start=inner)
+        if kind == "directional":
+            return DirectionalLight(direction, power)
+    except Exception as exc:
+        raise SceneError(f"{path}: light {name!r}: {exc}") from None
+    raise SceneError(f"{path}: light {name!r} has unknown type {kind!r}")
