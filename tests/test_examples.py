@@ -43,3 +43,15 @@ def test_notebook_runs(path, tmp_path):
     outputs = [o for cell in notebook.cells if cell.cell_type == "code" for o in cell.get("outputs", [])]
     assert not [o for o in outputs if o.get("output_type") == "error"]
     assert any("image/png" in o.get("data", {}) for o in outputs)  # the pictures were drawn
+
+
+def test_the_gltf_asset_is_what_its_script_writes(tmp_path):
+    """examples/assets/spheres.glb is examples/make_gltf_asset.py's output, byte for byte (so it can be remade)."""
+    import importlib.util
+
+    root = Path(__file__).resolve().parents[1] / "examples"
+    spec = importlib.util.spec_from_file_location("make_gltf_asset", root / "make_gltf_asset.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    written = module.main(tmp_path / "spheres.glb")
+    assert written.read_bytes() == (root / "assets" / "spheres.glb").read_bytes()
