@@ -4,8 +4,8 @@ The public API (see the README and each module's docstring):
 
 * lights: :class:`EnvironmentMap` (``load``, ``from_array``, ``eval``, ``sample``, ``pdf``), :class:`PointLight`,
   :class:`SpotLight` (``Scene.add_light``; area lights are objects with an emission);
-* materials: :class:`Lambert`, :class:`Phong`, :class:`GGXConductor`, :class:`RoughPlastic` (``eval``,
-  ``sample``, ``pdf``);
+* materials: :class:`Lambert`, :class:`Phong`, :class:`GGXConductor`, :class:`RoughPlastic`,
+  :class:`MetallicRoughness` (``eval``, ``sample``, ``pdf``);
 * estimators at one shading point: :func:`estimate`;
 * scenes and rendering: :class:`Scene`, :class:`Camera`, :class:`TriangleMesh`, :class:`Sphere`,
   :class:`Rectangle`, :func:`render` with :class:`RenderSettings`;
@@ -13,7 +13,7 @@ The public API (see the README and each module's docstring):
 * verification: :mod:`lightprobe.analysis.chi2`.
 """
 
-from .bsdfs import BSDF, GGXConductor, Lambert, Phong, RoughPlastic
+from .bsdfs import BSDF, GGXConductor, Lambert, MetallicRoughness, Phong, RoughPlastic
 from .emitters.envmap import EnvironmentMap
 from .emitters.punctual import PointLight, SpotLight
 from .errors import ImageError, LightprobeError, LightprobeWarning, ParameterError, SceneError
@@ -32,6 +32,7 @@ __all__ = [
     "Lambert",
     "LightprobeError",
     "LightprobeWarning",
+    "MetallicRoughness",
     "ParameterError",
     "Phong",
     "PointLight",
