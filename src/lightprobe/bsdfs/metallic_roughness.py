@@ -30,10 +30,10 @@ import math
 from .._numba import jit, jit_inline
 from ..errors import ParameterError
 from ..sampling.distributions import choose_rescaled
-from ..sampling.kernels import INV_PI, cosine_hemisphere_pdf, square_to_cosine_hemisphere
+from ..sampling.kernels import INV_PI, cosine_hemisphere_pdf
 from .base import BSDF, rgb_param
 from .conductor import ggx_reflection_pdf
-from .microfacet import ggx_d_terms, ggx_sample_visible_normal
+from .microfacet import ggx_d_terms, specular_or_diffuse_direction
 
 __all__ = ["METALLIC_ROUGHNESS", "MetallicRoughness"]
 
@@ -108,12 +108,7 @@ def metallic_roughness_sample(p, wo, u0, u1, u2):
     if wo[2] <= 0.0:
         return (0.0, 0.0, 1.0), 0.0, zero
     specular, v = choose_rescaled(u2, _specular_probability(p, wo))
-    if specular:
-        mx, my, mz = ggx_sample_visible_normal(p[_ALPHA], wo[0], wo[1], wo[2], u1, v)
-        d = wo[0] * mx + wo[1] * my + wo[2] * mz
-        wi = (2.0 * d * mx - wo[0], 2.0 * d * my - wo[1], 2.0 * d * mz - wo[2])
-    else:
-        wi = square_to_cosine_hemisphere(u1, v)
+    wi = specular_or_diffuse_direction(p[_ALPHA], wo, specular, u1, v)
     pdf = metallic_roughness_pdf(p, wo, wi)
     if pdf <= 0.0 or wi[2] <= 0.0:
         return wi, pdf, zero

@@ -14,9 +14,16 @@ from __future__ import annotations
 import math
 
 from .._numba import jit, jit_inline
-from ..sampling.kernels import sincos_turns
+from ..sampling.kernels import sincos_turns, square_to_cosine_hemisphere
 
-__all__ = ["ggx_d", "ggx_d_terms", "ggx_g1", "ggx_g1_denominator", "ggx_sample_visible_normal"]
+__all__ = [
+    "ggx_d",
+    "ggx_d_terms",
+    "ggx_g1",
+    "ggx_g1_denominator",
+    "ggx_sample_visible_normal",
+    "specular_or_diffuse_direction",
+]
 
 
 @jit
@@ -93,3 +100,15 @@ def ggx_sample_visible_normal(alpha, vx, vy, vz, u1, u2):
     mx, my, mz = alpha * nx, alpha * ny, max(1e-12, nz)
     inv = 1.0 / math.sqrt(mx * mx + my * my + mz * mz)
     return mx * inv, my * inv, mz * inv
+
+
+@jit_inline
+def specular_or_diffuse_direction(alpha, wo, specular, u1, v):
+    """The direction of a sample of a material with a GGX layer over a diffuse base (the rough plastic, glTF's
+    metallic-roughness): wo reflected about a visible normal (``specular``) or a cosine-weighted direction, from
+    the pair (u1, v) whose second number the lobe choice rescaled."""
+    if specular:
+        mx, my, mz = ggx_sample_visible_normal(alpha, wo[0], wo[1], wo[2], u1, v)
+        d = wo[0] * mx + wo[1] * my + wo[2] * mz
+        return 2.0 * d * mx - wo[0], 2.0 * d * my - wo[1], 2.0 * d * mz - wo[2]
+    return square_to_cosine_hemisphere(u1, v)

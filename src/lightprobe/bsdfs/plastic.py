@@ -35,11 +35,11 @@ import numpy as np
 from .._numba import jit, jit_inline, jit_parallel, prange
 from ..errors import ParameterError
 from ..sampling.distributions import choose_rescaled
-from ..sampling.kernels import INV_PI, cosine_hemisphere_pdf, square_to_cosine_hemisphere
+from ..sampling.kernels import INV_PI, cosine_hemisphere_pdf
 from .base import BSDF, rgb_param
 from .conductor import check_alpha, ggx_microfacet_product, ggx_reflection_pdf
 from .fresnel import fresnel_dielectric
-from .microfacet import ggx_g1, ggx_sample_visible_normal
+from .microfacet import ggx_g1, ggx_sample_visible_normal, specular_or_diffuse_direction
 
 __all__ = ["PLASTIC", "RoughPlastic"]
 
@@ -97,12 +97,7 @@ def plastic_sample(p, wo, u0, u1, u2):
     # the lobe from the pair's second coordinate, rescaled (choose_rescaled): u0, a number of its own, would give
     # each lobe a scattered subset of the pair's stratified set
     specular, v = choose_rescaled(u2, _specular_probability(p, wo))
-    if specular:
-        mx, my, mz = ggx_sample_visible_normal(p[_ALPHA], wo[0], wo[1], wo[2], u1, v)
-        d = wo[0] * mx + wo[1] * my + wo[2] * mz
-        wi = (2.0 * d * mx - wo[0], 2.0 * d * my - wo[1], 2.0 * d * mz - wo[2])
-    else:
-        wi = square_to_cosine_hemisphere(u1, v)
+    wi = specular_or_diffuse_direction(p[_ALPHA], wo, specular, u1, v)
     pdf = plastic_pdf(p, wo, wi)
     if pdf <= 0.0 or wi[2] <= 0.0:
         return wi, pdf, zero
