@@ -537,8 +537,9 @@ def check_command(
         tech, samples=samples, seed=seed, material=_material_option(material), environment=_envmap_option(envmap)
     )
     png = output.with_suffix(".png")
-    write_html(report, output)
-    png.write_bytes(figure_png(report))
+    picture = figure_png(report)
+    write_html(report, output, picture)
+    png.write_bytes(picture)
     typer.echo(json.dumps(report.as_dict()) if as_json else report.text())
     _echo_err(f"wrote {output} and {png}")
     if not report.passed:
@@ -668,13 +669,11 @@ def _render_settings(defaults: dict, chosen: dict):
 
 def _lab_renderer(scene, settings, token: str):
     """``render(scene, settings, progress=...)`` with the user techniques of a ``--techniques`` token."""
-    from .integrators.wavefront import settings_for
     from .lab.render import parse_lab_token, render_lab
 
     strategy, overrides = parse_lab_token(token)
     if overrides:
         raise LightprobeError(f"--techniques {token!r}: give settings as options (--seed, --heuristic ...)")
-    strategy.heuristic = settings_for(scene, settings).heuristic
 
     def run(scene, settings, progress=None):
         return render_lab(scene, strategy, settings, progress=progress)

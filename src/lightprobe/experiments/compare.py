@@ -106,8 +106,6 @@ def parse_any_strategy(token: str, base: RenderSettings, equal: str = "spp", spp
         (dataclasses.replace(settings, spp=max(settings.spp, 4)) if settings.adaptive else settings).validate()
     except LightprobeError as exc:
         raise LightprobeError(f"strategy {token!r}: {exc}") from None
-    if lab is not None:
-        lab.heuristic = settings.heuristic
     return token.strip(), settings, lab
 
 

@@ -15,7 +15,7 @@ a bright patch), in this order, each check stopping the rest of its context when
    equal mass about the mirror direction for BSDF techniques, texel-aligned for light techniques), Sidak-corrected
    significance 0.01 over the contexts.
 
-:func:`write_picture` draws observed and expected histograms side by side; :func:`write_html` puts the verdict, the
+:func:`figure_png` draws observed and expected histograms side by side; :func:`write_html` puts the verdict, the
 numbers and that picture in one self-contained page.
 """
 
@@ -113,7 +113,7 @@ def default_environment():
     return EnvironmentMap.from_array(image, source="check map (64x32 sky with a 12-degree sun)", pdf="exact")
 
 
-def _contexts(tech: GuardedTechnique, material, environment):
+def _contexts(tech: GuardedTechnique):
     """(name, wo) of the contexts; the wo is local (BSDF) or a fixed viewer (light: unused by the map)."""
     if tech.kind == "bsdf":
         return [
@@ -138,7 +138,7 @@ def check_technique(
     material = material if material is not None else default_material()
     environment = environment if environment is not None else default_environment()
     report = CheckReport(tech.label, tech.kind, samples)
-    contexts = _contexts(tech, material, environment)
+    contexts = _contexts(tech)
     rng = np.random.default_rng(seed)
     for name, wo in contexts:
         u = rng.random((samples, tech.dimensions))
@@ -357,14 +357,10 @@ def figure_png(report: CheckReport) -> bytes:
     return buffer.getvalue()
 
 
-def write_picture(report: CheckReport, path) -> None:
-    with open(path, "wb") as f:
-        f.write(figure_png(report))
-
-
-def write_html(report: CheckReport, path) -> None:
-    """A self-contained page: the verdict, one table row per check, the histograms."""
-    png = base64.b64encode(figure_png(report)).decode("ascii")
+def write_html(report: CheckReport, path, picture: bytes | None = None) -> None:
+    """A self-contained page: the verdict, one table row per check, the histograms (``picture``, the PNG of
+    :func:`figure_png`, drawn here when not given)."""
+    png = base64.b64encode(picture if picture is not None else figure_png(report)).decode("ascii")
     rows = "".join(
         f"<tr class='{'ok' if i.passed else 'fail'}'><td>{html.escape(i.context)}</td><td>{html.escape(i.name)}</td>"
         f"<td>{'ok' if i.passed else 'FAIL'}</td><td>{html.escape(i.message)}</td></tr>"

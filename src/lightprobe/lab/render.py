@@ -53,7 +53,7 @@ class LabRenderError(TechniqueError):
 @dataclass
 class LabStrategy:
     """One technique alone, or a BSDF and a light technique under MIS with ``heuristic`` (a name or a function
-    weight(n_f, p_f, n_g, p_g))."""
+    weight(n_f, p_f, n_g, p_g)); None: the render settings' heuristic."""
 
     techniques: tuple[GuardedTechnique, ...]
     heuristic: str | Heuristic | None = None
@@ -78,7 +78,7 @@ class LabStrategy:
 
 
 def _weight(heuristic, n_f, p_f, n_g, p_g) -> np.ndarray:
-    if heuristic is None or heuristic == "balance":
+    if heuristic == "balance":
         return balance_heuristic(p_f, p_g, n_f=n_f, n_g=n_g)
     if heuristic == "power":
         return power_heuristic(p_f, p_g, n_f=n_f, n_g=n_g)
@@ -161,6 +161,7 @@ class _Shader:
         self.env = scene.environment
         self.materials = list(scene.materials.values())
         self.counts = strategy.counts(settings)
+        self.heuristic = strategy.heuristic if strategy.heuristic is not None else settings.heuristic
         self.dims = [t.dimensions for t in strategy.techniques]
         self.sampler = SAMPLERS[settings.sampler]
         self.rays = 0  # shadow rays traced
@@ -216,7 +217,7 @@ class _Shader:
             if len(techniques) == 2:
                 other = techniques[1 - j]
                 p_other = other.pdf(local if other.kind == "bsdf" else world, every)
-                weight = _weight(self.strategy.heuristic, count, pdf, self.counts[1 - j], p_other)
+                weight = _weight(self.heuristic, count, pdf, self.counts[1 - j], p_other)
             f = every.material.eval(every.wo, local)
             cos = np.maximum(local[:, 2], 0.0)
             live = (pdf > 0) & (cos > 0) & (weight > 0) & np.any(f > 0, axis=1)

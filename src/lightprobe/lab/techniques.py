@@ -394,13 +394,5 @@ def builtin(kind: str) -> GuardedTechnique:
     return GuardedTechnique(obj, "lightprobe:" + ("brdf" if kind == "bsdf" else "env"), time_limit=0.0)
 
 
-def balance_heuristic(n_f, p_f, n_g, p_g):
-    """Veach's balance heuristic n_f p_f / (n_f p_f + n_g p_g) (Krivanek eq. 17)."""
-    num = n_f * np.asarray(p_f, dtype=np.float64)
-    den = num + n_g * np.asarray(p_g, dtype=np.float64)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(den > 0, num / den, 0.0)
-
-
 #: a MIS heuristic: weight(n_f, p_f, n_g, p_g) of a sample of technique f (n_f samples) against technique g
 Heuristic = Callable[[float, np.ndarray, float, np.ndarray], np.ndarray]

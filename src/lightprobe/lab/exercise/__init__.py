@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from ...errors import LightprobeError
+from ...sampling.mis import balance_heuristic
 from ..techniques import GuardedTechnique, TechniqueError, load_module
 
 __all__ = ["FILES", "STEPS", "Grade", "Step", "grade", "init_exercise"]
@@ -162,9 +163,7 @@ def _heuristic_step(module) -> Step:
     p_f = np.concatenate([[0.0, 0.0, 1.0, 0.3, 2.0], rng.random(200) * 10.0])
     p_g = np.concatenate([[0.0, 1.0, 0.0, 0.6, 2.0], rng.random(200) * 10.0])
     for n_f, n_g in ((1, 1), (4, 1), (1, 3)):
-        expected = np.divide(
-            n_f * p_f, n_f * p_f + n_g * p_g, out=np.zeros_like(p_f), where=(n_f * p_f + n_g * p_g) > 0
-        )
+        expected = balance_heuristic(p_f, p_g, n_f=n_f, n_g=n_g)
         try:
             got = np.asarray(fn(n_f, p_f.copy(), n_g, p_g.copy()), dtype=np.float64)
         except NotImplementedError:
