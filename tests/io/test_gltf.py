@@ -222,12 +222,12 @@ def test_scene_file_object_and_camera(tmp_path, capsys):
 def test_a_gltf_render_agrees_with_the_same_scene_in_toml(tmp_path):
     """The quad and a metallic-roughness material from glTF against the same quad and material written in Python:
     blocks of the two images agree within their noise."""
+    from lightprobe.analysis.metrics import block_z_test
     from lightprobe.emitters.envmap import EnvironmentMap
     from lightprobe.emitters.procedural import sky_with_sun
     from lightprobe.geometry import Camera, Scene
     from lightprobe.geometry.mesh import TriangleMesh
     from lightprobe.integrators import RenderSettings, render
-    from lightprobe.lab.exercise import z_test
 
     doc = json.loads(write_gltf(tmp_path / "a.gltf").read_text())
     doc["materials"][0].pop("emissiveFactor")
@@ -247,6 +247,6 @@ def test_a_gltf_render_agrees_with_the_same_scene_in_toml(tmp_path):
     by_hand.add(quad, MetallicRoughness([0.3, 0.5, 0.7], 0.25, 0.6), transform=matrix, two_sided=True)
     a = render(from_gltf, RenderSettings(spp=256, seed=1))
     b = render(by_hand, RenderSettings(spp=256, seed=2))
-    verdict = z_test(a.image, a.variance, b.image, b.variance, block=4)
+    verdict = block_z_test(a.image, a.variance, b.image, b.variance, block=4)
     assert abs(verdict["pooled_z"]) < 4.0 and verdict["outliers"] <= 0.05, verdict
     assert a.image.mean() > 0.01

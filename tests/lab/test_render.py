@@ -6,11 +6,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from lightprobe.analysis.metrics import block_z_test
 from lightprobe.experiments.compare import compare
 from lightprobe.integrators.settings import RenderSettings
 from lightprobe.integrators.wavefront import render
 from lightprobe.io.scene_file import load_scene
-from lightprobe.lab.exercise import init_exercise, z_test
+from lightprobe.lab.exercise import init_exercise
 from lightprobe.lab.render import LabRenderError, LabStrategy, parse_lab_token, render_lab
 from lightprobe.lab.techniques import TechniqueError, builtin
 
@@ -30,7 +31,7 @@ def exercise_scene(tmp_path_factory):
 
 
 def _z(result, reference, block=6):
-    return z_test(result.image, result.variance, reference.image, reference.variance, block=block)
+    return block_z_test(result.image, result.variance, reference.image, reference.variance, block=block)
 
 
 @pytest.mark.parametrize("sampler", ["sobol", "independent"])

@@ -10,8 +10,8 @@ into a directory. ``check`` grades it step by step, stopping at the first step t
    pdfs);
 6. a render of ``scene.toml`` with the student's Phong and environment techniques under MIS weighted by their
    heuristic (the laboratory's estimator, ``lab/render.py``) against lightprobe's own render at 8x the samples: z =
-   (mine - lightprobe's) / sqrt(var_mine + var_lightprobe) over 8 x 8-pixel blocks (:func:`z_test`), pooled and as
-   the share of |z| > 4, from fixed seeds.
+   (mine - lightprobe's) / sqrt(var_mine + var_lightprobe) over 8 x 8-pixel blocks
+   (``analysis.metrics.block_z_test``), pooled and as the share of |z| > 4, from fixed seeds.
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ...analysis.metrics import block_z_test
 from ...errors import LightprobeError
 from ...sampling.mis import balance_heuristic
 from ..techniques import GuardedTechnique, TechniqueError, load_module
@@ -195,47 +196,15 @@ def _render_step(root: Path, techniques: dict, heuristic) -> Step:
     except LabRenderError as exc:
         return Step(6, name, False, str(exc))
     theirs = render(scene, RenderSettings(spp=REFERENCE_SPP, seed=12, heuristic="balance"))
-    verdict = z_test(mine.image, mine.variance, theirs.image, theirs.variance)
+    verdict = block_z_test(mine.image, mine.variance, theirs.image, theirs.variance, block=BLOCK)
     text = (
         f"{verdict['blocks']} blocks of {BLOCK}x{BLOCK} pixels: pooled z {verdict['pooled_z']:+.2f} (limit "
         f"{POOLED_Z_LIMIT:g}), |z| > 4 in {verdict['outliers']:.1%} (limit {OUTLIER_SHARE_LIMIT:.0%}); "
-        f"image means {verdict['mine']:.5f} "
-        f"(yours) and {verdict['theirs']:.5f} (lightprobe's)"
+        f"image means {verdict['image_mean']:.5f} "
+        f"(yours) and {verdict['reference_mean']:.5f} (lightprobe's)"
     )
     if abs(verdict["pooled_z"]) > POOLED_Z_LIMIT or verdict["outliers"] > OUTLIER_SHARE_LIMIT:
         side = "brighter" if verdict["pooled_z"] > 0 else "darker"
         return Step(6, name, False, f"your image is {side} than lightprobe's: {text}; with every technique passing "
                     "its checks, look at how the render combines them: the heuristic's counts n_f and n_g")  # fmt: skip
     return Step(6, name, True, f"your image matches lightprobe's: {text}")
-
-
-def z_test(image, variance, reference, reference_variance, *, block: int = BLOCK) -> dict:
-    """z of two independent images' difference over blocks of ``block`` x ``block`` pixels (luminance), pooled as
-    sum z / sqrt(blocks), and the share of blocks with |z| > 4.
-
-    Blocks, not pixels: a pixel's variance estimate from 16 samples is noisy and, for a skewed estimator (a small
-    bright sun sampled from a piecewise-constant map), correlated with its mean, which pushes a per-pixel z's mean
-    below 0 with no bias at all (the exact solution gave a pooled per-pixel z of -7 at 16 spp, -3.6 at 64); a
-    block's variance comes from block^2 times the samples. A luminance's variance is bounded by
-    (sum_c w_c sd_c)^2 (the channels of one sample are correlated): a conservative z."""
-    from ...color import LUMINANCE_WEIGHTS, luminance
-
-    def spread(v):
-        return (np.sqrt(np.maximum(v.astype(np.float64), 0.0)) @ np.asarray(LUMINANCE_WEIGHTS)) ** 2
-
-    def blocks(a):
-        h, w = (a.shape[0] // block) * block, (a.shape[1] // block) * block
-        return a[:h, :w].reshape(h // block, block, w // block, block).sum(axis=(1, 3))
-
-    n = float(block * block)
-    diff = blocks(luminance(image.astype(np.float64)) - luminance(reference.astype(np.float64))) / n
-    var = blocks(spread(variance) + spread(reference_variance)) / (n * n)
-    lit = var > 0
-    z = diff[lit] / np.sqrt(var[lit])
-    return {
-        "blocks": int(lit.sum()),
-        "pooled_z": float(z.sum() / np.sqrt(z.size)) if z.size else 0.0,
-        "outliers": float(np.mean(np.abs(z) > 4.0)) if z.size else 0.0,
-        "mine": float(image.mean()),
-        "theirs": float(reference.mean()),
-    }
