@@ -75,6 +75,19 @@ class Accumulator:
         """The record the accumulation stage writes."""
         return AccumulatorArrays(self.mean, self.m2, self.count, self.nonfinite)
 
+    def add(self, values: np.ndarray) -> None:
+        """One more sample of every pixel, ``values`` (n_pixels, 3), by :func:`accumulate`'s update (Welford; a
+        non-finite value counts as 0 and is counted), for callers that hold a whole pass in NumPy (the laboratory's
+        estimator, ``lab/render.py``)."""
+        finite = np.all(np.isfinite(values), axis=1)
+        values = np.where(finite[:, None], values, 0.0)
+        self.nonfinite += ~finite
+        self.count += 1
+        n = self.count[:, None].astype(np.float64)
+        delta = values - self.mean
+        self.mean += delta / n
+        self.m2 += delta * (values - self.mean)
+
     def copy(self) -> Accumulator:
         other = Accumulator(0)
         other.mean, other.m2 = self.mean.copy(), self.m2.copy()

@@ -273,7 +273,7 @@ def render_lab(
             for lo in range(0, pixels_all.size, BATCH):
                 block = pixels_all[lo : lo + BATCH]
                 values[lo : lo + BATCH] = shader.values(block, sample)
-            _accumulate(acc, values)
+            acc.add(values)
             done += 1
             pass_seconds = time.perf_counter() - t0
             if progress is not None:
@@ -318,18 +318,6 @@ def _stats(settings, strategy, start, done, stopped, interrupted, rays, acc) -> 
         "seed": settings.seed,
         "sampler": settings.sampler,
     }
-
-
-def _accumulate(acc: Accumulator, values: np.ndarray) -> None:
-    """One sample per pixel, Welford's update in float64 (the core's accumulate, for whole-image passes)."""
-    finite = np.all(np.isfinite(values), axis=1)
-    values = np.where(finite[:, None], values, 0.0)
-    acc.nonfinite += ~finite
-    acc.count += 1
-    n = acc.count[:, None].astype(np.float64)
-    delta = values - acc.mean
-    acc.mean += delta / n
-    acc.m2 += delta * (values - acc.mean)
 
 
 # --- strategy tokens of `lightprobe compare` -------------------------------------------------------------------------
