@@ -250,8 +250,7 @@ def render_command(
         if camera not in scene.cameras:
             known = ", ".join(scene.cameras) or "none (no glTF object has one)"
             raise LightprobeError(f"--camera {camera!r}: no such camera; the scene's glTF cameras: {known}")
-        asset, key = scene.cameras[camera]
-        scene.camera = asset.camera(key, scene.camera.resolution)
+        scene.camera = scene.cameras[camera].camera(camera, scene.camera.resolution)
     if width is not None:
         if width < 1:
             raise LightprobeError(f"--width must be >= 1, got {width}")

@@ -95,7 +95,7 @@ class Scene:
         # point, spot and directional lights (emitters/punctual.py, directional.py): in the light table after the
         # emitting objects' rows, the directional ones with the infinite lights
         self.lights: list = []
-        #: cameras of included glTF files: name -> (asset, name) (``io/gltf.py``; ``lightprobe render --camera``)
+        #: cameras of included glTF files: name -> the asset that has it (``io/gltf.py``; ``render --camera``)
         self.cameras: dict = {}
 
     def add_material(self, name: str, bsdf: BSDF) -> str:

@@ -249,7 +249,7 @@ def _material(doc: dict, index: int | None, path: Path, where: str):
     from ..bsdfs import MetallicRoughness
 
     if index is None:
-        return MetallicRoughness(1.0, 1.0, 1.0), None, False, "default material"
+        return MetallicRoughness(1.0, 1.0, 1.0), None, False
     spec = doc["materials"][index]
     name = spec.get("name") or f"material {index}"
     pbr = spec.get("pbrMetallicRoughness", {})
@@ -268,7 +268,7 @@ def _material(doc: dict, index: int | None, path: Path, where: str):
     emissive = np.asarray(spec.get("emissiveFactor", [0.0, 0.0, 0.0]), dtype=np.float64)
     strength = spec.get("extensions", {}).get("KHR_materials_emissive_strength", {}).get("emissiveStrength", 1.0)
     emission = emissive * float(strength) if np.any(emissive > 0) else None
-    return material, emission, bool(spec.get("doubleSided", False)), name
+    return material, emission, bool(spec.get("doubleSided", False))
 
 
 def load_gltf(path, *, transform=None) -> GltfAsset:
@@ -310,7 +310,7 @@ def load_gltf(path, *, transform=None) -> GltfAsset:
                 label = f"{mesh_name}" + (f" #{k}" if len(mesh_spec["primitives"]) > 1 else "")
                 mesh = TriangleMesh.from_arrays(vertices, faces.reshape(-1, 3), normals, smooth=False,
                                                 name=f"{file.name}: {label}")  # fmt: skip
-                material, emission, two_sided, _ = _material(doc, prim.get("material"), file, where)
+                material, emission, two_sided = _material(doc, prim.get("material"), file, where)
                 asset.meshes.append(GltfMesh(mesh.transformed(matrix), material, label, two_sided, emission))
         if "camera" in node:
             spec = doc["cameras"][node["camera"]]

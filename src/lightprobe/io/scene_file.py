@@ -353,7 +353,7 @@ def _object(scene: Scene, t: _Table, base: Path) -> None:
         t.done()
         asset = load_gltf(file, transform=transform)
         asset.add_to(scene, name=name if "name" in t.data else file.name)
-        scene.cameras.update({n: (asset, n) for n in asset.cameras})
+        scene.cameras.update(dict.fromkeys(asset.cameras, asset))
         return
     if kind == "mesh":
         file = _path(base, t.get("file", required=True), t.where)
