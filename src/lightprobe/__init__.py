@@ -5,7 +5,8 @@ The public API (see the README and each module's docstring):
 * lights: :class:`EnvironmentMap` (``load``, ``from_array``, ``eval``, ``sample``, ``pdf``), :class:`PointLight`,
   :class:`SpotLight` (``Scene.add_light``; area lights are objects with an emission);
 * materials: :class:`Lambert`, :class:`Phong`, :class:`GGXConductor`, :class:`RoughPlastic`,
-  :class:`MetallicRoughness` (``eval``, ``sample``, ``pdf``);
+  :class:`MetallicRoughness` (``eval``, ``sample``, ``pdf``); textures: :class:`ImageTexture`,
+  :class:`MaterialTextures` (the ``textures=`` of a Lambert or metallic-roughness material);
 * estimators at one shading point: :func:`estimate`;
 * scenes and rendering: :class:`Scene`, :class:`Camera`, :class:`TriangleMesh`, :class:`Sphere`,
   :class:`Rectangle`, :func:`render` with :class:`RenderSettings`;
@@ -19,6 +20,7 @@ from .emitters.punctual import PointLight, SpotLight
 from .errors import ImageError, LightprobeError, LightprobeWarning, ParameterError, SceneError
 from .geometry import Camera, Rectangle, Scene, Sphere, TriangleMesh
 from .integrators import Estimate, RenderResult, RenderSettings, estimate, render
+from .textures import ImageTexture, MaterialTextures
 
 __version__ = "0.1.0"
 
@@ -29,9 +31,11 @@ __all__ = [
     "Estimate",
     "GGXConductor",
     "ImageError",
+    "ImageTexture",
     "Lambert",
     "LightprobeError",
     "LightprobeWarning",
+    "MaterialTextures",
     "MetallicRoughness",
     "ParameterError",
     "Phong",

@@ -54,6 +54,14 @@ def _arrays(spheres, rects, tree):
         emptyi,
         emptyi,
         np.zeros((0, 16)),
+        emptyi,
+        np.zeros((0, 3), np.int64),
+        np.zeros(0),
+        np.zeros((0, 2)),
+        np.zeros((0, 4)),
+        np.zeros((0, 7), np.int64),
+        np.zeros((0, 4), np.uint8),
+        np.zeros((0, 4), np.float32),
         *tree,
     )
 

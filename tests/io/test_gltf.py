@@ -181,13 +181,135 @@ def test_missing_buffers_and_corrupt_files(tmp_path):
         load_gltf(tmp_path / "i.gltf")
 
 
-def test_textures_fall_back_to_factors_with_a_warning(tmp_path):
-    doc = json.loads(write_gltf(tmp_path / "t.gltf").read_text())
-    doc["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = {"index": 0}
-    (tmp_path / "t.gltf").write_text(json.dumps(doc))
-    with pytest.warns(UserWarning, match="textures are not applied yet .baseColorTexture."):
-        asset = load_gltf(tmp_path / "t.gltf")
-    assert asset.meshes[0].material.base_color.tolist() == [0.3, 0.5, 0.7]
+def _png(path: Path, pixels: np.ndarray) -> bytes:
+    import OpenImageIO as oiio
+
+    h, w, c = pixels.shape
+    fmt = oiio.UINT16 if pixels.dtype == np.uint16 else oiio.UINT8
+    out = oiio.ImageOutput.create(str(path))
+    out.open(str(path), oiio.ImageSpec(w, h, c, fmt))
+    out.write_image(pixels)
+    out.close()
+    return path.read_bytes()
+
+
+def textured_gltf(tmp_path: Path, *, how: str = "file", tangents: bool = False) -> Path:
+    """The quad of :func:`write_gltf` with TEXCOORD_0 (and TANGENT) and base colour, metallic-roughness and
+    normal textures; the images as files next to it, data URIs, or buffer views of a second buffer."""
+    rng = np.random.default_rng(11)
+    base = rng.integers(0, 256, size=(3, 5, 4), dtype=np.uint8)  # odd sizes, with alpha
+    mr = rng.integers(0, 65536, size=(4, 2, 3), dtype=np.uint16)  # 16 bits
+    normal = np.tile(np.uint8([128, 128, 255]), (2, 2, 1))
+    pngs = [_png(tmp_path / name, pixels) for name, pixels in (("base.png", base), ("mr.png", mr),
+                                                               ("normal.png", normal))]  # fmt: skip
+    uv = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, -1.5], [0.0, -1.5]], np.float32)  # out of [0, 1]: wrapped
+    tangent = np.tile(np.float32([1.0, 0.0, 0.0, 1.0]), (4, 1))
+    extra = uv.tobytes() + (tangent.tobytes() if tangents else b"")
+    doc = {
+        "images": [{"uri": "base.png"}, {"uri": "mr.png"}, {"uri": "normal.png"}],
+        "samplers": [{"wrapS": 33648, "wrapT": 33071, "magFilter": 9728}],
+        "textures": [{"source": 0, "sampler": 0}, {"source": 1}, {"source": 2}],
+    }
+    path = write_gltf(tmp_path / "t.gltf")
+    full = json.loads(path.read_text())
+    full.update(doc)
+    full["buffers"].append({"byteLength": len(extra), "uri": "data:application/octet-stream;base64,"
+                            + base64.b64encode(extra).decode()})  # fmt: skip
+    full["bufferViews"].append({"buffer": 1, "byteOffset": 0, "byteLength": len(extra)})
+    full["accessors"].append({"bufferView": 3, "componentType": 5126, "count": 4, "type": "VEC2"})
+    attributes = full["meshes"][0]["primitives"][0]["attributes"]
+    attributes["TEXCOORD_0"] = 3
+    if tangents:
+        full["accessors"].append({"bufferView": 3, "byteOffset": 32, "componentType": 5126, "count": 4,
+                                  "type": "VEC4"})  # fmt: skip
+        attributes["TANGENT"] = 4
+    material = full["materials"][0]
+    material["pbrMetallicRoughness"]["baseColorTexture"] = {"index": 0}
+    material["pbrMetallicRoughness"]["metallicRoughnessTexture"] = {"index": 1}
+    material["normalTexture"] = {"index": 2, "scale": 0.5}
+    if how == "data":
+        for image, png in zip(full["images"], pngs, strict=True):
+            image["uri"] = "data:image/png;base64," + base64.b64encode(png).decode()
+    elif how == "view":
+        offset = len(extra)
+        blob = extra
+        for image, png in zip(full["images"], pngs, strict=True):
+            blob += png
+            full["bufferViews"].append({"buffer": 1, "byteOffset": offset, "byteLength": len(png)})
+            image.pop("uri")
+            image.update(bufferView=len(full["bufferViews"]) - 1, mimeType="image/png")
+            offset += len(png)
+        full["buffers"][1] = {"byteLength": len(blob), "uri": "data:application/octet-stream;base64,"
+                              + base64.b64encode(blob).decode()}  # fmt: skip
+    path.write_text(json.dumps(full))
+    return path
+
+
+@pytest.mark.parametrize("how", ["file", "data", "view"])
+def test_textures_from_files_data_uris_and_buffer_views(tmp_path, how):
+    asset = load_gltf(textured_gltf(tmp_path, how=how))
+    (item,) = asset.meshes
+    textures = item.material.textures
+    assert textures.base_color.pixels.shape == (3, 5, 4) and not textures.base_color.is_float
+    assert textures.base_color.wrap == ("mirrored_repeat", "clamp") and textures.base_color.filter == "nearest"
+    assert textures.metallic_roughness.is_float and textures.metallic_roughness.wrap == ("repeat", "repeat")
+    assert textures.normal_scale == 0.5 and textures.normal.filter == "linear"
+    np.testing.assert_array_equal(item.mesh.uvs, [[0.0, 0.0], [2.0, 0.0], [2.0, -1.5], [0.0, -1.5]])
+    assert item.mesh.tangents is None  # generated when the scene is compiled
+
+
+def test_a_textured_gltf_renders_and_reads_its_tangents(tmp_path):
+    """UVs outside [0, 1] wrap, the file's tangents are kept (turned with the node), the image is finite."""
+    from lightprobe.emitters.envmap import EnvironmentMap
+    from lightprobe.geometry import Camera, Scene
+    from lightprobe.integrators import RenderSettings, render
+
+    asset = load_gltf(textured_gltf(tmp_path, tangents=True))
+    # the node turns the quad a quarter turn about +Y: the tangent +x goes to -z
+    np.testing.assert_allclose(asset.meshes[0].mesh.tangents, np.tile([0.0, 0.0, -1.0, 1.0], (4, 1)), atol=1e-6)
+    scene = Scene(Camera([1.0, 6.0, 7.0], [1.0, 3.0, 3.0], fov=40.0, resolution=(16, 12)),
+                  EnvironmentMap.from_array(np.full((8, 16, 3), 0.5)))  # fmt: skip
+    asset.add_to(scene)
+    image = render(scene, RenderSettings(spp=4)).image
+    assert np.all(np.isfinite(image)) and image.max() > 0.0
+
+
+def test_texture_inputs_refused_or_warned_in_one_line(tmp_path):
+    path = textured_gltf(tmp_path)
+    doc = json.loads(path.read_text())
+    (tmp_path / "normal.png").unlink()
+    with pytest.raises(SceneError, match=r"normal\.png \(image 2 of t\.gltf\): no such file") as info:
+        load_gltf(path)
+    assert "\n" not in str(info.value)
+    (tmp_path / "normal.png").write_bytes(b"not a png at all")
+    with pytest.raises(SceneError, match=r"normal\.png \(image 2 of t\.gltf\): cannot read image"):
+        load_gltf(path)
+    (tmp_path / "normal.png").write_bytes((tmp_path / "base.png").read_bytes())
+    for change, message in (
+        (lambda d: d["textures"][0].update(source=9), "texture 0 has no image"),
+        (lambda d: d["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"].update(index=7),
+         "material 'paint' baseColorTexture: texture 7 does not exist"),
+        (lambda d: d["meshes"][0]["primitives"][0]["attributes"].pop("TEXCOORD_0"), "has textures but it has no "
+         "TEXCOORD_0"),
+    ):  # fmt: skip
+        broken = json.loads(json.dumps(doc))
+        change(broken)
+        (tmp_path / "b.gltf").write_text(json.dumps(broken))
+        with pytest.raises(SceneError, match=message) as info:
+            load_gltf(tmp_path / "b.gltf")
+        assert str(info.value).startswith(str(tmp_path / "b.gltf")) and "\n" not in str(info.value)
+    doc["materials"][0]["occlusionTexture"] = {"index": 0}
+    doc["materials"][0]["emissiveTexture"] = {"index": 0, "texCoord": 1}
+    doc["materials"][0]["alphaMode"] = "MASK"
+    (tmp_path / "w.gltf").write_text(json.dumps(doc))
+    with pytest.warns(UserWarning) as record:
+        asset = load_gltf(tmp_path / "w.gltf")
+    said = " | ".join(str(w.message) for w in record)
+    for part in ("occlusionTexture is ignored", "texCoord 1 is read as TEXCOORD_0", "emissiveTexture is applied as "
+                 "its mean colour", "alphaMode MASK is rendered as OPAQUE"):  # fmt: skip
+        assert part in said, said
+    mean = asset.meshes[0].material.textures.base_color.mean_rgb(srgb=True)
+    np.testing.assert_allclose(asset.meshes[0].emission, np.array([4.0, 2.0, 1.0]) * mean)
 
 
 def test_scene_file_object_and_camera(tmp_path, capsys):

@@ -23,10 +23,12 @@ import numpy as np
 
 from ..errors import ParameterError, numeric_array
 
-__all__ = ["BSDF", "PARAM_SIZE", "rgb_param"]
+__all__ = ["BSDF", "PARAM_SIZE", "TEXTURED_PARAM_SIZE", "rgb_param"]
 
 #: Length of every material's parameter block.
 PARAM_SIZE = 80
+#: Length of the leading part of a textured material's block that a camera sample keeps its own copy of.
+TEXTURED_PARAM_SIZE = 8
 
 #: (eval_batch, pdf_batch, sample_batch) of :mod:`lightprobe.bsdfs.dispatch`, set when it is imported
 BATCHES: list = []
@@ -57,12 +59,31 @@ def _directions(v, name: str, n: int | None = None) -> np.ndarray:
 
 
 class BSDF:
-    """Base class: subclasses set ``kind`` and fill ``params`` (length :data:`PARAM_SIZE`)."""
+    """Base class: subclasses set ``kind`` and fill ``params`` (length :data:`PARAM_SIZE`).  A material that can
+    be textured names the uses it takes in ``texture_uses`` and keeps its :class:`MaterialTextures` (or None) in
+    ``textures``; its block then fits in :data:`TEXTURED_PARAM_SIZE`, the width of a camera sample's own block."""
 
     kind: int = -1
+    texture_uses: tuple[str, ...] = ()
 
     def __init__(self) -> None:
         self.params = np.zeros(PARAM_SIZE)
+        self.textures = None
+
+    def check_textures(self, textures):
+        """``textures`` checked against what this material takes (None or a MaterialTextures)."""
+        from ..textures.material_textures import MaterialTextures
+
+        if textures is None:
+            return None
+        name = type(self).__name__
+        if not isinstance(textures, MaterialTextures):
+            raise ParameterError(f"{name}: textures must be a MaterialTextures, got {type(textures).__name__}")
+        extra = [use for use in textures.used() if use not in self.texture_uses]
+        if extra:
+            takes = ", ".join(self.texture_uses) or "none"
+            raise ParameterError(f"{name}: takes no {', '.join(extra)} texture (it takes: {takes})")
+        return textures if textures.used() else None
 
     def eval(self, wo, wi) -> np.ndarray:
         """BRDF value f(wo, wi), RGB (N, 3), without the cosine factor."""

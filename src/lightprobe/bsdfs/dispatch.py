@@ -11,17 +11,18 @@ import numpy as np
 from .._numba import jit_inline, jit_parallel, prange
 from .base import BATCHES
 from .conductor import GGX_CONDUCTOR, ggx_conductor_eval, ggx_conductor_pdf, ggx_conductor_sample
-from .lambert import LAMBERT, lambert_eval, lambert_pdf, lambert_sample
+from .lambert import LAMBERT, lambert_eval, lambert_pdf, lambert_sample, lambert_textured
 from .metallic_roughness import (
     METALLIC_ROUGHNESS,
     metallic_roughness_eval,
     metallic_roughness_pdf,
     metallic_roughness_sample,
+    metallic_roughness_textured,
 )
 from .phong import PHONG, phong_eval, phong_pdf, phong_sample
 from .plastic import PLASTIC, plastic_eval, plastic_pdf, plastic_sample
 
-__all__ = ["bsdf_eval", "bsdf_pdf", "bsdf_sample", "eval_batch", "pdf_batch", "sample_batch"]
+__all__ = ["bsdf_eval", "bsdf_pdf", "bsdf_sample", "bsdf_textured", "eval_batch", "pdf_batch", "sample_batch"]
 
 
 @jit_inline
@@ -68,6 +69,18 @@ def bsdf_sample(kind, p, wo, u0, u1, u2):
     if kind == METALLIC_ROUGHNESS:
         return metallic_roughness_sample(p, wo, u0, u1, u2)
     return (0.0, 0.0, 1.0), 0.0, (0.0, 0.0, 0.0)
+
+
+@jit_inline
+def bsdf_textured(kind, p, out, r, g, b, metallic, roughness):
+    """Write into ``out`` (length ``TEXTURED_PARAM_SIZE``) material ``p``'s block at a hit whose textures read base
+    colour (r, g, b), metallic and roughness factors (1 where a material has no such texture)."""
+    for i in range(out.shape[0]):
+        out[i] = p[i]
+    if kind == LAMBERT:
+        lambert_textured(out, r, g, b)
+    elif kind == METALLIC_ROUGHNESS:
+        metallic_roughness_textured(p, out, r, g, b, metallic, roughness)
 
 
 @jit_parallel

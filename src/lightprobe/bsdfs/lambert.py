@@ -45,15 +45,26 @@ def lambert_sample(p, wo, u0, u1, u2):
     return wi, pdf, (p[0], p[1], p[2])
 
 
+@jit_inline
+def lambert_textured(out, r, g, b):
+    """The block ``out`` (a copy of the material's) at a texel of base colour (r, g, b): the albedo times it."""
+    out[0] *= r
+    out[1] *= g
+    out[2] *= b
+
+
 class Lambert(BSDF):
-    """Ideal diffuse reflector with reflectance ``albedo`` (scalar or RGB in [0, 1])."""
+    """Ideal diffuse reflector with reflectance ``albedo`` (scalar or RGB in [0, 1]); ``textures``: a
+    :class:`~lightprobe.textures.MaterialTextures` whose ``base_color`` multiplies the albedo (and ``normal``)."""
 
     kind = LAMBERT
+    texture_uses = ("base_color", "normal")
 
-    def __init__(self, albedo=0.5):
+    def __init__(self, albedo=0.5, *, textures=None):
         super().__init__()
         self.albedo = rgb_param(albedo, "albedo", upper=1.0)
         self.params[0:3] = self.albedo
+        self.textures = self.check_textures(textures)
 
     def __repr__(self) -> str:
         return f"Lambert(albedo={self.albedo.tolist()})"

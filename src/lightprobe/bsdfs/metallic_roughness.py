@@ -40,8 +40,8 @@ __all__ = ["METALLIC_ROUGHNESS", "MetallicRoughness"]
 METALLIC_ROUGHNESS = 4
 DIELECTRIC_F0 = 0.04
 ALPHA_MIN = 1e-4
-# parameter block: base colour[0:3], metallic[3], alpha[4], mean base colour[5]
-_METALLIC, _ALPHA, _MEAN = 3, 4, 5
+# parameter block: base colour[0:3], metallic[3], alpha[4], mean base colour[5], roughness[6] (for textures)
+_METALLIC, _ALPHA, _MEAN, _ROUGHNESS = 3, 4, 5, 6
 
 
 @jit
@@ -117,6 +117,18 @@ def metallic_roughness_sample(p, wo, u0, u1, u2):
     return wi, pdf, (f[0] * k, f[1] * k, f[2] * k)
 
 
+@jit_inline
+def metallic_roughness_textured(p, out, r, g, b, metallic, roughness):
+    """The block ``out`` (a copy of ``p``) at a texel: base colour x (r, g, b), metallic x ``metallic``, roughness x
+    ``roughness``, and what follows from them, computed as the constructor does (a white texel changes nothing)."""
+    out[0], out[1], out[2] = p[0] * r, p[1] * g, p[2] * b
+    out[_METALLIC] = p[_METALLIC] * metallic
+    rough = p[_ROUGHNESS] * roughness
+    out[_ALPHA] = max(rough * rough, ALPHA_MIN)
+    out[_MEAN] = (out[0] + out[1] + out[2]) / 3.0
+    out[_ROUGHNESS] = rough
+
+
 def _unit(value, name: str) -> float:
     x = float(value)
     if not (math.isfinite(x) and 0.0 <= x <= 1.0):
@@ -129,8 +141,9 @@ class MetallicRoughness(BSDF):
     See the module docstring."""
 
     kind = METALLIC_ROUGHNESS
+    texture_uses = ("base_color", "metallic_roughness", "normal")
 
-    def __init__(self, base_color=1.0, metallic=1.0, roughness=1.0):
+    def __init__(self, base_color=1.0, metallic=1.0, roughness=1.0, *, textures=None):
         super().__init__()  # the defaults are the specification's
         self.base_color = rgb_param(base_color, "base_color", upper=1.0)
         self.metallic = _unit(metallic, "metallic")
@@ -140,6 +153,8 @@ class MetallicRoughness(BSDF):
         self.params[_METALLIC] = self.metallic
         self.params[_ALPHA] = self.alpha
         self.params[_MEAN] = float(self.base_color.mean())
+        self.params[_ROUGHNESS] = self.roughness
+        self.textures = self.check_textures(textures)
 
     def __repr__(self) -> str:
         return (

@@ -46,20 +46,34 @@ def angle_weighted_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarra
 class TriangleMesh:
     """Vertices (V, 3) float64, faces (F, 3) int64, optional unit vertex normals (V, 3), and optional per-face values
     (F, k) float64 that stay with their faces (a degenerate face dropped takes its row along): the file's face
-    colours, or a scene file's per-face emission."""
+    colours, or a scene file's per-face emission.  Optional texture coordinates ``uvs`` (V, 2) (glTF's: v down the
+    image) and ``tangents`` (V, 4) (unit xyz and the bitangent's sign w) serve textured materials."""
 
     vertices: np.ndarray
     faces: np.ndarray
     normals: np.ndarray | None = None
     name: str = "<mesh>"
     face_values: np.ndarray | None = None
+    uvs: np.ndarray | None = None
+    tangents: np.ndarray | None = None
 
     @classmethod
     def from_arrays(
-        cls, vertices, faces, normals=None, *, smooth: bool = True, name: str = "<mesh>", face_values=None
+        cls,
+        vertices,
+        faces,
+        normals=None,
+        *,
+        smooth: bool = True,
+        name: str = "<mesh>",
+        face_values=None,
+        uvs=None,
+        tangents=None,
     ) -> TriangleMesh:
         """Validate and build; see the module docstring for what is rejected and what is repaired.  ``face_values``
-        (F,) or (F, k) numbers, one row per face given, are kept for the faces that remain."""
+        (F,) or (F, k) numbers, one row per face given, are kept for the faces that remain.  ``uvs`` (V, 2) must be
+        finite; ``tangents`` (V, 4) with a zero or non-finite direction are dropped with a warning (generated
+        instead where a normal map needs them)."""
         try:
             v = np.asarray(vertices, dtype=np.float64)
             f = np.asarray(faces)
@@ -113,7 +127,27 @@ class TriangleMesh:
         elif smooth:
             n = angle_weighted_normals(v, f)
         values = None if values is None else np.ascontiguousarray(values)
-        return cls(np.ascontiguousarray(v), np.ascontiguousarray(f), n, name, values)
+        if uvs is not None:
+            uvs = np.asarray(uvs, dtype=np.float64)
+            if uvs.shape != (v.shape[0], 2):
+                raise SceneError(f"{name}: texture coordinates must be a ({v.shape[0]}, 2) array, got {uvs.shape}")
+            if not np.all(np.isfinite(uvs)):
+                raise SceneError(f"{name}: {int((~np.isfinite(uvs)).any(axis=1).sum())} texture coordinates are NaN "
+                                 "or infinite")  # fmt: skip
+            uvs = np.ascontiguousarray(uvs)
+        if tangents is not None:
+            tangents = np.array(tangents, dtype=np.float64)
+            if tangents.shape != (v.shape[0], 4):
+                raise SceneError(f"{name}: tangents must be a ({v.shape[0]}, 4) array, got {tangents.shape}")
+            length = np.linalg.norm(tangents[:, :3], axis=1)
+            if not np.all(np.isfinite(tangents)) or not np.all(length > 1e-12):
+                warn_once(f"{name}: zero or non-finite tangents; tangents are generated from the texture coordinates "
+                          "instead")  # fmt: skip
+                tangents = None
+            else:
+                tangents[:, :3] /= length[:, None]
+                tangents[:, 3] = np.where(tangents[:, 3] < 0.0, -1.0, 1.0)
+        return cls(np.ascontiguousarray(v), np.ascontiguousarray(f), n, name, values, uvs, tangents)
 
     @classmethod
     def load(cls, path: str | os.PathLike, *, smooth: bool = True, face_values=None) -> TriangleMesh:
@@ -160,8 +194,17 @@ class TriangleMesh:
         if self.normals is not None:
             n = self.normals @ np.linalg.inv(linear)
             n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
-        faces = self.faces if np.linalg.det(linear) > 0 else self.faces[:, ::-1].copy()  # keep outward winding
-        return TriangleMesh(np.ascontiguousarray(v), np.ascontiguousarray(faces), n, self.name, self.face_values)
+        det = np.linalg.det(linear)
+        faces = self.faces if det > 0 else self.faces[:, ::-1].copy()  # keep outward winding
+        tangents = None
+        if self.tangents is not None:  # a direction on the surface: transformed like a point's offset
+            tangents = self.tangents.copy()
+            tangents[:, :3] = self.tangents[:, :3] @ linear.T
+            tangents[:, :3] /= np.maximum(np.linalg.norm(tangents[:, :3], axis=1, keepdims=True), 1e-300)
+            if det < 0:  # a mirror flips the bitangent's side
+                tangents[:, 3] = -tangents[:, 3]
+        return TriangleMesh(np.ascontiguousarray(v), np.ascontiguousarray(faces), n, self.name, self.face_values,
+                            self.uvs, tangents)  # fmt: skip
 
     @property
     def bounds(self) -> np.ndarray:

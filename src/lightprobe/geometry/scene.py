@@ -68,6 +68,16 @@ class SceneArrays(NamedTuple):
     mesh_light_start: np.ndarray  # (M,) int64: the light of face f of mesh g is start[g] + f; -1: no emission
     material_kind: np.ndarray  # (K,) int64
     material_params: np.ndarray  # (K, PARAM_SIZE) float64
+    # textures (textures/): per material, 1 if textured, its texture rows by use (-1: none) and normal-map scale;
+    # per mesh vertex, texture coordinates and tangents (zeros where unused); the packed texture table
+    material_textured: np.ndarray  # (K,) int64
+    material_textures: np.ndarray  # (K, 3) int64: base colour, metallic-roughness, normal
+    material_normal_scale: np.ndarray  # (K,) float64
+    mesh_uvs: np.ndarray  # (V, 2) float64
+    mesh_tangents: np.ndarray  # (V, 4) float64
+    texture_table: np.ndarray  # (T, 7) int64 (textures/image_texture.py)
+    texture_bytes: np.ndarray  # (N, 4) uint8
+    texture_floats: np.ndarray  # (N', 4) float32
     # a hierarchy over spheres and rectangles when there are many (geometry/shape_bvh.ShapeTree's arrays; a nested
     # tuple is refused by Numba's parallel kernels, so its fields are flat here): empty arrays otherwise
     tree_lo: np.ndarray
@@ -143,6 +153,13 @@ class Scene:
                 raise SceneError(f"{label}: transforms apply to meshes; place spheres and rectangles directly")
         if not isinstance(shape, TriangleMesh | Sphere | Rectangle):
             raise SceneError(f"{label}: unsupported shape {type(shape).__name__}")
+        if self.materials[material].textures is not None:
+            if not isinstance(shape, TriangleMesh):
+                raise SceneError(f"{label}: material {material!r} has textures, which need a triangle mesh with "
+                                 f"texture coordinates, not a {type(shape).__name__.lower()}")  # fmt: skip
+            if shape.uvs is None:
+                raise SceneError(f"{label}: material {material!r} has textures but the mesh has no texture "
+                                 "coordinates (UVs)")  # fmt: skip
         obj = SceneObject(shape, material, bool(two_sided), label, emission)
         self.objects.append(obj)
         return obj
@@ -178,10 +195,14 @@ class Scene:
         spheres = [o for o in self.objects if isinstance(o.shape, Sphere)]
         rects = [o for o in self.objects if isinstance(o.shape, Rectangle)]
 
+        textures = _TextureRows([self.materials[n] for n in names])
         vertices, normals, faces, starts, smooth, bounds, proxies = [], [], [], [0], [], [], []
+        uvs, tangents = [], []
         base = 0
         for o in meshes:
             m: TriangleMesh = o.shape
+            uvs.append(m.uvs if m.uvs is not None else np.zeros((m.vertices.shape[0], 2)))
+            tangents.append(textures.tangents(m, self.materials[o.material]))
             vertices.append(m.vertices)
             normals.append(m.normals if m.normals is not None else np.zeros_like(m.vertices))
             faces.append(m.faces + base)
@@ -228,8 +249,25 @@ class Scene:
             ints(mesh_light),
             kinds,
             np.ascontiguousarray(params),
+            textures.textured,
+            textures.uses,
+            textures.normal_scale,
+            np.ascontiguousarray(np.concatenate(uvs)) if uvs else np.zeros((0, 2)),
+            np.ascontiguousarray(np.concatenate(tangents)) if tangents else np.zeros((0, 4)),
+            textures.packed.table,
+            textures.packed.bytes,
+            textures.packed.floats,
             *build_shape_tree(sphere_rows, rect_rows),
         )
+
+    @property
+    def texture_bytes(self) -> int:
+        """Bytes the render kernels hold for the scene's textures (each texture once)."""
+        seen = {}
+        for material in self.materials.values():
+            if material.textures is not None:
+                seen.update({id(t): t.nbytes for t in material.textures.used().values()})
+        return sum(seen.values())
 
     @property
     def emitters(self) -> list[SceneObject]:
@@ -336,3 +374,42 @@ def _triangle_lights(mesh: TriangleMesh, emission, two_sided: bool):
         np.full(f, int(two_sided), np.int64),
         0.5 * length,
     )
+
+
+class _TextureRows:
+    """The materials' textures in the kernels' layout (``SceneArrays.material_textured`` and after)."""
+
+    def __init__(self, materials: list[BSDF]):
+        from ..textures import pack_textures
+        from ..textures.material_textures import USES
+
+        k = len(materials)
+        self.textured = np.zeros(k, np.int64)
+        self.uses = np.full((k, len(USES)), -1, np.int64)
+        self.normal_scale = np.ones(k)
+        rows: dict[int, int] = {}
+        textures = []
+        for i, material in enumerate(materials):
+            if material.textures is None:
+                continue
+            self.textured[i] = 1
+            self.normal_scale[i] = float(material.textures.normal_scale)
+            for use, texture in material.textures.used().items():
+                if id(texture) not in rows:
+                    rows[id(texture)] = len(textures)
+                    textures.append(texture)
+                self.uses[i, USES.index(use)] = rows[id(texture)]
+        self.packed = pack_textures(textures)
+
+    @staticmethod
+    def tangents(mesh: TriangleMesh, material: BSDF) -> np.ndarray:
+        """The mesh's tangents where its material has a normal map (generated if it stores none), else zeros."""
+        from ..textures import generate_tangents
+        from .mesh import angle_weighted_normals
+
+        if material.textures is None or material.textures.normal is None:
+            return np.zeros((mesh.vertices.shape[0], 4))
+        if mesh.tangents is not None:
+            return mesh.tangents
+        normals = mesh.normals if mesh.normals is not None else angle_weighted_normals(mesh.vertices, mesh.faces)
+        return generate_tangents(mesh.vertices, mesh.faces, normals, mesh.uvs)

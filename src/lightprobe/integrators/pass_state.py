@@ -22,6 +22,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .._memory import fresh_array
+from ..bsdfs.base import TEXTURED_PARAM_SIZE
 
 __all__ = ["AccumulatorArrays", "CameraSamples", "PassConstants", "Slots", "camera_buffers", "slot_buffers", "views"]
 
@@ -70,6 +71,7 @@ class CameraSamples(NamedTuple):
     frame: np.ndarray  # (n, 9) shading frame s, t, n
     wo_local: np.ndarray  # (n, 3) direction to the viewer in the shading frame
     material: np.ndarray  # (n,) int64; -1: nothing to shade
+    params: np.ndarray  # (n, TEXTURED_PARAM_SIZE) or empty: a textured material's block at the hit (textures/)
 
 
 class Slots(NamedTuple):
@@ -108,8 +110,8 @@ class AccumulatorArrays(NamedTuple):
     nonfinite: np.ndarray  # (pixels,) int64
 
 
-def camera_buffers(n: int) -> CameraSamples:
-    """Buffers for ``n`` camera samples."""
+def camera_buffers(n: int, *, textured: bool = False) -> CameraSamples:
+    """Buffers for ``n`` camera samples; ``textured``: the scene has textured materials (``params``)."""
     i64 = np.int64
     return CameraSamples(
         fresh_array((n, 3)),
@@ -126,6 +128,7 @@ def camera_buffers(n: int) -> CameraSamples:
         fresh_array((n, 9)),
         fresh_array((n, 3)),
         fresh_array(n, i64),
+        fresh_array((n if textured else 0, TEXTURED_PARAM_SIZE)),
     )
 
 

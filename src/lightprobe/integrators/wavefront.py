@@ -188,7 +188,7 @@ class _Pass:
         """Every pass uses leading views of these: memory bounded by one pass.  (Mapped without huge pages, and
         populated when mapped: first touches in the first passes took up to twice a pass's time, decisions.md 32,
         39.)"""
-        self.cams = camera_buffers(self.largest)
+        self.cams = camera_buffers(self.largest, textured=bool(self.scene.material_textured.any()))
         self.slots = slot_buffers(
             self.largest * self.m,
             picks=not self.plan.environment_alone,

@@ -14,7 +14,14 @@ What becomes what:
 - a primitive's material: :class:`~lightprobe.bsdfs.MetallicRoughness` with ``baseColorFactor``, ``metallicFactor``,
   ``roughnessFactor`` (the specification's defaults 1, 1, 1, and its default material when there is none);
   ``emissiveFactor`` x ``KHR_materials_emissive_strength`` makes the primitive an area light; ``doubleSided``;
-  textures are not applied yet: a material with one is rendered with its factors, with a warning naming it;
+- textures (``lightprobe.textures``): ``baseColorTexture`` (sRGB), ``metallicRoughnessTexture`` (G roughness,
+  B metallic), ``normalTexture`` with its ``scale``, with the sampler's ``wrapS`` / ``wrapT`` and its ``magFilter``
+  (nearest, else bilinear), on ``TEXCOORD_0`` and the file's ``TANGENT`` (generated when absent); images from files,
+  data URIs or buffer views, decoded by OpenImageIO (8-bit kept as bytes, 16-bit as float).  Fallbacks, each with a
+  warning: an ``emissiveTexture`` scales the emission by its mean colour (an area light's radiance is constant
+  per triangle); ``occlusionTexture`` is ignored (the renderer computes occlusion); a ``texCoord`` other than 0
+  reads ``TEXCOORD_0``; ``KHR_texture_transform`` (when not required) is ignored; alpha is opaque (``MASK`` and
+  ``BLEND`` render as ``OPAQUE``);
 - cameras (perspective): :class:`~lightprobe.geometry.Camera` at the node, looking down its -Z with +Y up, ``yfov``
   vertical; orthographic cameras are refused by name;
 - ``KHR_lights_punctual``: point (intensity in candela, taken as W/sr), spot (cone angles), directional (lux, as
@@ -22,7 +29,8 @@ What becomes what:
 
 Refused, each in one line naming the file and the item: a missing or short buffer, a data URI that is not base64,
 ``extensionsRequired`` outside what is read here (Draco: ``KHR_draco_mesh_compression``, by name), primitives that
-are not triangles (points, lines, strips and fans), sparse accessors, indices out of range.
+are not triangles (points, lines, strips and fans), sparse accessors, indices out of range, a missing or corrupt
+image, a texture or image index that does not exist, a textured primitive without ``TEXCOORD_0``.
 """
 
 from __future__ import annotations
@@ -36,7 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import SceneError, warn_once
+from ..errors import LightprobeError, SceneError, warn_once
 
 __all__ = ["GltfAsset", "load_gltf"]
 
@@ -114,6 +122,7 @@ class _Reader:
         if unsupported:
             raise SceneError(f"{path}: requires unsupported extension(s) {', '.join(unsupported)}")
         self._buffers: dict[int, bytes] = {}
+        self._textures: dict[int, object] = {}
 
     def _glb(self, raw: bytes):
         if len(raw) < 20:
@@ -206,6 +215,68 @@ class _Reader:
             return np.maximum(array.astype(np.float64) / info.max, -1.0)
         return array.astype(np.float64 if dtype is np.float32 else np.int64)
 
+    def texture(self, info: dict, what: str):
+        """The ImageTexture of a material's texture reference ``info`` (``{"index": ...}``), read once per
+        texture."""
+        from ..textures import ImageTexture
+
+        index = info.get("index")
+        textures = self.doc.get("textures", [])
+        if not isinstance(index, int) or not 0 <= index < len(textures):
+            raise SceneError(f"{self.path}: {what}: texture {index} does not exist")
+        if info.get("texCoord", 0) != 0:
+            warn_once(f"{self.path}: {what}: texCoord {info['texCoord']} is read as TEXCOORD_0")
+        if "KHR_texture_transform" in info.get("extensions", {}):
+            warn_once(f"{self.path}: {what}: KHR_texture_transform is ignored")
+        if index in self._textures:
+            return self._textures[index]
+        spec = textures[index]
+        source = spec.get("source")
+        images = self.doc.get("images", [])
+        if not isinstance(source, int) or not 0 <= source < len(images):
+            raise SceneError(f"{self.path}: {what}: texture {index} has no image (source {source})")
+        sampler = {}
+        if "sampler" in spec:
+            samplers = self.doc.get("samplers", [])
+            if not 0 <= spec["sampler"] < len(samplers):
+                raise SceneError(f"{self.path}: {what}: sampler {spec['sampler']} does not exist")
+            sampler = samplers[spec["sampler"]]
+        wrap = tuple(_WRAPS.get(sampler.get(key, 10497), "repeat") for key in ("wrapS", "wrapT"))
+        filter = "nearest" if sampler.get("magFilter") == 9728 else "linear"
+        image = images[source]
+        label = f"{self.path}: image {source}" + (f" ({image['name']})" if image.get("name") else "")
+        try:
+            if "uri" in image and not image["uri"].startswith("data:"):
+                file = self.path.parent / image["uri"]
+                texture = ImageTexture.read(file, wrap=wrap, filter=filter, name=f"{file} (image {source} of "
+                                            f"{self.path.name})")  # fmt: skip
+            else:
+                data, mime = self._image_bytes(image, source)
+                texture = ImageTexture.from_bytes(data, suffix=_SUFFIXES.get(mime, ".png"), wrap=wrap, filter=filter,
+                                                  name=label)  # fmt: skip
+        except LightprobeError as exc:
+            raise SceneError(str(exc)) from None
+        self._textures[index] = texture
+        return texture
+
+    def _image_bytes(self, image: dict, source: int) -> tuple[bytes, str]:
+        if "uri" in image:
+            head, _, payload = image["uri"].partition(",")
+            if not head.endswith(";base64"):
+                raise SceneError(f"{self.path}: image {source}: only base64 data URIs are read")
+            return base64.b64decode(payload), head[5:].split(";")[0]
+        views = self.doc.get("bufferViews", [])
+        if not isinstance(image.get("bufferView"), int) or not 0 <= image["bufferView"] < len(views):
+            raise SceneError(f"{self.path}: image {source} has neither a uri nor a buffer view")
+        view = views[image["bufferView"]]
+        data = self.buffer(view["buffer"])
+        start = view.get("byteOffset", 0)
+        return data[start : start + view["byteLength"]], image.get("mimeType", "image/png")
+
+
+_WRAPS = {10497: "repeat", 33648: "mirrored_repeat", 33071: "clamp"}
+_SUFFIXES = {"image/png": ".png", "image/jpeg": ".jpg", "image/webp": ".webp", "image/ktx2": ".ktx2"}
+
 
 def _node_matrix(node: dict) -> np.ndarray:
     if "matrix" in node:
@@ -245,29 +316,48 @@ def _world_nodes(doc: dict, path: Path):
     return out
 
 
-def _material(doc: dict, index: int | None, path: Path, where: str):
+def _material(reader: _Reader, index: int | None, where: str):
+    """(material, emission, two-sided) of material ``index`` (None: the specification's default)."""
     from ..bsdfs import MetallicRoughness
+    from ..textures import MaterialTextures
 
+    doc, path = reader.doc, reader.path
     if index is None:
         return MetallicRoughness(1.0, 1.0, 1.0), None, False
-    spec = doc["materials"][index]
+    materials = doc.get("materials", [])
+    if not isinstance(index, int) or not 0 <= index < len(materials):
+        raise SceneError(f"{path}: {where}: material {index} does not exist")
+    spec = materials[index]
     name = spec.get("name") or f"material {index}"
+    what = f"material {name!r}"
     pbr = spec.get("pbrMetallicRoughness", {})
     base = pbr.get("baseColorFactor", [1.0, 1.0, 1.0, 1.0])
-    textures = [k for k in ("baseColorTexture", "metallicRoughnessTexture") if k in pbr]
-    textures += [k for k in ("normalTexture", "emissiveTexture", "occlusionTexture") if k in spec]
-    if textures:
-        warn_once(f"{path}: material {name!r}: textures are not applied yet ({', '.join(textures)}); its factors are "
-                  "used")  # fmt: skip
     if spec.get("alphaMode", "OPAQUE") != "OPAQUE":
-        warn_once(f"{path}: material {name!r}: alphaMode {spec['alphaMode']} is rendered as OPAQUE")
+        warn_once(f"{path}: {what}: alphaMode {spec['alphaMode']} is rendered as OPAQUE")
+    if "occlusionTexture" in spec:
+        warn_once(f"{path}: {what}: occlusionTexture is ignored (the renderer computes occlusion by tracing rays)")
+    uses = {}
+    for use, holder, key in (("base_color", pbr, "baseColorTexture"),
+                             ("metallic_roughness", pbr, "metallicRoughnessTexture"),
+                             ("normal", spec, "normalTexture")):  # fmt: skip
+        if key in holder:
+            uses[use] = reader.texture(holder[key], f"{what} {key}")
+    scale = float(spec.get("normalTexture", {}).get("scale", 1.0))
     try:
-        material = MetallicRoughness(base[:3], pbr.get("metallicFactor", 1.0), pbr.get("roughnessFactor", 1.0))
-    except Exception as exc:
-        raise SceneError(f"{path}: {where}: material {name!r}: {exc}") from None
+        textures = MaterialTextures(**uses, normal_scale=scale) if uses else None
+        material = MetallicRoughness(base[:3], pbr.get("metallicFactor", 1.0), pbr.get("roughnessFactor", 1.0),
+                                     textures=textures)  # fmt: skip
+    except LightprobeError as exc:
+        raise SceneError(f"{path}: {where}: {what}: {exc}") from None
     emissive = np.asarray(spec.get("emissiveFactor", [0.0, 0.0, 0.0]), dtype=np.float64)
     strength = spec.get("extensions", {}).get("KHR_materials_emissive_strength", {}).get("emissiveStrength", 1.0)
     emission = emissive * float(strength) if np.any(emissive > 0) else None
+    if emission is not None and "emissiveTexture" in spec:
+        texture = reader.texture(spec["emissiveTexture"], f"{what} emissiveTexture")
+        emission = emission * texture.mean_rgb(srgb=True)
+        warn_once(f"{path}: {what}: emissiveTexture is applied as its mean colour (an area light's radiance is "
+                  "constant per triangle)")  # fmt: skip
+        emission = emission if np.any(emission > 0) else None
     return material, emission, bool(spec.get("doubleSided", False))
 
 
@@ -308,9 +398,22 @@ def load_gltf(path, *, transform=None) -> GltfAsset:
                 if faces.size and (faces.min() < 0 or faces.max() >= vertices.shape[0]):
                     raise SceneError(f"{file}: {where}: indices out of range (0 to {vertices.shape[0] - 1})")
                 label = f"{mesh_name}" + (f" #{k}" if len(mesh_spec["primitives"]) > 1 else "")
+                material, emission, two_sided = _material(reader, prim.get("material"), where)
+                uvs = tangents = None
+                if material.textures is not None:
+                    if "TEXCOORD_0" not in attributes:
+                        raise SceneError(f"{file}: {where}: its material has textures but it has no TEXCOORD_0")
+                    uvs = reader.accessor(attributes["TEXCOORD_0"], f"{where} TEXCOORD_0")[:, :2]
+                    if material.textures.normal is not None and "TANGENT" in attributes:
+                        tangents = reader.accessor(attributes["TANGENT"], f"{where} TANGENT")
+                    if uvs.shape[0] != vertices.shape[0] or (
+                        tangents is not None and tangents.shape != (vertices.shape[0], 4)
+                    ):
+                        raise SceneError(f"{file}: {where}: TEXCOORD_0 or TANGENT does not have one VEC2 / VEC4 "
+                                         "per vertex")  # fmt: skip
                 mesh = TriangleMesh.from_arrays(vertices, faces.reshape(-1, 3), normals, smooth=False,
-                                                name=f"{file.name}: {label}")  # fmt: skip
-                material, emission, two_sided = _material(doc, prim.get("material"), file, where)
+                                                name=f"{file.name}: {label}", uvs=uvs,
+                                                tangents=tangents)  # fmt: skip
                 asset.meshes.append(GltfMesh(mesh.transformed(matrix), material, label, two_sided, emission))
         if "camera" in node:
             spec = doc["cameras"][node["camera"]]

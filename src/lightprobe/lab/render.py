@@ -145,6 +145,11 @@ def _check_scene(scene) -> None:
             f"scene {scene.name!r}: user techniques render scenes lit by an environment map alone (the exercise's "
             f"setting); this one has {emitting} other light(s)"
         )
+    textured = [name for name, material in scene.materials.items() if material.textures is not None]
+    if textured:
+        raise TechniqueError(
+            f"scene {scene.name!r}: user techniques render untextured materials; {textured[0]!r} has textures"
+        )
 
 
 class _Shader:

@@ -21,6 +21,7 @@ from ..._numba import jit_body
 from ...bsdfs.dispatch import bsdf_eval, bsdf_pdf
 from ...emitters.lights import is_delta
 from ...geometry.frame import to_local
+from ...textures.surface import material_parameters
 from ..techniques import (
     MIS,
     NONE,
@@ -53,7 +54,7 @@ def finish(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
         if cams.material[k] < 0:
             continue
         ts, tt, ns, wo = load_shading_frame(cams.frame, cams.wo_local, k)
-        mk, mp = s.material_kind[cams.material[k]], s.material_params[cams.material[k]]
+        mk, mp = s.material_kind[cams.material[k]], material_parameters(s, cams, k)
         for j in range(m):
             r = base + j
             st = slots.state[r]

@@ -33,6 +33,7 @@ from ...emitters.selection import select_light
 from ...geometry.frame import to_local
 from ...sampling.rng import sample_state, uniform, uniform_2d
 from ...simd import LANES
+from ...textures.surface import material_parameters
 from ..techniques import ENV, MIS, SLOT_LIGHT, SLOT_NONE, load_shading_frame, pick_number, technique_slot
 from .environment_lanes import env_sample_block
 
@@ -155,7 +156,7 @@ def environment_resampled(s, env, lights, sel, c, cams, slots, acc, worker, lo, 
         j = r % m
         rs = sample_state(c.sampler, c.seed, c.pixels[k // c.spp_pass], c.sample_start + k % c.spp_pass)
         ts, tt, ns, wo = load_shading_frame(cams.frame, cams.wo_local, k)
-        mk, mp = s.material_kind[cams.material[k]], s.material_params[cams.material[k]]
+        mk, mp = s.material_kind[cams.material[k]], material_parameters(s, cams, k)
         compensated = c.compensate[cams.material[k]]
         wsum = 0.0
         kept_target = 0.0

@@ -17,6 +17,7 @@ from ...geometry.frame import to_world
 from ...geometry.intersect import MESH, MISS, RECT, SPHERE
 from ...sampling.rng import SOBOL, sample_state, uniform, uniform_2d
 from ...simd import LANES
+from ...textures.surface import apply_textures, material_parameters
 from ..techniques import (
     BRDF,
     ENV,
@@ -84,8 +85,10 @@ def shading_setup(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
             cams.direct[k, 0] = cams.direct[k, 1] = cams.direct[k, 2] = 0.0
         if wo[2] <= 0.0:
             continue
+        if s.material_textured[cams.material[k]] == 1:
+            apply_textures(s, cams, k, dx, dy, dz)
         ts, tt, ns, wo = load_shading_frame(cams.frame, cams.wo_local, k)
-        mk, mp = s.material_kind[cams.material[k]], s.material_params[cams.material[k]]
+        mk, mp = s.material_kind[cams.material[k]], material_parameters(s, cams, k)
         rs = sample_state(c.sampler, c.seed, c.pixels[k // c.spp_pass], c.sample_start + k % c.spp_pass)
         sobol = c.sampler == SOBOL
         own = c.numbers[worker]

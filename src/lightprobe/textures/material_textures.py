@@ -1,0 +1,52 @@
+"""Which textures a material reads, and what each one does (glTF 2.0's metallic-roughness material, section 3.9).
+
+- ``base_color`` (sRGB): multiplies the material's base colour (a Lambert's albedo, a metallic-roughness material's
+  ``base_color``), channel by channel; its alpha is the surface's coverage, unused (every material is opaque);
+- ``metallic_roughness`` (linear): its blue channel multiplies ``metallic`` and its green channel ``roughness``
+  (metallic-roughness materials only);
+- ``normal`` (linear, tangent space): the shading normal becomes normalize((2 c - 1) (scale, scale, 1)) in the
+  frame of the mesh's tangent, bitangent and normal (see ``textures/surface.py``).
+
+Textures need a triangle mesh with texture coordinates (``TriangleMesh.uvs``); a normal map also uses its tangents,
+generated when the mesh has none (``textures/tangents.py``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from ..errors import ParameterError
+from .image_texture import ImageTexture
+
+__all__ = ["MaterialTextures"]
+
+#: columns of the scene's material-texture table: the texture row of each use, -1 for none
+BASE_COLOR, METALLIC_ROUGHNESS, NORMAL = 0, 1, 2
+USES = ("base_color", "metallic_roughness", "normal")
+
+
+@dataclass(frozen=True)
+class MaterialTextures:
+    """The textures of one material (any may be None).  See the module docstring."""
+
+    base_color: ImageTexture | None = None
+    metallic_roughness: ImageTexture | None = None
+    normal: ImageTexture | None = None
+    normal_scale: float = 1.0
+
+    def __post_init__(self):
+        for use in USES:
+            value = getattr(self, use)
+            if value is not None and not isinstance(value, ImageTexture):
+                raise ParameterError(f"textures: {use} must be an ImageTexture, got {type(value).__name__}")
+        if not math.isfinite(float(self.normal_scale)):
+            raise ParameterError(f"textures: normal_scale must be finite, got {self.normal_scale!r}")
+
+    def used(self) -> dict[str, ImageTexture]:
+        """The textures present, by use."""
+        return {use: getattr(self, use) for use in USES if getattr(self, use) is not None}
+
+    @property
+    def nbytes(self) -> int:
+        return sum(t.nbytes for t in {id(t): t for t in self.used().values()}.values())

@@ -1,0 +1,38 @@
+"""Generated tangents: dP/du along the image's rows, the bitangent toward its top (glTF's v points down), the sign
+w flipping on a mirrored chart and under a mirroring transform."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from lightprobe.geometry.mesh import TriangleMesh
+from lightprobe.textures import generate_tangents
+
+QUAD = np.array([[-1.0, 0.0, 1.0], [1.0, 0.0, 1.0], [1.0, 0.0, -1.0], [-1.0, 0.0, -1.0]])  # facing +y
+FACES = np.array([[0, 1, 2], [0, 2, 3]])
+UP = np.tile([0.0, 1.0, 0.0], (4, 1))
+
+
+def test_tangent_follows_u_and_the_bitangent_the_top_of_the_image():
+    # u along +x; v down the image along +z, so the top of the image is toward -z
+    uvs = np.array([[0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]])
+    t = generate_tangents(QUAD, FACES, UP, uvs)
+    np.testing.assert_allclose(t, np.tile([1.0, 0.0, 0.0, 1.0], (4, 1)), atol=1e-12)
+    bitangent = t[0, 3] * np.cross(UP[0], t[0, :3])
+    np.testing.assert_allclose(bitangent, [0.0, 0.0, -1.0], atol=1e-12)
+
+
+def test_a_mirrored_chart_and_a_mirroring_transform_flip_w():
+    mirrored = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])  # v up the image along -z: mirrored
+    t = generate_tangents(QUAD, FACES, UP, mirrored)
+    assert np.all(t[:, 3] == -1.0)
+    np.testing.assert_allclose(t[:, :3], np.tile([1.0, 0.0, 0.0], (4, 1)), atol=1e-12)
+    mesh = TriangleMesh.from_arrays(QUAD, FACES, UP, uvs=mirrored, tangents=t)
+    flipped = mesh.transformed(np.diag([-1.0, 1.0, 1.0, 1.0]))
+    np.testing.assert_allclose(flipped.tangents, np.tile([-1.0, 0.0, 0.0, 1.0], (4, 1)), atol=1e-12)
+
+
+def test_degenerate_uvs_still_give_a_unit_tangent_in_the_surface():
+    t = generate_tangents(QUAD, FACES, UP, np.zeros((4, 2)))
+    np.testing.assert_allclose(np.linalg.norm(t[:, :3], axis=1), 1.0)
+    np.testing.assert_allclose(t[:, :3] @ [0.0, 1.0, 0.0], 0.0, atol=1e-12)
