@@ -58,6 +58,7 @@ def _arrays(spheres, rects, tree):
         np.zeros((0, 3), np.int64),
         np.zeros(0),
         np.zeros((0, 2)),
+        np.zeros((0, 2)),
         np.zeros((0, 4)),
         np.zeros((0, 7), np.int64),
         np.zeros((0, 4), np.uint8),

@@ -300,13 +300,13 @@ def test_texture_inputs_refused_or_warned_in_one_line(tmp_path):
         assert str(info.value).startswith(str(tmp_path / "b.gltf")) and "\n" not in str(info.value)
     doc["materials"][0]["occlusionTexture"] = {"index": 0}
     doc["materials"][0]["emissiveTexture"] = {"index": 0, "texCoord": 1}
-    doc["materials"][0]["alphaMode"] = "MASK"
+    doc["materials"][0]["alphaMode"] = "BLEND"
     (tmp_path / "w.gltf").write_text(json.dumps(doc))
     with pytest.warns(UserWarning) as record:
         asset = load_gltf(tmp_path / "w.gltf")
     said = " | ".join(str(w.message) for w in record)
     for part in ("occlusionTexture is ignored", "texCoord 1 is read as TEXCOORD_0", "emissiveTexture is applied as "
-                 "its mean colour", "alphaMode MASK is rendered as OPAQUE"):  # fmt: skip
+                 "its mean colour", "alphaMode BLEND is rendered as MASK"):  # fmt: skip
         assert part in said, said
     mean = asset.meshes[0].material.textures.base_color.mean_rgb(srgb=True)
     np.testing.assert_allclose(asset.meshes[0].emission, np.array([4.0, 2.0, 1.0]) * mean)
@@ -372,3 +372,18 @@ def test_a_gltf_render_agrees_with_the_same_scene_in_toml(tmp_path):
     verdict = block_z_test(a.image, a.variance, b.image, b.variance, block=4)
     assert abs(verdict["pooled_z"]) < 4.0 and verdict["outliers"] <= 0.05, verdict
     assert a.image.mean() > 0.01
+
+
+def test_alpha_mask_reads_cutoff_and_factor(tmp_path):
+    path = textured_gltf(tmp_path)
+    doc = json.loads(path.read_text())
+    material = doc["materials"][0]
+    material.update(alphaMode="MASK", alphaCutoff=0.3)
+    material["pbrMetallicRoughness"]["baseColorFactor"] = [0.3, 0.5, 0.7, 0.8]
+    path.write_text(json.dumps(doc))
+    textures = load_gltf(path).meshes[0].material.textures
+    assert (textures.alpha_mode, textures.alpha_cutoff, textures.alpha_factor) == ("mask", 0.3, 0.8)
+    material["alphaMode"] = "SOMETIMES"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(SceneError, match="unknown alphaMode 'SOMETIMES'"):
+        load_gltf(path)

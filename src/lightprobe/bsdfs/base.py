@@ -83,7 +83,7 @@ class BSDF:
         if extra:
             takes = ", ".join(self.texture_uses) or "none"
             raise ParameterError(f"{name}: takes no {', '.join(extra)} texture (it takes: {takes})")
-        return textures if textures.used() else None
+        return textures if textures.used() or textures.masked else None
 
     def eval(self, wo, wi) -> np.ndarray:
         """BRDF value f(wo, wi), RGB (N, 3), without the cosine factor."""

@@ -97,6 +97,9 @@ def _load():
         "rtcAttachGeometry": (uint, [vp, vp]),
         "rtcReleaseGeometry": (None, [vp]),
         "rtcGetDeviceProperty": (ctypes.c_ssize_t, [vp, ctypes.c_int]),
+        "rtcSetGeometryUserData": (None, [vp, vp]),
+        "rtcSetGeometryIntersectFilterFunction": (None, [vp, vp]),
+        "rtcSetGeometryOccludedFilterFunction": (None, [vp, vp]),
     }
     for name, (restype, argtypes) in signatures.items():
         fn = getattr(lib, name)
@@ -132,10 +135,11 @@ class EmbreeScene:
     """Triangle meshes in one Embree scene; mesh g is geometry g (so geomID is the mesh index).
 
     ``handle`` is the ``RTCScene`` pointer as an integer, for the kernels.  The vertex and index arrays are shared
-    with Embree (not copied), so the scene keeps them alive until :meth:`close`.
+    with Embree (not copied), so the scene keeps them alive until :meth:`close`.  ``arrays`` (the compiled scene)
+    gives the meshes with alpha cut-outs their filter function (``alpha_mask.py``).
     """
 
-    def __init__(self, vertices: np.ndarray, faces: np.ndarray, face_start: np.ndarray):
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray, face_start: np.ndarray, *, arrays=None):
         self._scene = self._device = None  # so that close() (and __del__) work however far this gets
         self.handle = 0
         self._device = _lib.rtcNewDevice(None)
@@ -146,9 +150,16 @@ class EmbreeScene:
         # Embree may read 16 bytes at the last vertex (its documented padding rule), hence the spare row
         self._vertices = np.zeros((vertices.shape[0] + 1, 3), np.float32)
         self._vertices[:-1] = vertices
-        self._indices = []
-        for g in range(face_start.shape[0] - 1):
-            idx = np.ascontiguousarray(faces[face_start[g] : face_start[g + 1]], dtype=np.uint32)
+        self._indices = [
+            np.ascontiguousarray(faces[face_start[g] : face_start[g + 1]], dtype=np.uint32)
+            for g in range(face_start.shape[0] - 1)
+        ]
+        self._masks = None
+        if arrays is not None and np.any(arrays.material_alpha[:, 0] >= 0.0):
+            from .alpha_mask import MaskRecords, filter_address
+
+            self._masks = MaskRecords(arrays, self._indices)
+        for g, idx in enumerate(self._indices):
             geom = _lib.rtcNewGeometry(self._device, _RTC_GEOMETRY_TYPE_TRIANGLE)
             _lib.rtcSetSharedGeometryBuffer(
                 geom, _RTC_BUFFER_TYPE_VERTEX, 0, _RTC_FORMAT_FLOAT3, self._vertices.ctypes.data, 0, 12,
@@ -157,10 +168,13 @@ class EmbreeScene:
             _lib.rtcSetSharedGeometryBuffer(
                 geom, _RTC_BUFFER_TYPE_INDEX, 0, _RTC_FORMAT_UINT3, idx.ctypes.data, 0, 12, idx.shape[0]
             )
+            if self._masks is not None and self._masks.records[g]:
+                _lib.rtcSetGeometryUserData(geom, self._masks.records[g])
+                _lib.rtcSetGeometryIntersectFilterFunction(geom, filter_address())
+                _lib.rtcSetGeometryOccludedFilterFunction(geom, filter_address())
             _lib.rtcCommitGeometry(geom)
             _lib.rtcAttachGeometry(self._scene, geom)
             _lib.rtcReleaseGeometry(geom)
-            self._indices.append(idx)
         _lib.rtcCommitScene(self._scene)  # builds the BVH now, outside any timed query
         error = _lib.rtcGetDeviceError(self._device)
         if error:

@@ -65,7 +65,7 @@ class RayTracer:
         self.embree: EmbreeScene | None = None
         self.scratch = new_scratch()
         if arrays.mesh_faces.shape[0]:
-            self.embree = EmbreeScene(arrays.mesh_vertices, arrays.mesh_faces, arrays.mesh_face_start)
+            self.embree = EmbreeScene(arrays.mesh_vertices, arrays.mesh_faces, arrays.mesh_face_start, arrays=arrays)
 
     def _require_open(self) -> None:
         if self.embree is None and self.arrays.mesh_faces.shape[0]:  # else every mesh would silently vanish

@@ -23,7 +23,7 @@ import numpy as np
 
 from ..bsdfs.base import BSDF, PARAM_SIZE
 from ..emitters.envmap import EnvironmentMap
-from ..errors import SceneError
+from ..errors import SceneError, warn_once
 from .camera import Camera
 from .intersect import RECT_WIDTH, rectangle_rows
 from .mesh import TriangleMesh
@@ -73,6 +73,7 @@ class SceneArrays(NamedTuple):
     material_textured: np.ndarray  # (K,) int64
     material_textures: np.ndarray  # (K, 3) int64: base colour, metallic-roughness, normal
     material_normal_scale: np.ndarray  # (K,) float64
+    material_alpha: np.ndarray  # (K, 2) float64: alpha cutoff (-1: opaque) and alpha factor (geometry/alpha_mask.py)
     mesh_uvs: np.ndarray  # (V, 2) float64
     mesh_tangents: np.ndarray  # (V, 4) float64
     texture_table: np.ndarray  # (T, 7) int64 (textures/image_texture.py)
@@ -160,6 +161,8 @@ class Scene:
             if shape.uvs is None:
                 raise SceneError(f"{label}: material {material!r} has textures but the mesh has no texture "
                                  "coordinates (UVs)")  # fmt: skip
+            if emission is not None and self.materials[material].textures.masked:
+                warn_once(f"{label}: an emitter is never cut out; material {material!r}'s alpha mask is ignored here")
         obj = SceneObject(shape, material, bool(two_sided), label, emission)
         self.objects.append(obj)
         return obj
@@ -210,7 +213,7 @@ class Scene:
             starts.append(starts[-1] + m.faces.shape[0])
             smooth.append(1 if m.normals is not None else 0)
             bounds.append(m.bounds)
-            proxies.append(m.spheres)
+            proxies.append(textures.proxy_spheres(m, self.materials[o.material]))
 
         def ints(values):
             return np.asarray(values, dtype=np.int64).reshape(-1)
@@ -252,6 +255,7 @@ class Scene:
             textures.textured,
             textures.uses,
             textures.normal_scale,
+            textures.alpha,
             np.ascontiguousarray(np.concatenate(uvs)) if uvs else np.zeros((0, 2)),
             np.ascontiguousarray(np.concatenate(tangents)) if tangents else np.zeros((0, 4)),
             textures.packed.table,
@@ -387,6 +391,7 @@ class _TextureRows:
         self.textured = np.zeros(k, np.int64)
         self.uses = np.full((k, len(USES)), -1, np.int64)
         self.normal_scale = np.ones(k)
+        self.alpha = np.tile([-1.0, 1.0], (k, 1))
         rows: dict[int, int] = {}
         textures = []
         for i, material in enumerate(materials):
@@ -394,12 +399,25 @@ class _TextureRows:
                 continue
             self.textured[i] = 1
             self.normal_scale[i] = float(material.textures.normal_scale)
+            if material.textures.masked:
+                self.alpha[i] = material.textures.alpha_cutoff, material.textures.alpha_factor
             for use, texture in material.textures.used().items():
                 if id(texture) not in rows:
                     rows[id(texture)] = len(textures)
                     textures.append(texture)
                 self.uses[i, USES.index(use)] = rows[id(texture)]
         self.packed = pack_textures(textures)
+
+    @staticmethod
+    def proxy_spheres(mesh: TriangleMesh, material: BSDF) -> np.ndarray:
+        """The mesh's proxy spheres; without the inner ball if its material cuts holes in it."""
+        from .proxies import NO_BALL
+
+        if material.textures is None or not material.textures.masked:
+            return mesh.spheres
+        spheres = mesh.spheres.copy()
+        spheres[4] = NO_BALL
+        return spheres
 
     @staticmethod
     def tangents(mesh: TriangleMesh, material: BSDF) -> np.ndarray:

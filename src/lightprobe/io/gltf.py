@@ -20,8 +20,10 @@ What becomes what:
   data URIs or buffer views, decoded by OpenImageIO (8-bit kept as bytes, 16-bit as float).  Fallbacks, each with a
   warning: an ``emissiveTexture`` scales the emission by its mean colour (an area light's radiance is constant
   per triangle); ``occlusionTexture`` is ignored (the renderer computes occlusion); a ``texCoord`` other than 0
-  reads ``TEXCOORD_0``; ``KHR_texture_transform`` (when not required) is ignored; alpha is opaque (``MASK`` and
-  ``BLEND`` render as ``OPAQUE``);
+  reads ``TEXCOORD_0``; ``KHR_texture_transform`` (when not required) is ignored; ``BLEND`` is rendered as
+  ``MASK`` at 0.5 (the renderer has no partial transparency);
+- ``alphaMode`` ``MASK`` cuts the surface out where ``baseColorFactor``'s alpha x the base-colour texture's alpha
+  is below ``alphaCutoff``, for camera, BSDF and shadow rays (``geometry/alpha_mask.py``);
 - cameras (perspective): :class:`~lightprobe.geometry.Camera` at the node, looking down its -Z with +Y up, ``yfov``
   vertical; orthographic cameras are refused by name;
 - ``KHR_lights_punctual``: point (intensity in candela, taken as W/sr), spot (cone angles), directional (lux, as
@@ -332,8 +334,11 @@ def _material(reader: _Reader, index: int | None, where: str):
     what = f"material {name!r}"
     pbr = spec.get("pbrMetallicRoughness", {})
     base = pbr.get("baseColorFactor", [1.0, 1.0, 1.0, 1.0])
-    if spec.get("alphaMode", "OPAQUE") != "OPAQUE":
-        warn_once(f"{path}: {what}: alphaMode {spec['alphaMode']} is rendered as OPAQUE")
+    alpha_mode = spec.get("alphaMode", "OPAQUE")
+    if alpha_mode not in ("OPAQUE", "MASK", "BLEND"):
+        raise SceneError(f"{path}: {what}: unknown alphaMode {alpha_mode!r}")
+    if alpha_mode == "BLEND":
+        warn_once(f"{path}: {what}: alphaMode BLEND is rendered as MASK with cutoff 0.5 (no partial transparency)")
     if "occlusionTexture" in spec:
         warn_once(f"{path}: {what}: occlusionTexture is ignored (the renderer computes occlusion by tracing rays)")
     uses = {}
@@ -344,7 +349,15 @@ def _material(reader: _Reader, index: int | None, where: str):
             uses[use] = reader.texture(holder[key], f"{what} {key}")
     scale = float(spec.get("normalTexture", {}).get("scale", 1.0))
     try:
-        textures = MaterialTextures(**uses, normal_scale=scale) if uses else None
+        alpha = {}
+        if alpha_mode != "OPAQUE":
+            cutoff = spec.get("alphaCutoff", 0.5) if alpha_mode == "MASK" else 0.5
+            alpha = {
+                "alpha_mode": "mask",
+                "alpha_cutoff": cutoff,
+                "alpha_factor": float(base[3]) if len(base) > 3 else 1.0,
+            }
+        textures = MaterialTextures(**uses, normal_scale=scale, **alpha) if uses or alpha else None
         material = MetallicRoughness(base[:3], pbr.get("metallicFactor", 1.0), pbr.get("roughnessFactor", 1.0),
                                      textures=textures)  # fmt: skip
     except LightprobeError as exc:

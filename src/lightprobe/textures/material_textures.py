@@ -7,6 +7,11 @@
 - ``normal`` (linear, tangent space): the shading normal becomes normalize((2 c - 1) (scale, scale, 1)) in the
   frame of the mesh's tangent, bitangent and normal (see ``textures/surface.py``).
 
+``alpha_mode = "mask"`` cuts the surface out where its coverage, ``alpha_factor`` x the base-colour texture's
+alpha, is below ``alpha_cutoff`` (glTF's ``MASK``; ``geometry/alpha_mask.py``), for camera, BSDF and shadow rays
+alike; ``"opaque"`` ignores alpha.  (glTF's ``BLEND`` is rendered as ``MASK`` at 0.5 by the glTF reader, with a
+warning: the renderer has no partial transparency.)
+
 Textures need a triangle mesh with texture coordinates (``TriangleMesh.uvs``); a normal map also uses its tangents,
 generated when the mesh has none (``textures/tangents.py``).
 """
@@ -34,6 +39,9 @@ class MaterialTextures:
     metallic_roughness: ImageTexture | None = None
     normal: ImageTexture | None = None
     normal_scale: float = 1.0
+    alpha_mode: str = "opaque"
+    alpha_cutoff: float = 0.5
+    alpha_factor: float = 1.0
 
     def __post_init__(self):
         for use in USES:
@@ -42,6 +50,16 @@ class MaterialTextures:
                 raise ParameterError(f"textures: {use} must be an ImageTexture, got {type(value).__name__}")
         if not math.isfinite(float(self.normal_scale)):
             raise ParameterError(f"textures: normal_scale must be finite, got {self.normal_scale!r}")
+        if self.alpha_mode not in ("opaque", "mask"):
+            raise ParameterError(f"textures: alpha_mode must be 'opaque' or 'mask', got {self.alpha_mode!r}")
+        for name in ("alpha_cutoff", "alpha_factor"):
+            value = float(getattr(self, name))
+            if not (math.isfinite(value) and 0.0 <= value <= 1.0):
+                raise ParameterError(f"textures: {name} must be in [0, 1], got {getattr(self, name)!r}")
+
+    @property
+    def masked(self) -> bool:
+        return self.alpha_mode == "mask"
 
     def used(self) -> dict[str, ImageTexture]:
         """The textures present, by use."""
