@@ -299,79 +299,33 @@ def test_texture_inputs_refused_or_warned_in_one_line(tmp_path):
             load_gltf(tmp_path / "b.gltf")
         assert str(info.value).startswith(str(tmp_path / "b.gltf")) and "\n" not in str(info.value)
     doc["materials"][0]["occlusionTexture"] = {"index": 0}
-    doc["materials"][0]["emissiveTexture"] = {"index": 0, "texCoord": 1}
+    doc["materials"][0]["emissiveTexture"] = {"index": 1, "texCoord": 1}
     doc["materials"][0]["alphaMode"] = "BLEND"
     (tmp_path / "w.gltf").write_text(json.dumps(doc))
     with pytest.warns(UserWarning) as record:
         asset = load_gltf(tmp_path / "w.gltf")
     said = " | ".join(str(w.message) for w in record)
     for part in ("occlusionTexture is ignored", "texCoord 1 is read as TEXCOORD_0", "emissiveTexture is applied as "
-                 "its mean colour", "alphaMode BLEND is rendered as MASK"):  # fmt: skip
+                 "its mean over each triangle", "alphaMode BLEND is rendered as MASK"):  # fmt: skip
         assert part in said, said
-    mean = asset.meshes[0].material.textures.base_color.mean_rgb(srgb=True)
-    np.testing.assert_allclose(asset.meshes[0].emission, np.array([4.0, 2.0, 1.0]) * mean)
+    # per face: the emission x the sRGB-decoded texture's mean over the face (16 sub-triangle centroids)
+    from lightprobe.textures.image_texture import triangle_means
+
+    item = asset.meshes[0]
+    means = triangle_means(item.material.textures.metallic_roughness, item.mesh.uvs[item.mesh.faces], srgb=True)
+    assert item.emission.shape == (2, 3) and not np.allclose(means[0], means[1])
+    np.testing.assert_allclose(item.emission, np.array([4.0, 2.0, 1.0]) * means)
 
 
-def test_scene_file_object_and_camera(tmp_path, capsys):
-    from lightprobe.cli import main
-    from lightprobe.io.scene_file import load_scene
+def test_triangle_means_are_exact_for_a_texture_linear_across_the_triangle():
+    from lightprobe.textures import ImageTexture
+    from lightprobe.textures.image_texture import triangle_means
 
-    doc = json.loads(write_gltf(tmp_path / "a.gltf").read_text())
-    doc["materials"][0].pop("emissiveFactor")
-    doc["extensions"]["KHR_lights_punctual"]["lights"] = doc["extensions"]["KHR_lights_punctual"]["lights"][:1]
-    doc["scenes"][0]["nodes"] = [0, 2, 3]
-    (tmp_path / "a.gltf").write_text(json.dumps(doc))
-    (tmp_path / "s.toml").write_text(
-        "[camera]\norigin = [0, 5, 9]\ntarget = [1, 2, 3]\nresolution = [24, 16]\n"
-        "[environment]\nconstant = [0.2, 0.2, 0.2]\n"
-        '[[objects]]\ntype = "gltf"\nfile = "a.gltf"\ntransform = { translate = [0, 1, 0] }\n'
-    )
-    scene, _ = load_scene(tmp_path / "s.toml")
-    assert len(scene.objects) == 1 and len(scene.lights) == 1 and "Main" in scene.cameras
-    assert scene.objects[0].shape.vertices[:, 1].min() == pytest.approx(4.0)  # 2 + 0.5 x 2, then + 1
-    out = tmp_path / "o.exr"
-    assert main(["render", str(tmp_path / "s.toml"), "--camera", "Main", "--spp", "2", "-o", str(out), "-q"]) == 0
-    assert main(["render", str(tmp_path / "s.toml"), "--camera", "Side", "-o", str(out), "-q"]) == 2
-    assert "no such camera; the scene's glTF cameras: Main" in capsys.readouterr().err
-    (tmp_path / "m.toml").write_text(
-        "[camera]\norigin = [0, 5, 9]\ntarget = [1, 2, 3]\nresolution = [24, 16]\n[environment]\nconstant = 1\n"
-        '[[objects]]\ntype = "gltf"\nfile = "a.gltf"\nmaterial = "x"\n'
-    )
-    with pytest.raises(SceneError, match="takes its materials and emission from its file"):
-        load_scene(tmp_path / "m.toml")
-
-
-def test_a_gltf_render_agrees_with_the_same_scene_in_toml(tmp_path):
-    """The quad and a metallic-roughness material from glTF against the same quad and material written in Python:
-    blocks of the two images agree within their noise."""
-    from lightprobe.analysis.metrics import block_z_test
-    from lightprobe.emitters.envmap import EnvironmentMap
-    from lightprobe.emitters.procedural import sky_with_sun
-    from lightprobe.geometry import Camera, Scene
-    from lightprobe.geometry.mesh import TriangleMesh
-    from lightprobe.integrators import RenderSettings, render
-
-    doc = json.loads(write_gltf(tmp_path / "a.gltf").read_text())
-    doc["materials"][0].pop("emissiveFactor")
-    doc["scenes"][0]["nodes"] = [0]
-    (tmp_path / "a.gltf").write_text(json.dumps(doc))
-    env = EnvironmentMap.from_array(sky_with_sun(64, 32, sun_diameter_deg=10.0, sun_radiance=(20.0, 19.0, 18.0)))
-    camera = Camera([1.0, 6.0, 7.0], [1.0, 3.0, 3.0], fov=40.0, resolution=(32, 24))
-    from_gltf = Scene(camera, env)
-    load_gltf(tmp_path / "a.gltf").add_to(from_gltf)
-    by_hand = Scene(camera, env)
-    quad = TriangleMesh.from_arrays(QUAD.astype(np.float64) + np.array([0.0, 0.5, 0.0]), QUAD_FACES.astype(np.int64),
-                                    np.tile([0.0, 1.0, 0.0], (4, 1)))  # fmt: skip
-    rotation = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])
-    matrix = np.eye(4)
-    matrix[:3, :3] = 2.0 * rotation
-    matrix[:3, 3] = [1.0, 2.0, 3.0]
-    by_hand.add(quad, MetallicRoughness([0.3, 0.5, 0.7], 0.25, 0.6), transform=matrix, two_sided=True)
-    a = render(from_gltf, RenderSettings(spp=256, seed=1))
-    b = render(by_hand, RenderSettings(spp=256, seed=2))
-    verdict = block_z_test(a.image, a.variance, b.image, b.variance, block=4)
-    assert abs(verdict["pooled_z"]) < 4.0 and verdict["outliers"] <= 0.05, verdict
-    assert a.image.mean() > 0.01
+    width = 16
+    ramp = np.tile(((np.arange(width) + 0.5) / width)[None, :, None], (4, 1, 3)).astype(np.float32)  # value = u
+    triangles = np.array([[[0.1, 0.2], [0.9, 0.4], [0.3, 0.8]], [[0.05, 0.5], [0.5, 0.5], [0.2, 0.9]]])
+    means = triangle_means(ImageTexture(ramp, wrap="clamp"), triangles, srgb=False)
+    np.testing.assert_allclose(means, np.repeat(triangles[:, :, 0].mean(axis=1)[:, None], 3, axis=1), atol=1e-6)
 
 
 def test_alpha_mask_reads_cutoff_and_factor(tmp_path):
@@ -387,3 +341,27 @@ def test_alpha_mask_reads_cutoff_and_factor(tmp_path):
     path.write_text(json.dumps(doc))
     with pytest.raises(SceneError, match="unknown alphaMode 'SOMETIMES'"):
         load_gltf(path)
+
+
+def test_a_textured_round_trip_through_trimesh(tmp_path):
+    """trimesh writes a textured box (UVs, a base-colour PNG); lightprobe reads back the same texels and UVs."""
+    trimesh = pytest.importorskip("trimesh")
+    image_module = pytest.importorskip("PIL.Image")
+    from trimesh.visual.material import PBRMaterial
+
+    rng = np.random.default_rng(12)
+    texels = rng.integers(0, 256, size=(6, 10, 3), dtype=np.uint8)
+    box = trimesh.creation.box(extents=[1.0, 1.0, 1.0])
+    uv = rng.random((box.vertices.shape[0], 2))
+    material = PBRMaterial(baseColorTexture=image_module.fromarray(texels), metallicFactor=0.0, roughnessFactor=0.5)
+    box.visual = trimesh.visual.TextureVisuals(uv=uv, material=material)
+    box.export(tmp_path / "box.glb")
+    (item,) = load_gltf(tmp_path / "box.glb").meshes
+    texture = item.material.textures.base_color
+    np.testing.assert_array_equal(texture.pixels[:, :, :3], texels)
+    # trimesh stores glTF's v = 1 - its own v (OpenGL's, up the image); lightprobe reads the file's
+    ours = {
+        tuple(np.round(v, 5)): tuple(np.round(t, 5)) for v, t in zip(item.mesh.vertices, item.mesh.uvs, strict=True)
+    }
+    for v, t in zip(box.vertices, uv, strict=True):
+        assert ours[tuple(np.round(v, 5))] == pytest.approx((t[0], 1.0 - t[1]), abs=1e-5)

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from lightprobe.analysis.metrics import block_z_test
+from lightprobe.bsdfs import Lambert
 from lightprobe.experiments.compare import compare
 from lightprobe.integrators.settings import RenderSettings
 from lightprobe.integrators.wavefront import render
@@ -125,6 +126,16 @@ def test_strategy_tokens_and_scene_checks(exercise_scene):
     area = build("area")
     with pytest.raises(TechniqueError, match="environment map alone"):
         render_lab(area, strategy, RenderSettings(spp=1))
+    from lightprobe.geometry import Scene
+    from lightprobe.geometry.mesh import TriangleMesh
+    from lightprobe.textures import ImageTexture, MaterialTextures
+
+    scene, _ = exercise_scene
+    textured = Scene(scene.camera, scene.environment)
+    quad = TriangleMesh.from_arrays([[0, 0, 0], [1, 0, 0], [1, 0, 1]], [[0, 2, 1]], uvs=[[0, 0], [1, 0], [1, 1]])
+    textured.add(quad, Lambert(0.5, textures=MaterialTextures(base_color=ImageTexture([[0.5]]))), name="tile")
+    with pytest.raises(TechniqueError, match="user techniques render untextured materials; 'tile material' has"):
+        render_lab(textured, strategy, RenderSettings(spp=1))
 
 
 def test_compare_takes_user_strategies(exercise_scene):

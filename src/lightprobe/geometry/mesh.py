@@ -183,6 +183,7 @@ class TriangleMesh:
             smooth=smooth,
             name=str(p),
             face_values=face_values,
+            uvs=_file_uvs(loaded),
         )
 
     def transformed(self, matrix) -> TriangleMesh:
@@ -223,6 +224,18 @@ class TriangleMesh:
         from .proxies import mesh_spheres
 
         return mesh_spheres(self.vertices, self.faces)
+
+
+def _file_uvs(loaded) -> np.ndarray | None:
+    """The file's per-vertex texture coordinates in glTF's convention (v down the image), or None.  trimesh gives
+    OBJ's and PLY's as stored, v up the image (OpenGL's), so v becomes 1 - v."""
+    uv = getattr(loaded.visual, "uv", None)
+    if uv is None:
+        return None
+    uv = np.asarray(uv, dtype=np.float64)
+    if uv.shape != (len(loaded.vertices), 2):
+        return None
+    return np.column_stack([uv[:, 0], 1.0 - uv[:, 1]])
 
 
 def _face_colors(loaded, path: Path) -> np.ndarray:

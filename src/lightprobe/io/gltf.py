@@ -18,9 +18,9 @@ What becomes what:
   B metallic), ``normalTexture`` with its ``scale``, with the sampler's ``wrapS`` / ``wrapT`` and its ``magFilter``
   (nearest, else bilinear), on ``TEXCOORD_0`` and the file's ``TANGENT`` (generated when absent); images from files,
   data URIs or buffer views, decoded by OpenImageIO (8-bit kept as bytes, 16-bit as float).  Fallbacks, each with a
-  warning: an ``emissiveTexture`` scales the emission by its mean colour (an area light's radiance is constant
-  per triangle); ``occlusionTexture`` is ignored (the renderer computes occlusion); a ``texCoord`` other than 0
-  reads ``TEXCOORD_0``; ``KHR_texture_transform`` (when not required) is ignored; ``BLEND`` is rendered as
+  warning: an ``emissiveTexture`` gives each triangle the texture's mean over it (sRGB) x the emission (a triangle
+  light's radiance is constant); ``occlusionTexture`` is ignored (the renderer computes occlusion); a ``texCoord``
+  other than 0 reads ``TEXCOORD_0``; ``KHR_texture_transform`` (when not required) is ignored; ``BLEND`` is rendered as
   ``MASK`` at 0.5 (the renderer has no partial transparency);
 - ``alphaMode`` ``MASK`` cuts the surface out where ``baseColorFactor``'s alpha x the base-colour texture's alpha
   is below ``alphaCutoff``, for camera, BSDF and shadow rays (``geometry/alpha_mask.py``);
@@ -47,6 +47,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import LightprobeError, SceneError, warn_once
+from ..textures.image_texture import triangle_means
 
 __all__ = ["GltfAsset", "load_gltf"]
 
@@ -319,7 +320,8 @@ def _world_nodes(doc: dict, path: Path):
 
 
 def _material(reader: _Reader, index: int | None, where: str):
-    """(material, emission, two-sided) of material ``index`` (None: the specification's default)."""
+    """(material, emission, two-sided) of material ``index`` (None: the specification's default); the emission is
+    None, RGB, or (RGB, emissive texture) for the caller to take the texture's mean over each triangle."""
     from ..bsdfs import MetallicRoughness
     from ..textures import MaterialTextures
 
@@ -366,11 +368,10 @@ def _material(reader: _Reader, index: int | None, where: str):
     strength = spec.get("extensions", {}).get("KHR_materials_emissive_strength", {}).get("emissiveStrength", 1.0)
     emission = emissive * float(strength) if np.any(emissive > 0) else None
     if emission is not None and "emissiveTexture" in spec:
-        texture = reader.texture(spec["emissiveTexture"], f"{what} emissiveTexture")
-        emission = emission * texture.mean_rgb(srgb=True)
-        warn_once(f"{path}: {what}: emissiveTexture is applied as its mean colour (an area light's radiance is "
-                  "constant per triangle)")  # fmt: skip
-        emission = emission if np.any(emission > 0) else None
+        emissive_texture = reader.texture(spec["emissiveTexture"], f"{what} emissiveTexture")
+        warn_once(f"{path}: {what}: emissiveTexture is applied as its mean over each triangle (a triangle light's "
+                  "radiance is constant)")  # fmt: skip
+        emission = (emission, emissive_texture)
     return material, emission, bool(spec.get("doubleSided", False))
 
 
@@ -413,11 +414,15 @@ def load_gltf(path, *, transform=None) -> GltfAsset:
                 label = f"{mesh_name}" + (f" #{k}" if len(mesh_spec["primitives"]) > 1 else "")
                 material, emission, two_sided = _material(reader, prim.get("material"), where)
                 uvs = tangents = None
-                if material.textures is not None:
+                if material.textures is not None or isinstance(emission, tuple):
                     if "TEXCOORD_0" not in attributes:
                         raise SceneError(f"{file}: {where}: its material has textures but it has no TEXCOORD_0")
                     uvs = reader.accessor(attributes["TEXCOORD_0"], f"{where} TEXCOORD_0")[:, :2]
-                    if material.textures.normal is not None and "TANGENT" in attributes:
+                    if (
+                        material.textures is not None
+                        and material.textures.normal is not None
+                        and "TANGENT" in attributes
+                    ):
                         tangents = reader.accessor(attributes["TANGENT"], f"{where} TANGENT")
                     if uvs.shape[0] != vertices.shape[0] or (
                         tangents is not None and tangents.shape != (vertices.shape[0], 4)
@@ -427,6 +432,10 @@ def load_gltf(path, *, transform=None) -> GltfAsset:
                 mesh = TriangleMesh.from_arrays(vertices, faces.reshape(-1, 3), normals, smooth=False,
                                                 name=f"{file.name}: {label}", uvs=uvs,
                                                 tangents=tangents)  # fmt: skip
+                if isinstance(emission, tuple):  # (factor, texture): one radiance per face
+                    factor, texture = emission
+                    emission = factor * triangle_means(texture, mesh.uvs[mesh.faces], srgb=True)
+                    emission = emission if np.any(emission > 0) else None
                 asset.meshes.append(GltfMesh(mesh.transformed(matrix), material, label, two_sided, emission))
         if "camera" in node:
             spec = doc["cameras"][node["camera"]]

@@ -43,6 +43,12 @@ Example (every key shown; optional ones have their default)::
     base_color = [0.8, 0.1, 0.1]
     metallic = 0.0
     roughness = 0.4
+    # lambert and metallic_roughness take textures on meshes with UVs (files relative to this one; glTF's meaning):
+    # base_color_texture = "albedo.png"            # sRGB, multiplies base_color / albedo
+    # metallic_roughness_texture = "mr.png"        # G roughness, B metallic (metallic_roughness only)
+    # normal_texture = "normal.png"                # tangent space, +Y up; normal_scale = 1.0
+    # texture_wrap = "repeat"                      # or "mirrored_repeat", "clamp"; texture_filter = "linear"
+    # alpha_mode = "mask"                          # cut out where the base colour's alpha < alpha_cutoff (0.5)
 
     [[objects]]
     type = "mesh"                       # OBJ, PLY, PLY.GZ, glTF/GLB
@@ -271,10 +277,45 @@ def _environment(t: _Table, base: Path) -> EnvironmentMap:
     return env
 
 
-def _material(t: _Table):
+_TEXTURE_KEYS = {"base_color_texture": "base_color", "metallic_roughness_texture": "metallic_roughness",
+                 "normal_texture": "normal"}  # fmt: skip
+
+
+def _textures(t: _Table, base: Path | None):
+    """The material's ``*_texture`` files (relative to the scene file), ``normal_scale``, ``texture_wrap``,
+    ``texture_filter``, ``alpha_mode``, ``alpha_cutoff``: a MaterialTextures, or None without any."""
+    from ..textures import ImageTexture, MaterialTextures
+
+    keys = set(_TEXTURE_KEYS) | {"normal_scale", "texture_wrap", "texture_filter", "alpha_mode", "alpha_cutoff"}
+    if not keys & set(t.data):
+        return None
+    wrap = t.choice("texture_wrap", ("repeat", "mirrored_repeat", "clamp"), "repeat")
+    filter_ = t.choice("texture_filter", ("linear", "nearest"), "linear")
+    uses = {}
+    for key, use in _TEXTURE_KEYS.items():
+        value = t.string(key)
+        if value is not None:
+            if base is None:
+                raise SceneError(f"{t.where}: {key}: textures are read from scene files only")
+            uses[use] = ImageTexture.read(_path(base, value, t.where), wrap=wrap, filter=filter_)
+    try:
+        return MaterialTextures(
+            **uses,
+            normal_scale=t.number("normal_scale", 1.0),
+            alpha_mode=t.choice("alpha_mode", ("opaque", "mask"), "opaque"),
+            alpha_cutoff=t.number("alpha_cutoff", 0.5),
+        )
+    except LightprobeError as exc:
+        raise SceneError(f"{t.where}: {exc}") from None
+
+
+def _material(t: _Table, base: Path | None = None):
     kind = t.string("type", required=True)
+    textures = _textures(t, base)
+    if textures is not None and kind not in ("lambert", "metallic_roughness"):
+        raise SceneError(f"{t.where}: textures are taken by lambert and metallic_roughness materials, not {kind}")
     if kind == "lambert":
-        bsdf = Lambert(t.get("albedo", 0.5))
+        bsdf = Lambert(t.get("albedo", 0.5), textures=textures)
     elif kind == "phong":
         bsdf = Phong(
             t.get("rho_d", 0.5),
@@ -294,7 +335,9 @@ def _material(t: _Table):
     elif kind == "plastic":
         bsdf = RoughPlastic(t.get("diffuse", 0.5), t.number("alpha", 0.1), eta=t.number("eta", 1.49 / 1.000277))
     elif kind == "metallic_roughness":
-        bsdf = MetallicRoughness(t.get("base_color", 1.0), t.number("metallic", 1.0), t.number("roughness", 1.0))
+        bsdf = MetallicRoughness(
+            t.get("base_color", 1.0), t.number("metallic", 1.0), t.number("roughness", 1.0), textures=textures
+        )
     else:
         raise SceneError(
             f"{t.where}: unknown material type {kind!r}; use lambert, phong, conductor, plastic or metallic_roughness"
@@ -446,7 +489,7 @@ def load_scene(path: str | os.PathLike, *, require_light: bool = True) -> tuple[
         raise SceneError(f"{p}: [materials] must be a table of tables")
     for name, spec in materials.items():
         where = f"{p}: [materials.{name}]"
-        scene.add_material(name, _within(where, lambda w, spec=spec: _material(_Table(spec, w))))
+        scene.add_material(name, _within(where, lambda w, spec=spec: _material(_Table(spec, w), base)))
     objects = root.get("objects", [])
     if not isinstance(objects, list) or not objects:
         raise SceneError(f"{p}: the scene needs at least one [[objects]] entry")

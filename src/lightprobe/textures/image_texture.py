@@ -37,6 +37,7 @@ __all__ = [
     "TextureTable",
     "pack_textures",
     "texture_lookup",
+    "triangle_means",
 ]
 
 REPEAT, MIRRORED_REPEAT, CLAMP = 0, 1, 2
@@ -280,6 +281,24 @@ def texture_lookup(table, texel_bytes, texel_floats, t, u, v, srgb):
         w00 * c00[2] + w10 * c10[2] + w01 * c01[2] + w11 * c11[2],
         w00 * c00[3] + w10 * c10[3] + w01 * c01[3] + w11 * c11[3],
     )
+
+
+def triangle_means(texture: ImageTexture, uv_triangles: np.ndarray, *, srgb: bool) -> np.ndarray:
+    """The mean colour (F, 3) of ``texture`` over each triangle of texture coordinates (F, 3, 2): the average of the
+    filtered lookups at the centroids of the triangle's 16 equal sub-triangles (exact where the texture is linear
+    across the triangle)."""
+    n = 4
+    up = [((i + 1 / 3) / n, (j + 1 / 3) / n) for i in range(n) for j in range(n - i)]
+    down = [((i + 2 / 3) / n, (j + 2 / 3) / n) for i in range(n - 1) for j in range(n - 1 - i)]
+    bary = np.array(up + down)  # (16, 2): weights of vertices 1 and 2
+    t = np.asarray(uv_triangles, dtype=np.float64)
+    points = (
+        t[:, None, 0] * (1.0 - bary[None, :, 0:1] - bary[None, :, 1:2])
+        + t[:, None, 1] * bary[None, :, 0:1]
+        + t[:, None, 2] * bary[None, :, 1:2]
+    )  # (F, 16, 2)
+    values = lookup_batch(pack_textures([texture]), 0, points.reshape(-1, 2), srgb=srgb)[:, :3]
+    return values.reshape(t.shape[0], bary.shape[0], 3).mean(axis=1)
 
 
 def lookup_batch(table: TextureTable, t: int, uv: np.ndarray, *, srgb: bool) -> np.ndarray:

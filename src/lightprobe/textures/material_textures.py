@@ -5,7 +5,7 @@
 - ``metallic_roughness`` (linear): its blue channel multiplies ``metallic`` and its green channel ``roughness``
   (metallic-roughness materials only);
 - ``normal`` (linear, tangent space): the shading normal becomes normalize((2 c - 1) (scale, scale, 1)) in the
-  frame of the mesh's tangent, bitangent and normal (see ``textures/surface.py``).
+  frame of the mesh's tangent, bitangent and normal (see ``integrators/textured_hits.py``).
 
 ``alpha_mode = "mask"`` cuts the surface out where its coverage, ``alpha_factor`` x the base-colour texture's
 alpha, is below ``alpha_cutoff`` (glTF's ``MASK``; ``geometry/alpha_mask.py``), for camera, BSDF and shadow rays

@@ -21,7 +21,6 @@ from ..._numba import jit_body
 from ...bsdfs.dispatch import bsdf_eval, bsdf_pdf
 from ...emitters.lights import is_delta
 from ...geometry.frame import to_local
-from ...textures.surface import material_parameters
 from ..techniques import (
     MIS,
     NONE,
@@ -34,6 +33,7 @@ from ..techniques import (
     light_scale,
     load_shading_frame,
 )
+from ..textured_hits import material_parameters
 
 __all__ = ["finish"]
 

@@ -33,8 +33,8 @@ from ...emitters.selection import select_light
 from ...geometry.frame import to_local
 from ...sampling.rng import sample_state, uniform, uniform_2d
 from ...simd import LANES
-from ...textures.surface import material_parameters
 from ..techniques import ENV, MIS, SLOT_LIGHT, SLOT_NONE, load_shading_frame, pick_number, technique_slot
+from ..textured_hits import material_parameters
 from .environment_lanes import env_sample_block
 
 __all__ = [

@@ -17,7 +17,6 @@ from ...geometry.frame import to_world
 from ...geometry.intersect import MESH, MISS, RECT, SPHERE
 from ...sampling.rng import SOBOL, sample_state, uniform, uniform_2d
 from ...simd import LANES
-from ...textures.surface import apply_textures, material_parameters
 from ..techniques import (
     BRDF,
     ENV,
@@ -30,6 +29,7 @@ from ..techniques import (
     store_shading_frame,
     technique_slot,
 )
+from ..textured_hits import apply_textures, material_parameters
 from .sobol_lanes import slot_numbers_block
 
 __all__ = ["emitter_of", "shading_setup"]

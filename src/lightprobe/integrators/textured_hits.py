@@ -19,8 +19,8 @@ import math
 from .._numba import jit_inline
 from ..bsdfs.dispatch import bsdf_textured
 from ..geometry.frame import coordinate_system, to_local
-from .image_texture import texture_lookup
-from .material_textures import BASE_COLOR, METALLIC_ROUGHNESS, NORMAL
+from ..textures.image_texture import texture_lookup
+from ..textures.material_textures import BASE_COLOR, METALLIC_ROUGHNESS, NORMAL
 
 __all__ = ["apply_textures", "material_parameters"]
 
