@@ -137,3 +137,7 @@ def test_texture_memory_is_counted_once_per_texture():
     scene.add(quad(), MetallicRoughness(textures=MaterialTextures(base_color=shared, normal=ImageTexture(
         np.zeros((4, 4, 3), np.float32)))))  # fmt: skip
     assert scene.texture_bytes == 64 * 32 * 4 + 4 * 4 * 16
+    assert "materials (0.0 MiB of textures)" in scene.summary()
+    untextured = Scene(camera(), sky())
+    untextured.add(quad(), Lambert(0.5))
+    assert "textures" not in untextured.summary()

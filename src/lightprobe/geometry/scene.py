@@ -324,9 +324,11 @@ class Scene:
             n = sum(light.kind == kind for light in self.lights)
             if n:
                 lights.append(f"{n} {kind} light{'s' if n > 1 else ''}")
+        textured = self.texture_bytes
+        textures = f" ({textured / 2**20:.1f} MiB of textures)" if textured else ""
         return (
             f"{self.name}: {len(self.objects)} objects ({self.triangle_count} triangles), "
-            f"{len(self.materials)} materials, {w}x{h}, light {' + '.join(lights) or 'none'}"
+            f"{len(self.materials)} materials{textures}, {w}x{h}, light {' + '.join(lights) or 'none'}"
         )
 
 

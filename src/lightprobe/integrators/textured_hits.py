@@ -3,7 +3,9 @@
 The setup stage calls :func:`apply_textures` once per camera sample that hits a textured material; it writes the
 block into the camera sample's row of ``CameraSamples.params``, which the later stages read instead of the
 material's constant block (``material_parameters``), so each texture is looked up once per camera sample however
-many shading slots it has.
+many shading slots it has.  ``apply_textures`` is a call, not inlined: it runs once per camera sample that hits a
+textured material, and inlined into each variant of the setup stage it made the first run's compile a minute longer
+(decisions.md 85).
 
 Normal mapping follows the glTF sample renderer: with the mesh's tangent t (made orthogonal to the shading normal
 n) and bitangent b = w cross(n, t), all three negated on the back of a two-sided surface, the shading normal becomes
@@ -16,7 +18,7 @@ from __future__ import annotations
 
 import math
 
-from .._numba import jit_inline
+from .._numba import jit, jit_inline
 from ..bsdfs.dispatch import bsdf_textured
 from ..geometry.frame import coordinate_system, to_local
 from ..textures.image_texture import texture_lookup
@@ -39,7 +41,7 @@ def _unit_clamp(x):
     return min(max(x, 0.0), 1.0)
 
 
-@jit_inline
+@jit
 def apply_textures(s, cams, k, dx, dy, dz):
     """Camera sample k (ray direction d, a mesh hit of a textured material, frame already stored): its parameter
     block, and its frame and local wo under a normal map.  See the module docstring."""
