@@ -110,3 +110,19 @@ def test_an_emitter_is_never_cut_out():
         scene.add(TriangleMesh.from_arrays(QUAD, FACES, UP, uvs=UVS), masked(), emission=2.0)
     image = render(scene, RenderSettings(spp=2)).image[..., 0]
     np.testing.assert_allclose(image[INNER], 2.0, rtol=1e-6)
+
+
+def test_a_mask_without_a_texture_needs_no_uvs_and_cuts_by_its_factor():
+    """glTF allows alphaMode MASK with baseColorFactor's alpha alone: 0.3 against the cutoff 0.5 removes the whole
+    mesh (which has no texture coordinates), 0.7 keeps it."""
+    origins = np.array([[0.2, 1.0, -0.3], [-0.5, 1.0, 0.6]])
+    directions = np.tile([0.0, -1.0, 0.0], (2, 1))
+    for factor, hit in ((0.3, False), (0.7, True)):
+        scene = Scene(camera(), None)
+        textures = MaterialTextures(alpha_mode="mask", alpha_factor=factor)
+        scene.add(TriangleMesh.from_arrays(QUAD, FACES, UP), Lambert(0.5, textures=textures))
+        tracer = RayTracer(scene.compile())
+        try:
+            np.testing.assert_array_equal(tracer.occluded(origins, directions), [hit, hit])
+        finally:
+            tracer.close()

@@ -337,6 +337,12 @@ def test_alpha_mask_reads_cutoff_and_factor(tmp_path):
     path.write_text(json.dumps(doc))
     textures = load_gltf(path).meshes[0].material.textures
     assert (textures.alpha_mode, textures.alpha_cutoff, textures.alpha_factor) == ("mask", 0.3, 0.8)
+    untextured = json.loads(write_gltf(tmp_path / "u.gltf").read_text())  # no TEXCOORD_0, no texture: none needed
+    untextured["materials"][0].update(alphaMode="MASK")
+    untextured["materials"][0]["pbrMetallicRoughness"]["baseColorFactor"] = [0.3, 0.5, 0.7, 0.2]
+    (tmp_path / "u.gltf").write_text(json.dumps(untextured))
+    (item,) = load_gltf(tmp_path / "u.gltf").meshes
+    assert item.material.textures.alpha_factor == 0.2 and np.all(item.mesh.uvs == 0.0)
     material["alphaMode"] = "SOMETIMES"
     path.write_text(json.dumps(doc))
     with pytest.raises(SceneError, match="unknown alphaMode 'SOMETIMES'"):

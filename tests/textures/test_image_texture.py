@@ -79,8 +79,13 @@ def test_storage_grey_and_alpha_expansion_and_memory():
     assert grey_alpha.is_float and grey_alpha.pixels[1, 1].tolist() == pytest.approx([0.3, 0.3, 0.3, 0.6])
     assert grey_alpha.nbytes == 2 * 2 * 16
     table = pack_textures([grey, grey_alpha, ImageTexture(np.zeros((1, 1, 3), np.uint8))])
-    assert table.table[:, 0].tolist() == [0, 0, 24]  # offsets into the byte and float texels
-    assert table.bytes.shape == (25, 4) and table.floats.shape == (4, 4)
+    # stored in 4 x 4 tiles, padded: 4 x 6 -> 2 tiles (32 rows), 2 x 2 and 1 x 1 -> one tile each
+    assert table.table[:, 0].tolist() == [0, 0, 32]  # offsets into the byte and float texels
+    assert table.bytes.shape == (48, 4) and table.floats.shape == (16, 4)
+    # the tiled order: texel (i, j) = (5, 2) of the 4 x 6 image is in tile 1, at row 2, column 1 of it
+    marked = np.zeros((4, 6, 4), np.uint8)
+    marked[2, 5] = 9
+    assert np.nonzero(pack_textures([ImageTexture(marked)]).bytes[:, 0])[0].tolist() == [16 + 2 * 4 + 1]
 
 
 def test_huge_and_non_finite_coordinates_stay_in_the_texture():

@@ -158,7 +158,7 @@ class Scene:
             if not isinstance(shape, TriangleMesh):
                 raise SceneError(f"{label}: material {material!r} has textures, which need a triangle mesh with "
                                  f"texture coordinates, not a {type(shape).__name__.lower()}")  # fmt: skip
-            if shape.uvs is None:
+            if shape.uvs is None and self.materials[material].textures.used():
                 raise SceneError(f"{label}: material {material!r} has textures but the mesh has no texture "
                                  "coordinates (UVs)")  # fmt: skip
             if emission is not None and self.materials[material].textures.masked:

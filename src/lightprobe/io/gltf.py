@@ -414,10 +414,12 @@ def load_gltf(path, *, transform=None) -> GltfAsset:
                 label = f"{mesh_name}" + (f" #{k}" if len(mesh_spec["primitives"]) > 1 else "")
                 material, emission, two_sided = _material(reader, prim.get("material"), where)
                 uvs = tangents = None
+                sampled = isinstance(emission, tuple) or (material.textures is not None and material.textures.used())
+                if sampled and "TEXCOORD_0" not in attributes:
+                    raise SceneError(f"{file}: {where}: its material has textures but it has no TEXCOORD_0")
                 if material.textures is not None or isinstance(emission, tuple):
-                    if "TEXCOORD_0" not in attributes:
-                        raise SceneError(f"{file}: {where}: its material has textures but it has no TEXCOORD_0")
-                    uvs = reader.accessor(attributes["TEXCOORD_0"], f"{where} TEXCOORD_0")[:, :2]
+                    uvs = (reader.accessor(attributes["TEXCOORD_0"], f"{where} TEXCOORD_0")[:, :2]
+                           if "TEXCOORD_0" in attributes else np.zeros((vertices.shape[0], 2)))  # fmt: skip
                     if (
                         material.textures is not None
                         and material.textures.normal is not None

@@ -14,7 +14,9 @@ Decoding is per use, not per image: a base colour or emissive texture holds sRGB
 linear before filtering; metallic-roughness and normal textures are linear.
 
 All textures of a scene are packed into one table (:func:`pack_textures`) that the kernels read with
-:func:`texture_lookup`.
+:func:`texture_lookup`, each texture's texels in 4 x 4 tiles (pbrt's blocked arrays): an 8-bit tile is 64 bytes, one
+cache line, so a bilinear lookup's 2 x 2 texels lie in one line unless they straddle a tile's edge (9 times in 16
+they do not), where rows of a 4096-texel image put them 16 KiB apart (decisions.md 85).
 """
 
 from __future__ import annotations
@@ -171,10 +173,14 @@ def _decode(path: Path, label: str) -> np.ndarray:
     return pixels
 
 
+TILE = 4  # texels along a side of a storage tile (``_tiled_row`` computes with shifts for 4)
+
+
 class TextureTable:
     """Every texture of a scene in the kernels' layout: ``table`` (T, 7) int64 rows of (offset, width, height,
     wrap u, wrap v, filter, float), ``bytes`` (N, 4) uint8 texels of the 8-bit textures and ``floats`` (M, 4)
-    float32 of the others, each texture's rows at its offset."""
+    float32 of the others, each texture's rows at its offset, in 4 x 4 tiles (row-major tiles of row-major texels;
+    the image padded to whole tiles)."""
 
     def __init__(self, table: np.ndarray, texel_bytes: np.ndarray, texel_floats: np.ndarray):
         self.table, self.bytes, self.floats = table, texel_bytes, texel_floats
@@ -190,7 +196,7 @@ def pack_textures(textures: list[ImageTexture]) -> TextureTable:
     byte_parts, float_parts = [], []
     n_bytes = n_floats = 0
     for i, tex in enumerate(textures):
-        texels = tex.pixels.reshape(-1, 4)
+        texels = _tiled(tex.pixels)
         if tex.is_float:
             table[i, _OFFSET], n_floats = n_floats, n_floats + texels.shape[0]
             float_parts.append(texels)
@@ -203,6 +209,22 @@ def pack_textures(textures: list[ImageTexture]) -> TextureTable:
     texel_bytes = np.ascontiguousarray(np.concatenate(byte_parts)) if byte_parts else np.zeros((0, 4), np.uint8)
     texel_floats = np.ascontiguousarray(np.concatenate(float_parts)) if float_parts else np.zeros((0, 4), np.float32)
     return TextureTable(table, texel_bytes, texel_floats)
+
+
+def _tiled(pixels: np.ndarray) -> np.ndarray:
+    """(H, W, 4) texels as rows of 4 x 4 tiles, the tiles row by row, each tile's texels row by row."""
+    h, w = pixels.shape[:2]
+    ty, tx = -(-h // TILE), -(-w // TILE)
+    padded = np.zeros((ty * TILE, tx * TILE, 4), pixels.dtype)
+    padded[:h, :w] = pixels
+    return np.ascontiguousarray(padded.reshape(ty, TILE, tx, TILE, 4).transpose(0, 2, 1, 3, 4).reshape(-1, 4))
+
+
+@jit_inline
+def _tiled_row(width, i, j):
+    """Texel (i, j)'s row within its texture's tiled storage (``_tiled``; i, j >= 0, shifts for TILE = 4)."""
+    tiles_across = (width + 3) >> 2
+    return ((((j >> 2) * tiles_across + (i >> 2)) << 4) | ((j & 3) << 2)) | (i & 3)
 
 
 @jit_inline
@@ -236,7 +258,7 @@ def _srgb_decode(x):
 @jit_inline
 def _texel(table, texel_bytes, texel_floats, t, i, j, srgb):
     """Texel (i, j) of texture t (indices already wrapped) as linear RGBA."""
-    row = table[t, _OFFSET] + j * table[t, _WIDTH] + i
+    row = table[t, _OFFSET] + _tiled_row(table[t, _WIDTH], i, j)
     if table[t, _FLOAT] == 1:
         x = texel_floats[row]
         r, g, b = float(x[0]), float(x[1]), float(x[2])
