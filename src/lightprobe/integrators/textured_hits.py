@@ -3,9 +3,8 @@
 The setup stage calls :func:`apply_textures` once per camera sample that hits a textured material; it writes the
 block into the camera sample's row of ``CameraSamples.params``, which the later stages read instead of the
 material's constant block (``material_parameters``), so each texture is looked up once per camera sample however
-many shading slots it has.  ``apply_textures`` is a call, not inlined: it runs once per camera sample that hits a
-textured material, and inlined into each variant of the setup stage it made the first run's compile a minute longer
-(decisions.md 85).
+many shading slots it has.  ``apply_textures`` is a call, not inlined into the setup stage: it runs once per camera
+sample that hits a textured material, and the first run's compile was shorter so (decisions.md 85).
 
 Normal mapping follows the glTF sample renderer: with the mesh's tangent t (made orthogonal to the shading normal
 n) and bitangent b = w cross(n, t), all three negated on the back of a two-sided surface, the shading normal becomes
