@@ -24,25 +24,60 @@ SPHERES = [  # (name, centre, radius, base colour, metallic, roughness)
 ]
 
 
-def main(out: Path | None = None) -> Path:
-    blob = bytearray()
-    views, accessors, meshes, materials, nodes = [], [], [], [], []
+class GlbBuffer:
+    """One glTF binary buffer, built view by view (each padded to 4 bytes), and its writing as a .glb with the
+    document: the layout of the specification (a JSON chunk, then the BIN chunk).  examples/make_textured_asset.py
+    uses it too."""
 
-    def add(array: np.ndarray, component: int, kind: str, target: int) -> int:
-        offset = len(blob)
-        blob.extend(array.tobytes())
-        blob.extend(b"\0" * (-len(blob) % 4))
-        views.append({"buffer": 0, "byteOffset": offset, "byteLength": array.nbytes, "target": target})
+    def __init__(self):
+        self.blob = bytearray()
+        self.views: list[dict] = []
+        self.accessors: list[dict] = []
+
+    def view(self, data: bytes, target: int | None = None) -> int:
+        """A buffer view of ``data`` (``target``: 34962 vertex attributes, 34963 indices; images take none)."""
+        offset = len(self.blob)
+        self.blob.extend(data)
+        self.blob.extend(b"\0" * (-len(self.blob) % 4))
+        view = {"buffer": 0, "byteOffset": offset, "byteLength": len(data)}
+        if target:
+            view["target"] = target
+        self.views.append(view)
+        return len(self.views) - 1
+
+    def accessor(self, array: np.ndarray, component: int, kind: str, target: int) -> int:
+        """An accessor of ``array`` (one row per element) in a view of its own; VEC3s get their bounds."""
         accessor = {
-            "bufferView": len(views) - 1,
+            "bufferView": self.view(array.tobytes(), target),
             "componentType": component,
             "count": int(array.shape[0]),
             "type": kind,
         }
         if kind == "VEC3":
             accessor["min"], accessor["max"] = array.min(axis=0).tolist(), array.max(axis=0).tolist()
-        accessors.append(accessor)
-        return len(accessors) - 1
+        self.accessors.append(accessor)
+        return len(self.accessors) - 1
+
+    def write(self, doc: dict, out: Path) -> Path:
+        """``doc`` with this buffer's buffers, bufferViews and accessors, as the .glb ``out``."""
+        doc = {**doc, "buffers": [{"byteLength": len(self.blob)}], "bufferViews": self.views,
+               "accessors": self.accessors}  # fmt: skip
+        text = json.dumps(doc, separators=(",", ":")).encode()
+        text += b" " * (-len(text) % 4)
+
+        def chunk(data: bytes, kind: int) -> bytes:
+            return len(data).to_bytes(4, "little") + kind.to_bytes(4, "little") + data
+
+        body = chunk(text, 0x4E4F534A) + chunk(bytes(self.blob), 0x004E4942)
+        out.parent.mkdir(exist_ok=True)
+        out.write_bytes(b"glTF" + (2).to_bytes(4, "little") + (12 + len(body)).to_bytes(4, "little") + body)
+        return out
+
+
+def main(out: Path | None = None) -> Path:
+    buffer = GlbBuffer()
+    meshes, materials, nodes = [], [], []
+    add = buffer.accessor
 
     def add_mesh(name, vertices, normals, faces, material) -> None:
         position = add(vertices.astype(np.float32), 5126, "VEC3", 34962)
@@ -126,20 +161,8 @@ def main(out: Path | None = None) -> Path:
                 ]
             }
         },
-        "buffers": [{"byteLength": len(blob)}],
-        "bufferViews": views,
-        "accessors": accessors,
     }
-    text = json.dumps(doc, separators=(",", ":")).encode()
-    text += b" " * (-len(text) % 4)
-
-    def chunk(data: bytes, kind: int) -> bytes:
-        return len(data).to_bytes(4, "little") + kind.to_bytes(4, "little") + data
-
-    body = chunk(text, 0x4E4F534A) + chunk(bytes(blob), 0x004E4942)
-    out = out or HERE / "assets" / "spheres.glb"
-    out.parent.mkdir(exist_ok=True)
-    out.write_bytes(b"glTF" + (2).to_bytes(4, "little") + (12 + len(body)).to_bytes(4, "little") + body)
+    out = buffer.write(doc, out or HERE / "assets" / "spheres.glb")
     print(f"wrote {out} ({out.stat().st_size:,} bytes)")
     return out
 

@@ -7,18 +7,20 @@ glaze, rough clay, metallic gold) and a normal map (a hammered, dimpled surface)
 
 The textures are made here with NumPy (periodic in u, so the spherical UV layout has no seam in them); UVs are a
 spherical projection about the mesh's centre, with the vertices of triangles that straddle the u = 0 / 1 seam
-duplicated at u + 1 (the sampler repeats).  The file is written with json and NumPy, the PNGs by OpenImageIO, one
-binary buffer holding geometry and images; no tangents are stored, so lightprobe generates them.
+duplicated at u + 1 (the sampler repeats).  The file is written by make_gltf_asset.py's GlbBuffer (one binary
+buffer holding geometry and images), the PNGs by OpenImageIO; no tangents are stored, so lightprobe generates them.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
+import importlib.util
 import tempfile
 from pathlib import Path
 
 import numpy as np
+
+from lightprobe.io.images import linear_to_srgb
 
 HERE = Path(__file__).resolve().parent
 
@@ -91,8 +93,7 @@ def _textures(size: int):
     blue = np.array([0.08, 0.22, 0.55]) * (0.9 + 0.2 * noise[..., None])
     gold = np.array([1.0, 0.78, 0.34])
     colour = np.where(band[..., None], gold, np.where(glaze[..., None], blue, terracotta))
-    srgb = np.where(colour <= 0.0031308, 12.92 * colour, 1.055 * colour ** (1 / 2.4) - 0.055)
-    base = np.dstack([np.round(np.clip(srgb, 0, 1) * 255), np.full((size, size), 255)]).astype(np.uint8)
+    base = np.dstack([np.round(linear_to_srgb(colour) * 255), np.full((size, size), 255)]).astype(np.uint8)
     roughness = np.where(band, 0.3, np.where(glaze, 0.12, 0.75 + 0.2 * noise))
     metallic = np.where(band, 1.0, 0.0)
     mr = np.dstack([np.zeros((size, size)), roughness, metallic])
@@ -106,6 +107,14 @@ def _textures(size: int):
     n /= np.linalg.norm(n, axis=2, keepdims=True)
     normal = np.round((n * 0.5 + 0.5) * 255).astype(np.uint8)
     return base, mr, normal
+
+
+def _gltf_writer():
+    """examples/make_gltf_asset.py as a module, for its GlbBuffer (loaded by path: this script runs from anywhere)."""
+    spec = importlib.util.spec_from_file_location("make_gltf_asset", HERE / "make_gltf_asset.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 def _png(pixels: np.ndarray) -> bytes:
@@ -129,26 +138,8 @@ def main(out: Path | None = None, *, size: int = 1024, mesh: Path | str | None =
     checker = ((rows // 8 + columns // 8) % 2).astype(np.float64)
     tile = np.round(255 * (0.35 + 0.25 * checker))[..., None].repeat(3, axis=2).astype(np.uint8)
 
-    blob = bytearray()
-    views, accessors = [], []
-
-    def add_view(data: bytes, target: int | None = None) -> int:
-        offset = len(blob)
-        blob.extend(data)
-        blob.extend(b"\0" * (-len(blob) % 4))
-        view = {"buffer": 0, "byteOffset": offset, "byteLength": len(data)}
-        if target:
-            view["target"] = target
-        views.append(view)
-        return len(views) - 1
-
-    def add(array: np.ndarray, component: int, kind: str, target: int) -> int:
-        accessor = {"bufferView": add_view(array.tobytes(), target), "componentType": component,
-                    "count": int(array.shape[0]), "type": kind}  # fmt: skip
-        if kind == "VEC3":
-            accessor["min"], accessor["max"] = array.min(axis=0).tolist(), array.max(axis=0).tolist()
-        accessors.append(accessor)
-        return len(accessors) - 1
+    buffer = _gltf_writer().GlbBuffer()
+    add, add_view = buffer.accessor, buffer.view
 
     def primitive(v, n, uv, f, material):
         attributes = {"POSITION": add(v.astype(np.float32), 5126, "VEC3", 34962),
@@ -204,20 +195,8 @@ def main(out: Path | None = None, *, size: int = 1024, mesh: Path | str | None =
         "samplers": [{"wrapS": 10497, "wrapT": 10497, "magFilter": 9729}],
         "textures": [{"source": k, "sampler": 0} for k in range(4)],
         "images": images,
-        "buffers": [{"byteLength": len(blob)}],
-        "bufferViews": views,
-        "accessors": accessors,
     }
-    text = json.dumps(doc, separators=(",", ":")).encode()
-    text += b" " * (-len(text) % 4)
-
-    def chunk(data: bytes, kind: int) -> bytes:
-        return len(data).to_bytes(4, "little") + kind.to_bytes(4, "little") + data
-
-    body = chunk(text, 0x4E4F534A) + chunk(bytes(blob), 0x004E4942)
-    out = out or HERE / "assets" / "textured_bunny.glb"
-    out.parent.mkdir(exist_ok=True)
-    out.write_bytes(b"glTF" + (2).to_bytes(4, "little") + (12 + len(body)).to_bytes(4, "little") + body)
+    out = buffer.write(doc, out or HERE / "assets" / "textured_bunny.glb")
     print(f"wrote {out} ({out.stat().st_size:,} bytes; {source}, {faces.shape[0]:,} triangles, "
           f"{size}x{size} textures)")  # fmt: skip
     return out
