@@ -166,10 +166,7 @@ class _Reader:
                 raise SceneError(f"{self.path}: buffer {index} has no uri and the file has no binary chunk")
             data = self.blob
         elif uri.startswith("data:"):
-            head, _, payload = uri.partition(",")
-            if not head.endswith(";base64"):
-                raise SceneError(f"{self.path}: buffer {index}: only base64 data URIs are read")
-            data = base64.b64decode(payload)
+            data, _ = self._data_uri(uri, f"buffer {index}")
         else:
             file = self.path.parent / uri
             try:
@@ -262,12 +259,16 @@ class _Reader:
         self._textures[index] = texture
         return texture
 
+    def _data_uri(self, uri: str, what: str) -> tuple[bytes, str]:
+        """The bytes and media type of a base64 data URI (``data:image/png;base64,...``)."""
+        head, _, payload = uri.partition(",")
+        if not head.endswith(";base64"):
+            raise SceneError(f"{self.path}: {what}: only base64 data URIs are read")
+        return base64.b64decode(payload), head[5:].split(";")[0]
+
     def _image_bytes(self, image: dict, source: int) -> tuple[bytes, str]:
         if "uri" in image:
-            head, _, payload = image["uri"].partition(",")
-            if not head.endswith(";base64"):
-                raise SceneError(f"{self.path}: image {source}: only base64 data URIs are read")
-            return base64.b64decode(payload), head[5:].split(";")[0]
+            return self._data_uri(image["uri"], f"image {source}")
         views = self.doc.get("bufferViews", [])
         if not isinstance(image.get("bufferView"), int) or not 0 <= image["bufferView"] < len(views):
             raise SceneError(f"{self.path}: image {source} has neither a uri nor a buffer view")

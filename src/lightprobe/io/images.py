@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..color import linear_to_srgb, srgb_to_linear
 from ..errors import ImageError, ParameterError, warn_once
 
 __all__ = [
@@ -209,17 +210,6 @@ def _write_oiio(p: Path, spec, pixels: np.ndarray) -> None:
             out.close()
         if not ok:
             raise ImageError(f"{p}: cannot write ({err.strip() or 'write failed'})")
-
-
-def linear_to_srgb(x: np.ndarray) -> np.ndarray:
-    """The sRGB transfer curve (IEC 61966-2-1) on values clipped to [0, 1]."""
-    x = np.clip(x, 0.0, 1.0)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
-
-
-def srgb_to_linear(x: np.ndarray) -> np.ndarray:
-    x = np.clip(x, 0.0, 1.0)
-    return np.where(x <= 0.04045, x / 12.92, np.power((x + 0.055) / 1.055, 2.4))
 
 
 def write_png(path: str | os.PathLike, linear_rgb: np.ndarray, *, exposure: float = 0.0) -> Path:

@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from .._numba import jit, jit_inline
+from ..color import srgb_to_linear
 from ..errors import ImageError, ParameterError
 
 __all__ = [
@@ -51,10 +52,8 @@ _OFFSET, _WIDTH, _HEIGHT, _WRAP_S, _WRAP_T, _FILTER, _FLOAT = range(7)
 TABLE_WIDTH = 7
 
 # 8-bit code value -> linear value, by the sRGB curve (IEC 61966-2-1) and plainly (/ 255)
-_codes = np.arange(256, dtype=np.float64) / 255.0
-SRGB_TABLE = np.where(_codes <= 0.04045, _codes / 12.92, ((_codes + 0.055) / 1.055) ** 2.4)
-LINEAR_TABLE = _codes.copy()
-del _codes
+LINEAR_TABLE = np.arange(256, dtype=np.float64) / 255.0
+SRGB_TABLE = srgb_to_linear(LINEAR_TABLE)
 
 
 class ImageTexture:
@@ -136,7 +135,7 @@ class ImageTexture:
         if self.is_float:
             rgb = self.pixels[:, :, :3].astype(np.float64)
             if srgb:
-                rgb = _srgb_decode_array(rgb)
+                rgb = srgb_to_linear(rgb)
         else:
             rgb = (SRGB_TABLE if srgb else LINEAR_TABLE)[self.pixels[:, :, :3]]
         return rgb.reshape(-1, 3).mean(axis=0)
@@ -144,11 +143,6 @@ class ImageTexture:
     def __repr__(self) -> str:
         kind = "float32" if self.is_float else "8-bit"
         return f"ImageTexture({self.name!r}, {self.width}x{self.height} {kind}, wrap={self.wrap}, filter={self.filter})"
-
-
-def _srgb_decode_array(x: np.ndarray) -> np.ndarray:
-    x = np.clip(x, 0.0, 1.0)
-    return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4)
 
 
 def _decode(path: Path, label: str) -> np.ndarray:

@@ -64,7 +64,3 @@ class MaterialTextures:
     def used(self) -> dict[str, ImageTexture]:
         """The textures present, by use."""
         return {use: getattr(self, use) for use in USES if getattr(self, use) is not None}
-
-    @property
-    def nbytes(self) -> int:
-        return sum(t.nbytes for t in {id(t): t for t in self.used().values()}.values())
