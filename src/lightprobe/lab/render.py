@@ -24,8 +24,11 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+from numba.core.dispatcher import Dispatcher
 
 from .._numba import jit_parallel, prange
+from ..bsdfs.dispatch import bsdf_eval
+from ..emitters.envmap import env_eval
 from ..geometry.camera import camera_ray
 from ..geometry.intersect import MISS
 from ..geometry.raytracer import RayTracer
@@ -34,7 +37,17 @@ from ..integrators.settings import RenderSettings
 from ..integrators.techniques import store_shading_frame
 from ..sampling.mis import balance_heuristic, power_heuristic
 from ..sampling.rng import SAMPLERS, group_slot, sample_state, sampler_batch, uniform
-from .techniques import Context, GuardedTechnique, Heuristic, TechniqueError
+from .jit_techniques import (
+    HEURISTICS,
+    JitContext,
+    borrowed,
+    elapsed_check,
+    environment_record,
+    material_record,
+    run_rows,
+)
+from .jit_techniques import user_serial as _user_serial
+from .techniques import UNIT_TOLERANCE, Context, GuardedTechnique, Heuristic, TechniqueError
 
 __all__ = ["LabRenderError", "LabStrategy", "render_lab"]
 
@@ -82,12 +95,123 @@ def _weight(heuristic, n_f, p_f, n_g, p_g) -> np.ndarray:
         return balance_heuristic(p_f, p_g, n_f=n_f, n_g=n_g)
     if heuristic == "power":
         return power_heuristic(p_f, p_g, n_f=n_f, n_g=n_g)
-    w = np.asarray(heuristic(n_f, p_f, n_g, p_g), dtype=np.float64)
+    name = getattr(heuristic, "__name__", "the heuristic")
+    if isinstance(heuristic, Dispatcher):  # an njit heuristic takes one sample's numbers
+        w = np.empty(len(p_f))
+        try:
+            run_rows(_heuristic_rows, len(p_f), heuristic, float(n_f), p_f, float(n_g), p_g, w)
+        except Exception as exc:  # the user's code
+            raise TechniqueError(f"{name} raised {type(exc).__name__}: {exc} (check: MIS weights)") from None
+    else:
+        w = np.asarray(heuristic(n_f, p_f, n_g, p_g), dtype=np.float64)
     if w.shape != np.shape(p_f) or not np.all(np.isfinite(w)) or np.any(w < 0) or np.any(w > 1 + 1e-9):
-        name = getattr(heuristic, "__name__", "the heuristic")
         raise TechniqueError(f"{name}: returned weights outside [0, 1], not finite or of shape {w.shape} (expected "
                              f"{np.shape(p_f)}) (check: MIS weights)")  # fmt: skip
     return w
+
+
+@_user_serial
+def _heuristic_rows(heuristic, lo, hi, n_f, p_f, n_g, p_g, out):
+    for i in range(lo, hi):
+        out[i] = heuristic(n_f, p_f[i], n_g, p_g[i])
+
+
+# --- the compiled estimator: every technique an njit function (lightprobe's own have njit twins) -------------------
+@_user_serial
+def _technique_rows(sample, lo, hi, u, other_pdf, heuristic, is_bsdf, has_other, count, other_count, wo, normal,
+                    frame, position, material, environment, data, other_data, wi, pdf, world, local, p_other,
+                    weight):  # fmt: skip
+    """Rows [lo, hi) of one technique's ``count`` samples per point (row r: sample r // n of point r % n): the
+    direction and pdf ``sample`` returns, the direction in both frames, the other technique's pdf there and the MIS
+    weight (1 without another technique)."""
+    n = wo.shape[0]
+    wo, normal, frame, position = borrowed(wo), borrowed(normal), borrowed(frame), borrowed(position)
+    material, environment = borrowed(material), borrowed(environment)
+    data, other_data = borrowed(data), borrowed(other_data)
+    for r in range(lo, hi):
+        k = r % n
+        ctx = JitContext(wo[k], normal[k], frame[k], position[k], material, environment, data)
+        w, p = sample(u[r], ctx)
+        x, y, z = w[0], w[1], w[2]
+        wi[r, 0], wi[r, 1], wi[r, 2] = x, y, z
+        pdf[r] = p
+        if is_bsdf:
+            local[r, 0], local[r, 1], local[r, 2] = x, y, z
+            for j in range(3):
+                world[r, j] = x * frame[k, 0, j] + y * frame[k, 1, j] + z * frame[k, 2, j]
+        else:
+            world[r, 0], world[r, 1], world[r, 2] = x, y, z
+            for j in range(3):
+                local[r, j] = frame[k, j, 0] * x + frame[k, j, 1] * y + frame[k, j, 2] * z
+        if has_other:
+            other = JitContext(wo[k], normal[k], frame[k], position[k], material, environment, other_data)
+            q = other_pdf(world[r] if is_bsdf else local[r], other)
+            p_other[r] = q
+            weight[r] = heuristic(count, p, other_count, q)
+        else:
+            weight[r] = 1.0
+
+
+@jit_parallel
+def _first_invalid(wi, pdf, p_other, weight, has_other):
+    """Whether a row breaks the contract (a direction or pdf not finite, a pdf < 0, a non-unit direction with
+    pdf > 0, the other pdf not finite or < 0, a weight outside [0, 1]): the NumPy path then names it."""
+    bad = 0
+    for r in prange(pdf.shape[0]):
+        x, y, z, p = wi[r, 0], wi[r, 1], wi[r, 2], pdf[r]
+        wrong = not (np.isfinite(x) and np.isfinite(y) and np.isfinite(z) and np.isfinite(p)) or p < 0.0
+        if not wrong and p > 0.0:
+            wrong = abs(np.sqrt(x * x + y * y + z * z) - 1.0) > UNIT_TOLERANCE
+        if has_other and not wrong:
+            q, w = p_other[r], weight[r]
+            wrong = not (np.isfinite(q) and q >= 0.0 and np.isfinite(w) and 0.0 <= w <= 1.0 + 1e-9)
+        if wrong:
+            bad += 1
+    return bad
+
+
+@jit_parallel
+def _shadow_rays(kind, params, count, wo, gnormal, error, position, local, world, pdf, weight, f, scale, d, origin,
+                 live):  # fmt: skip
+    """The estimator's terms before visibility, as the NumPy path computes them: f, the factor w cos / (n p), the
+    unit direction and the offset origin of each live row (pdf, cos, weight and f all > 0)."""
+    n = wo.shape[0]
+    for r in prange(pdf.shape[0]):
+        k = r % n
+        fr, fg, fb = bsdf_eval(kind, params, (wo[k, 0], wo[k, 1], wo[k, 2]), (local[r, 0], local[r, 1], local[r, 2]))
+        f[r, 0], f[r, 1], f[r, 2] = fr, fg, fb
+        cos = max(local[r, 2], 0.0)
+        live[r] = pdf[r] > 0.0 and cos > 0.0 and weight[r] > 0.0 and (fr > 0.0 or fg > 0.0 or fb > 0.0)
+        if live[r]:
+            x, y, z = world[r, 0], world[r, 1], world[r, 2]
+            norm = np.sqrt(x * x + y * y + z * z)
+            x, y, z = x / norm, y / norm, z / norm
+            d[r, 0], d[r, 1], d[r, 2] = x, y, z
+            ng0, ng1, ng2 = gnormal[k, 0], gnormal[k, 1], gnormal[k, 2]
+            side = -1.0 if x * ng0 + y * ng1 + z * ng2 < 0.0 else 1.0
+            offset = side * error[k]
+            origin[r, 0] = position[k, 0] + offset * ng0
+            origin[r, 1] = position[k, 1] + offset * ng1
+            origin[r, 2] = position[k, 2] + offset * ng2
+            scale[r] = weight[r] * cos / (count * pdf[r])
+
+
+@jit_parallel
+def _add_visible(env, count, out, f, scale, d, visible):
+    """out[k] += f L(d) w cos / (n p) of each visible row, sample by sample in order (as the NumPy path adds)."""
+    n = out.shape[0]
+    for k in prange(n):
+        for i in range(count):
+            r = i * n + k
+            if visible[r]:
+                lr, lg, lb = env_eval(env, d[r, 0], d[r, 1], d[r, 2])
+                out[k, 0] += f[r, 0] * lr * scale[r]
+                out[k, 1] += f[r, 1] * lg * scale[r]
+                out[k, 2] += f[r, 2] * lb * scale[r]
+            else:
+                out[k, 0] += 0.0
+                out[k, 1] += 0.0
+                out[k, 2] += 0.0
 
 
 @jit_parallel
@@ -170,6 +294,11 @@ class _Shader:
         self.dims = [t.dimensions for t in strategy.techniques]
         self.sampler = SAMPLERS[settings.sampler]
         self.rays = 0  # shadow rays traced
+        # every technique an njit function (or lightprobe's own) and the heuristic a name or an njit function: the
+        # compiled estimator (_shade_compiled); otherwise the NumPy one (_shade)
+        self.compiled = all(t.jit is not None for t in strategy.techniques) and (
+            len(strategy.techniques) == 1 or isinstance(self.heuristic, str | Dispatcher)
+        )
 
     def close(self):
         self.tracer.close()
@@ -198,8 +327,65 @@ class _Shader:
         for m in np.unique(material[material >= 0]):
             rows = np.nonzero(material == m)[0]
             ctx = Context(wo[rows], frame[rows, 2], frame[rows], point[rows], self.materials[m], self.env)
-            value[rows] += self._shade(ctx, [u[:, rows] for u in numbers], gnormal[rows], error[rows])
+            shade = self._shade_compiled if self.compiled else self._shade
+            value[rows] += shade(ctx, [u[:, rows] for u in numbers], gnormal[rows], error[rows])
         return value
+
+    def _shade_compiled(self, ctx: Context, numbers: list[np.ndarray], gnormal, error) -> np.ndarray:
+        """:meth:`_shade` with every technique's njit functions called inside compiled loops, one sample at a time,
+        and the rest of the estimator in the render core's compiled routines, in the same order of operations.
+        A batch that breaks the techniques' contract (a raise, NaN, a negative pdf, ...) is shaded again by
+        :meth:`_shade`, whose checks name the function, the check and the sample."""
+        techniques = self.strategy.techniques
+        n = len(ctx)
+        out = np.zeros((n, 3))
+        material = ctx.material
+        record = material_record(material)
+        environment = environment_record(self.env)
+        frame = np.ascontiguousarray(ctx.frame)
+        wo = np.ascontiguousarray(ctx.wo)
+        normal = np.ascontiguousarray(ctx.normal)
+        position = np.ascontiguousarray(ctx.position)
+        for t in techniques:
+            if t.kind == "light":
+                t.prepare(self.env)
+        data = [t.data() for t in techniques]
+        rays_before = self.rays
+        for j, (tech, count) in enumerate(zip(techniques, self.counts, strict=True)):
+            m = count * n
+            u = np.ascontiguousarray(numbers[j].reshape(m, -1))
+            has_other = len(techniques) == 2
+            other = techniques[1 - j] if has_other else tech
+            other_count = self.counts[1 - j] if has_other else count
+            heuristic = HEURISTICS[self.heuristic] if isinstance(self.heuristic, str) else self.heuristic
+            wi, pdf, world, local = np.empty((m, 3)), np.empty(m), np.empty((m, 3)), np.empty((m, 3))
+            p_other, weight = np.zeros(m), np.empty(m)
+            start = time.perf_counter()
+            try:
+                run_rows(
+                    _technique_rows, m, tech.jit[0], u, other.jit[1], heuristic if has_other else HEURISTICS["balance"],
+                    tech.kind == "bsdf", has_other, float(count), float(other_count), wo, normal, frame, position,
+                    record, environment, data[j], data[1 - j] if has_other else data[j], wi, pdf, world, local,
+                    p_other, weight,
+                )  # fmt: skip
+                failed = _first_invalid(wi, pdf, p_other, weight, has_other) > 0
+            except Exception:  # the user's code raised: the NumPy path finds and names it
+                failed = True
+            if failed:
+                self.rays = rays_before
+                return self._shade(ctx, numbers, gnormal, error)
+            elapsed_check(tech.label, "sample", start, max(t.time_limit for t in techniques), m)
+            f, scale, d, origin = np.empty((m, 3)), np.zeros(m), np.zeros((m, 3)), np.zeros((m, 3))
+            live = np.zeros(m, dtype=np.bool_)
+            _shadow_rays(material.kind, material.params, count, wo, gnormal, error, position, local, world, pdf,
+                         weight, f, scale, d, origin, live)  # fmt: skip
+            rows = np.nonzero(live)[0]
+            visible = np.zeros(m, dtype=np.bool_)
+            if rows.size:
+                visible[rows] = ~self.tracer.occluded(origin[rows], d[rows])
+                self.rays += rows.size
+            _add_visible(self.env.kernel, count, out, f, scale, d, visible)
+        return out
 
     def _shade(self, ctx: Context, numbers: list[np.ndarray], gnormal, error) -> np.ndarray:
         """The estimator of the module docstring at the points of ``ctx`` (one material); ``numbers[t]`` holds
@@ -282,25 +468,22 @@ def render_lab(
             done += 1
             pass_seconds = time.perf_counter() - t0
             if progress is not None:
-                progress(_stats(settings, strategy, start, done, False, False, shader.rays, acc))
+                progress(_stats(settings, strategy, start, done, False, False, shader, acc))
     except KeyboardInterrupt:
         interrupted = True
     except TechniqueError as exc:
-        partial = (
-            result_from(acc, width, height, _stats(settings, strategy, start, done, False, False, shader.rays, acc))
-            if done
-            else None
-        )
+        stats = _stats(settings, strategy, start, done, False, False, shader, acc)
+        partial = result_from(acc, width, height, stats) if done else None
         raise LabRenderError(
             f"{exc} (during sample {first + done}; {done} sample(s) per pixel kept)", partial
         ) from None
     finally:
         shader.close()
-    stats = _stats(settings, strategy, start, done, stopped, interrupted, shader.rays, acc)
+    stats = _stats(settings, strategy, start, done, stopped, interrupted, shader, acc)
     return result_from(acc, width, height, stats)
 
 
-def _stats(settings, strategy, start, done, stopped, interrupted, rays, acc) -> dict:
+def _stats(settings, strategy, start, done, stopped, interrupted, shader, acc) -> dict:
     """The render core's stats keys that apply (the CLI's progress bar, sidecar and summary read them)."""
     seconds = time.perf_counter() - start
     camera = done * acc.count.size
@@ -312,10 +495,10 @@ def _stats(settings, strategy, start, done, stopped, interrupted, rays, acc) -> 
         "passes": done,
         "camera_rays": camera,
         "samples_per_s": camera / max(seconds, 1e-9),
-        "rays_per_s": (camera + rays) / max(seconds, 1e-9),
+        "rays_per_s": (camera + shader.rays) / max(seconds, 1e-9),
         "nonfinite_samples": int(acc.nonfinite.sum()),
         "adaptive": False,
-        "estimator": "lightprobe.lab (user techniques)",
+        "estimator": f"lightprobe.lab (user techniques, {'compiled' if shader.compiled else 'NumPy'})",
         "strategy": strategy.label,
         "directions_per_sample": sum(strategy.counts(settings)),
         "stopped_by_time_limit": stopped,

@@ -249,9 +249,16 @@ class GuardedTechnique:
     """A technique whose every call is checked: see the module docstring."""
 
     def __init__(self, technique, label: str, *, time_limit: float = DEFAULT_TIME_LIMIT):
-        self.technique = technique
+        from .jit_techniques import JitTechnique, jit_functions
+
+        self.user = technique
         self.label = label
         self.time_limit = time_limit
+        #: (sample, pdf) as numba.njit functions of one sample (the laboratory's compiled estimator calls them), or
+        #: None: a NumPy technique, called a batch at a time
+        self.jit = jit_functions(technique, label)
+        # what every call goes through: the technique itself, or the NumPy contract around its njit functions
+        self.technique = technique if self.jit is None else JitTechnique(technique, label, self.jit)
         self.kind = getattr(technique, "kind", "bsdf")
         if self.kind not in KINDS:
             raise TechniqueError(f"{label}: kind must be one of {KINDS}, got {self.kind!r}")
@@ -265,6 +272,12 @@ class GuardedTechnique:
 
     def __repr__(self) -> str:
         return f"GuardedTechnique({self.label}, kind={self.kind})"
+
+    def data(self) -> tuple:
+        """What njit code sees as ``ctx.data``: the technique's ``data`` attribute, a tuple (after ``prepare``)."""
+        from .jit_techniques import technique_data
+
+        return technique_data(self.user, self.label)
 
     def _call(self, method: str, check: str, args, first_input: np.ndarray, input_name: str):
         fn = getattr(self.technique, method)
@@ -389,9 +402,16 @@ class BuiltinEnvironment:
 
 
 def builtin(kind: str) -> GuardedTechnique:
-    """lightprobe's technique of ``kind`` ("bsdf" or "light"), guarded like a user's."""
+    """lightprobe's technique of ``kind`` ("bsdf" or "light"), guarded like a user's: its NumPy methods for batch
+    calls, its njit twins (the same kernels) for the laboratory's compiled estimator."""
+    from . import jit_techniques as jt
+
     obj = BuiltinBSDF() if kind == "bsdf" else BuiltinEnvironment()
-    return GuardedTechnique(obj, "lightprobe:" + ("brdf" if kind == "bsdf" else "env"), time_limit=0.0)
+    guarded = GuardedTechnique(obj, "lightprobe:" + ("brdf" if kind == "bsdf" else "env"), time_limit=0.0)
+    guarded.jit = (
+        (jt.builtin_bsdf_sample, jt.builtin_bsdf_pdf) if kind == "bsdf" else (jt.builtin_env_sample, jt.builtin_env_pdf)
+    )
+    return guarded
 
 
 #: a MIS heuristic: weight(n_f, p_f, n_g, p_g) of a sample of technique f (n_f samples) against technique g
