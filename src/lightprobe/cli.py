@@ -265,7 +265,9 @@ def render_command(
 
         render = _lab_renderer(scene, settings, techniques)
         try:
-            result = _render_with_progress(scene, settings, render, quiet=quiet, core=False)
+            result = _render_with_progress(
+                scene, settings, render, quiet=quiet, core=False, lab_compiles=render.compiles
+            )
         except LabRenderError as exc:  # a technique failed mid-render: keep the passes done before it
             if exc.result is None:
                 raise
@@ -677,27 +679,33 @@ def _lab_renderer(scene, settings, token: str):
     def run(scene, settings, progress=None):
         return render_lab(scene, strategy, settings, progress=progress)
 
+    # njit techniques (lightprobe's own are) get their loops compiled on every run: announced like the core's compile
+    techniques = strategy.techniques
+    run.compiles = all(t.jit is not None for t in techniques) or any(t.technique is not t.user for t in techniques)
     return run
 
 
-def _render_with_progress(scene, settings, render, *, quiet: bool, core: bool = True):
+def _render_with_progress(scene, settings, render, *, quiet: bool, core: bool = True, lab_compiles: bool = False):
     """Render with a progress bar (unless ``quiet``).  The first run compiles the kernels for about half a minute
     before the first pass: that is announced (a spinner with the elapsed time on a terminal, one line elsewhere,
     and the time it took), since a silent half minute looks like a hang.  ``core``: ``render`` is the render
-    core's (whose kernels' cache can be looked up)."""
+    core's (whose kernels' cache can be looked up); ``lab_compiles``: a laboratory render whose njit techniques'
+    loops are compiled on every run (a few seconds)."""
     from .integrators.wavefront import kernels_cached
 
-    compiling = core and not kernels_cached(scene, settings)
+    compiling = not kernels_cached(scene, settings) if core else lab_compiles
+    what, when = ("kernels", "first run only") if core else ("the techniques' loops", "on every run")
     started = time.perf_counter()
     interactive = not quiet and sys.stderr.isatty()
     if compiling and not interactive:
-        _echo_err("lightprobe: compiling kernels (first run only; later runs load them from the cache) ...")
+        later = "later runs load them from the cache" if core else "Numba cannot cache functions passed to others"
+        _echo_err(f"lightprobe: compiling {what} ({when}; {later}) ...")
 
     def compiled(echo) -> None:
         nonlocal compiling
         if compiling:
             compiling = False
-            echo(f"lightprobe: compiled kernels in {time.perf_counter() - started:.0f} s (first run only)")
+            echo(f"lightprobe: compiled {what} in {time.perf_counter() - started:.0f} s ({when})")
 
     if not interactive:  # no bar to draw: --quiet, or stderr is a file or a pipe
         result = render(scene, settings, progress=lambda stats: compiled(_echo_err))
@@ -721,7 +729,7 @@ def _render_with_progress(scene, settings, render, *, quiet: bool, core: bool = 
     with Progress(*columns, transient=True, console=_stderr_console()) as bar:
         compile_task = None
         if compiling:
-            compile_task = bar.add_task("compiling kernels (first run only)", total=None, spp="-", passes="-", rate="")
+            compile_task = bar.add_task(f"compiling {what} ({when})", total=None, spp="-", passes="-", rate="")
         task = bar.add_task("rendering", total=total, spp=0, passes=0, rate="", visible=not compiling)
 
         def update(stats):

@@ -98,3 +98,23 @@ def test_render_with_user_techniques(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "ran out of luck" in err and "holds the 1 spp rendered before it" in err
     assert (tmp_path / "kept.exr").exists()
+
+
+def test_render_with_njit_techniques_announces_their_compile(tmp_path, capsys):
+    """njit techniques' loops are compiled on every run (a few seconds): said before it starts, like the core's."""
+    target = tmp_path / "ex"
+    main(["exercise", "init", str(target)])
+    example = HERE.parents[1] / "examples" / "njit_sampling.py"
+    capsys.readouterr()
+    out = tmp_path / "njit.exr"
+    token = f"mis:{example}:PhongLobes+{example}:EnvironmentMap"
+    args = ["render", str(target / "scene.toml"), "--techniques", token, "--spp", "2", "--width", "24", "-o", str(out)]
+    assert main([*args, "-q"]) == 0
+    err = capsys.readouterr().err
+    assert "compiling the techniques' loops (on every run" in err and "compiled the techniques' loops in" in err
+    sidecar = json.loads((tmp_path / "njit.exr.json").read_text())
+    assert sidecar["estimator"] == "lightprobe.lab (user techniques, compiled)" and sidecar["spp_done"] == 2
+    # a NumPy technique with lightprobe's own: the NumPy estimator, nothing compiled, nothing announced
+    args[3] = f"mis:{SOLUTIONS}:PhongLobes"
+    assert main([*args, "-q"]) == 0
+    assert "compiling" not in capsys.readouterr().err
