@@ -154,8 +154,8 @@ def _technique_rows(sample, lo, hi, u, other_pdf, heuristic, is_bsdf, has_other,
 
 @jit_parallel
 def _first_invalid(wi, pdf, p_other, weight, has_other):
-    """Whether a row breaks the contract (a direction or pdf not finite, a pdf < 0, a non-unit direction with
-    pdf > 0, the other pdf not finite or < 0, a weight outside [0, 1]): the NumPy path then names it."""
+    """How many rows break the contract (a direction or pdf not finite, a pdf < 0, a non-unit direction with
+    pdf > 0, the other pdf not finite or < 0, a weight outside [0, 1]); any, and the NumPy path names the first."""
     bad = 0
     for r in prange(pdf.shape[0]):
         x, y, z, p = wi[r, 0], wi[r, 1], wi[r, 2], pdf[r]
@@ -208,7 +208,7 @@ def _add_visible(env, count, out, f, scale, d, visible):
                 out[k, 0] += f[r, 0] * lr * scale[r]
                 out[k, 1] += f[r, 1] * lg * scale[r]
                 out[k, 2] += f[r, 2] * lb * scale[r]
-            else:
+            else:  # the NumPy path adds a row of zeros here (it turns -0.0 into 0.0): the same bits
                 out[k, 0] += 0.0
                 out[k, 1] += 0.0
                 out[k, 2] += 0.0
