@@ -77,6 +77,7 @@ __all__ = [
 #: the compiled loops that call user functions: not cached (a function argument cannot be), otherwise the render
 #: core's flags, so that lightprobe's own techniques called through them give the core's numbers
 user_serial = njit(nogil=True, error_model="numpy", fastmath=FASTMATH)
+user_inline = njit(nogil=True, error_model="numpy", fastmath=FASTMATH, inline="always")
 
 
 class JitContext(NamedTuple):
@@ -89,6 +90,13 @@ class JitContext(NamedTuple):
     material: tuple
     environment: tuple
     data: tuple
+
+
+class KernelMaterial(NamedTuple):
+    """A material as lightprobe's own techniques see it: its kind and kernel block (``bsdfs.dispatch``)."""
+
+    kind: int
+    params: np.ndarray
 
 
 class EnvironmentRecord(NamedTuple):
@@ -218,7 +226,7 @@ def borrowed(typingctx, value):
 # Serial loops over a range of rows, run on every core by threads (the loops release the GIL): Numba's parallel
 # loops cannot take the nested named tuples a context holds, and report a raise inside them without its message.
 @user_serial
-def _sample_rows(sample, lo, hi, u, wo, normal, frame, position, material, environment, data, wi, pdf):
+def _sample_rows(lo, hi, sample, u, wo, normal, frame, position, material, environment, data, wi, pdf):
     wo, normal, frame, position = borrowed(wo), borrowed(normal), borrowed(frame), borrowed(position)
     material, environment, data = borrowed(material), borrowed(environment), borrowed(data)
     for i in range(lo, hi):
@@ -231,7 +239,7 @@ def _sample_rows(sample, lo, hi, u, wo, normal, frame, position, material, envir
 
 
 @user_serial
-def _pdf_rows(pdf, lo, hi, wi, wo, normal, frame, position, material, environment, data, out):
+def _pdf_rows(lo, hi, pdf, wi, wo, normal, frame, position, material, environment, data, out):
     wo, normal, frame, position = borrowed(wo), borrowed(normal), borrowed(frame), borrowed(position)
     material, environment, data = borrowed(material), borrowed(environment), borrowed(data)
     for i in range(lo, hi):
@@ -281,19 +289,18 @@ _WORKERS: _Workers | None = None
 
 
 def run_rows(loop, n: int, *args) -> None:
-    """``loop(args[0], lo, hi, *args[1:])`` over [0, n) in chunks, on every core (Numba's thread count); the first
-    exception raised is raised here."""
+    """``loop(lo, hi, *args)`` over [0, n) in chunks, on every core (Numba's thread count); the first exception
+    raised is raised here."""
     global _WORKERS
     workers = max(1, numba.get_num_threads())
-    first, rest = args[0], args[1:]
     if workers == 1 or n < 2:
-        loop(first, 0, n, *rest)
+        loop(0, n, *args)
         return
     if _WORKERS is None or _WORKERS.count < workers:
         _WORKERS = _Workers(workers)
     chunks = min(n, 4 * workers)
     bounds = [n * c // chunks for c in range(chunks + 1)]
-    futures = [_WORKERS.submit(loop, first, lo, hi, *rest) for lo, hi in itertools.pairwise(bounds)]
+    futures = [_WORKERS.submit(loop, lo, hi, *args) for lo, hi in itertools.pairwise(bounds)]
     try:
         for future in futures:
             future.result()

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba.core.dispatcher import Dispatcher
 
-from .._numba import jit_parallel, prange
+from .._numba import jit, jit_parallel, prange
 from ..bsdfs.dispatch import bsdf_eval
 from ..emitters.envmap import env_eval
 from ..geometry.camera import camera_ray
@@ -40,11 +40,19 @@ from ..sampling.rng import SAMPLERS, group_slot, sample_state, sampler_batch, un
 from .jit_techniques import (
     HEURISTICS,
     JitContext,
+    KernelMaterial,
+    balance_weight,
     borrowed,
+    builtin_bsdf_pdf,
+    builtin_bsdf_sample,
+    builtin_env_pdf,
+    builtin_env_sample,
     elapsed_check,
     environment_record,
     material_record,
+    power_weight,
     run_rows,
+    user_inline,
 )
 from .jit_techniques import user_serial as _user_serial
 from .techniques import UNIT_TOLERANCE, Context, GuardedTechnique, Heuristic, TechniqueError
@@ -111,16 +119,14 @@ def _weight(heuristic, n_f, p_f, n_g, p_g) -> np.ndarray:
 
 
 @_user_serial
-def _heuristic_rows(heuristic, lo, hi, n_f, p_f, n_g, p_g, out):
+def _heuristic_rows(lo, hi, heuristic, n_f, p_f, n_g, p_g, out):
     for i in range(lo, hi):
         out[i] = heuristic(n_f, p_f[i], n_g, p_g[i])
 
 
 # --- the compiled estimator: every technique an njit function (lightprobe's own have njit twins) -------------------
-@_user_serial
-def _technique_rows(sample, lo, hi, u, other_pdf, heuristic, is_bsdf, has_other, count, other_count, wo, normal,
-                    frame, position, material, environment, data, other_data, wi, pdf, world, local, p_other,
-                    weight):  # fmt: skip
+def _rows(lo, hi, sample, other_pdf, heuristic, is_bsdf, has_other, count, other_count, u, wo, normal, frame, position,
+          material, environment, data, other_data, wi, pdf, world, local, p_other, weight):  # fmt: skip
     """Rows [lo, hi) of one technique's ``count`` samples per point (row r: sample r // n of point r % n): the
     direction and pdf ``sample`` returns, the direction in both frames, the other technique's pdf there and the MIS
     weight (1 without another technique)."""
@@ -150,6 +156,40 @@ def _technique_rows(sample, lo, hi, u, other_pdf, heuristic, is_bsdf, has_other,
             weight[r] = heuristic(count, p, other_count, q)
         else:
             weight[r] = 1.0
+
+
+# one body, inlined into the loop compiled for a user's functions (each run) and into the cached loops of
+# lightprobe's own techniques (compiled once, so that lab:mis pays no compile per run)
+_rows_inline = user_inline(_rows)
+_technique_rows = _user_serial(_rows)
+
+
+@jit
+def _builtin_bsdf_rows(lo, hi, power, has_other, count, other_count, u, wo, normal, frame, position, material,
+                       environment, data, other_data, wi, pdf, world, local, p_other, weight):  # fmt: skip
+    """:func:`_rows` for lightprobe's BSDF sampling, against its map sampling under MIS."""
+    if power:
+        _rows_inline(lo, hi, builtin_bsdf_sample, builtin_env_pdf, power_weight, True, has_other, count, other_count,
+                     u, wo, normal, frame, position, material, environment, data, other_data, wi, pdf, world, local,
+                     p_other, weight)  # fmt: skip
+    else:
+        _rows_inline(lo, hi, builtin_bsdf_sample, builtin_env_pdf, balance_weight, True, has_other, count, other_count,
+                     u, wo, normal, frame, position, material, environment, data, other_data, wi, pdf, world, local,
+                     p_other, weight)  # fmt: skip
+
+
+@jit
+def _builtin_light_rows(lo, hi, power, has_other, count, other_count, u, wo, normal, frame, position, material,
+                        environment, data, other_data, wi, pdf, world, local, p_other, weight):  # fmt: skip
+    """:func:`_rows` for lightprobe's map sampling, against its BSDF sampling under MIS."""
+    if power:
+        _rows_inline(lo, hi, builtin_env_sample, builtin_bsdf_pdf, power_weight, False, has_other, count, other_count,
+                     u, wo, normal, frame, position, material, environment, data, other_data, wi, pdf, world, local,
+                     p_other, weight)  # fmt: skip
+    else:
+        _rows_inline(lo, hi, builtin_env_sample, builtin_bsdf_pdf, balance_weight, False, has_other, count,
+                     other_count, u, wo, normal, frame, position, material, environment, data, other_data, wi, pdf,
+                     world, local, p_other, weight)  # fmt: skip
 
 
 @jit_parallel
@@ -340,7 +380,10 @@ class _Shader:
         n = len(ctx)
         out = np.zeros((n, 3))
         material = ctx.material
-        record = material_record(material)
+        # lightprobe's own techniques alone run cached loops, which take the material as its kernel block only (a
+        # record type made at run time could not be cached)
+        builtin = all(t.builtin for t in techniques) and isinstance(self.heuristic, str)
+        record = KernelMaterial(material.kind, material.params) if builtin else material_record(material)
         environment = environment_record(self.env)
         frame = np.ascontiguousarray(ctx.frame)
         wo = np.ascontiguousarray(ctx.wo)
@@ -357,17 +400,19 @@ class _Shader:
             has_other = len(techniques) == 2
             other = techniques[1 - j] if has_other else tech
             other_count = self.counts[1 - j] if has_other else count
-            heuristic = HEURISTICS[self.heuristic] if isinstance(self.heuristic, str) else self.heuristic
             wi, pdf, world, local = np.empty((m, 3)), np.empty(m), np.empty((m, 3)), np.empty((m, 3))
             p_other, weight = np.zeros(m), np.empty(m)
             start = time.perf_counter()
+            arrays = (float(count), float(other_count), u, wo, normal, frame, position, record, environment, data[j],
+                      data[1 - j] if has_other else data[j], wi, pdf, world, local, p_other, weight)  # fmt: skip
             try:
-                run_rows(
-                    _technique_rows, m, tech.jit[0], u, other.jit[1], heuristic if has_other else HEURISTICS["balance"],
-                    tech.kind == "bsdf", has_other, float(count), float(other_count), wo, normal, frame, position,
-                    record, environment, data[j], data[1 - j] if has_other else data[j], wi, pdf, world, local,
-                    p_other, weight,
-                )  # fmt: skip
+                if builtin:
+                    loop = _builtin_bsdf_rows if tech.kind == "bsdf" else _builtin_light_rows
+                    run_rows(loop, m, self.heuristic == "power", has_other, *arrays)
+                else:
+                    heuristic = HEURISTICS[self.heuristic] if isinstance(self.heuristic, str) else self.heuristic
+                    functions = (tech.jit[0], other.jit[1], heuristic if has_other else HEURISTICS["balance"])
+                    run_rows(_technique_rows, m, *functions, tech.kind == "bsdf", has_other, *arrays)
                 failed = _first_invalid(wi, pdf, p_other, weight, has_other) > 0
             except Exception:  # the user's code raised: the NumPy path finds and names it
                 failed = True

@@ -259,6 +259,8 @@ class GuardedTechnique:
         self.jit = jit_functions(technique, label)
         # what every call goes through: the technique itself, or the NumPy contract around its njit functions
         self.technique = technique if self.jit is None else JitTechnique(technique, label, self.jit)
+        #: lightprobe's own technique (``builtin``), whose njit twins have cached loops
+        self.builtin = False
         self.kind = getattr(technique, "kind", "bsdf")
         if self.kind not in KINDS:
             raise TechniqueError(f"{label}: kind must be one of {KINDS}, got {self.kind!r}")
@@ -408,6 +410,7 @@ def builtin(kind: str) -> GuardedTechnique:
 
     obj = BuiltinBSDF() if kind == "bsdf" else BuiltinEnvironment()
     guarded = GuardedTechnique(obj, "lightprobe:" + ("brdf" if kind == "bsdf" else "env"), time_limit=0.0)
+    guarded.builtin = True
     guarded.jit = (
         (jt.builtin_bsdf_sample, jt.builtin_bsdf_pdf) if kind == "bsdf" else (jt.builtin_env_sample, jt.builtin_env_pdf)
     )
