@@ -679,9 +679,9 @@ def _lab_renderer(scene, settings, token: str):
     def run(scene, settings, progress=None):
         return render_lab(scene, strategy, settings, progress=progress)
 
-    # njit techniques (lightprobe's own are) get their loops compiled on every run: announced like the core's compile
-    techniques = strategy.techniques
-    run.compiles = all(t.jit is not None for t in techniques) or any(t.technique is not t.user for t in techniques)
+    # a user's njit techniques get their loops compiled on every run (lightprobe's own have cached loops): announced
+    # like the core's compile
+    run.compiles = any(t.technique is not t.user for t in strategy.techniques)
     return run
 
 
