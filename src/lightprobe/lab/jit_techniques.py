@@ -45,6 +45,7 @@ import queue
 import re
 import threading
 import time
+import weakref
 from collections import namedtuple
 from concurrent.futures import Future
 from typing import NamedTuple
@@ -110,7 +111,8 @@ class EnvironmentRecord(NamedTuple):
 
 
 _RECORD_TYPES: dict[tuple, type] = {}
-_ENVIRONMENT_RECORDS: dict[int, tuple] = {}
+#: each map's record, kept while the map lives (not beyond: a record holds the map's arrays)
+_ENVIRONMENT_RECORDS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 def material_record(material) -> tuple:
@@ -143,19 +145,16 @@ def material_record(material) -> tuple:
 def environment_record(environment) -> EnvironmentRecord:
     """The map's :class:`EnvironmentRecord` (lightprobe's placeholder map when there is none)."""
     env = environment if environment is not None else placeholder_environment()
-    record = _ENVIRONMENT_RECORDS.get(id(env))
-    if record is None or record[0] is not env:
-        record = (
-            env,
-            EnvironmentRecord(
-                np.ascontiguousarray(env.luminance, dtype=np.float64),
-                np.ascontiguousarray(env.radiance, dtype=np.float64),
-                np.ascontiguousarray(env.to_world, dtype=np.float64),
-                env.kernel,
-            ),
+    record = _ENVIRONMENT_RECORDS.get(env)
+    if record is None:
+        record = EnvironmentRecord(
+            np.ascontiguousarray(env.luminance, dtype=np.float64),
+            np.ascontiguousarray(env.radiance, dtype=np.float64),
+            np.ascontiguousarray(env.to_world, dtype=np.float64),
+            env.kernel,
         )
-        _ENVIRONMENT_RECORDS[id(env)] = record
-    return record[1]
+        _ENVIRONMENT_RECORDS[env] = record
+    return record
 
 
 def _njit_function(technique, method: str, label: str):
