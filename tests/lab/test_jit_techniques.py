@@ -10,10 +10,7 @@ import pytest
 
 from lightprobe.analysis.metrics import block_z_test
 from lightprobe.integrators.settings import RenderSettings
-from lightprobe.integrators.wavefront import render
-from lightprobe.io.scene_file import load_scene
 from lightprobe.lab.check import check_technique
-from lightprobe.lab.exercise import init_exercise
 from lightprobe.lab.jit_techniques import material_record
 from lightprobe.lab.render import LabRenderError, LabStrategy, parse_lab_token, render_lab
 from lightprobe.lab.techniques import GuardedTechnique, TechniqueError, builtin, load_module, load_technique
@@ -28,16 +25,6 @@ N = 100_000
 def check(name, path=TECHNIQUES, **kwargs):
     return check_technique(load_technique(f"{path}:{name}", time_limit=kwargs.pop("time_limit", 60.0)), samples=N,
                            **kwargs)  # fmt: skip
-
-
-@pytest.fixture(scope="module")
-def exercise_scene(tmp_path_factory):
-    root = tmp_path_factory.mktemp("exercise")
-    init_exercise(root)
-    scene, _ = load_scene(root / "scene.toml")
-    scene.camera = scene.camera.with_resolution(48, 36)
-    reference = render(scene, RenderSettings(spp=1024, seed=99, heuristic="balance"))
-    return scene, reference
 
 
 def _njit_mis(heuristic="balance"):

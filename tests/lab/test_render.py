@@ -11,24 +11,12 @@ from lightprobe.bsdfs import Lambert
 from lightprobe.experiments.compare import compare
 from lightprobe.integrators.settings import RenderSettings
 from lightprobe.integrators.wavefront import render
-from lightprobe.io.scene_file import load_scene
-from lightprobe.lab.exercise import init_exercise
 from lightprobe.lab.render import LabRenderError, LabStrategy, parse_lab_token, render_lab
 from lightprobe.lab.techniques import TechniqueError, builtin
 
 HERE = Path(__file__).parent
 SOLUTIONS = HERE / "solutions" / "sampling.py"
 TECHNIQUES = HERE / "user_techniques.py"
-
-
-@pytest.fixture(scope="module")
-def exercise_scene(tmp_path_factory):
-    root = tmp_path_factory.mktemp("exercise")
-    init_exercise(root)
-    scene, _ = load_scene(root / "scene.toml")
-    scene.camera = scene.camera.with_resolution(48, 36)
-    reference = render(scene, RenderSettings(spp=1024, seed=99, heuristic="balance"))
-    return scene, reference
 
 
 def _z(result, reference, block=6):

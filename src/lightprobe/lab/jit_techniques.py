@@ -329,9 +329,6 @@ class JitTechnique:
         self.technique = technique
         self.label = label
         self.sample_fn, self.pdf_fn = functions
-        for name in ("kind", "dimensions", "support"):
-            if hasattr(technique, name):
-                setattr(self, name, getattr(technique, name))
         if hasattr(technique, "prepare"):
             self.prepare = technique.prepare
 
