@@ -46,7 +46,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .._numba import jit, jit_inline, jit_parallel, prange
+from .._numba import jit, jit_alloc, jit_inline, jit_parallel, prange
 from ..color import luminance
 from ..errors import ParameterError
 from ..geometry.shape_bvh import sort_along_widest_axis
@@ -79,6 +79,9 @@ __all__ = [
 SELECTORS = {"uniform": 0, "power": 1, "bvh": 2}
 UNIFORM, POWER, BVH = 0, 1, 2
 MAX_DEPTH = 62  # bit trails are int64
+# the columns of LightSelector.node_bounds
+B_CENTER, B_RADIUS, B_AXIS, B_COS_O, B_SIN_O, B_COS_E, B_PHI, B_TWO_SIDED = 0, 3, 4, 7, 8, 9, 10, 11
+BOUNDS_WIDTH = 12
 
 
 class LightSelector(NamedTuple):
@@ -94,14 +97,11 @@ class LightSelector(NamedTuple):
     cdf: np.ndarray  # (bounded lights + 1,) power CDF over the bounded lights (POWER), empty otherwise
     # the light bounds: a tree (BVH) or its root alone (POWER: for the environment's share), empty without area
     # lights or in UNIFORM mode; node 0 is the root
-    node_center: np.ndarray  # (M, 3) centre of each node's box
-    node_radius: np.ndarray  # (M,) half the box's diagonal: the radius of the box's bounding sphere
-    node_phi: np.ndarray  # (M,) power (a sphere's a quarter of it: _light_bounds)
-    node_w: np.ndarray  # (M, 3) axis of the normal cone
-    node_cos_o: np.ndarray  # (M,) cos of the normal cone's spread
-    node_sin_o: np.ndarray  # (M,) its sine
-    node_cos_e: np.ndarray  # (M,) cos of the emission spread about any normal
-    node_two_sided: np.ndarray  # (M,) int64
+    # (M, 12) each node's bounds in one row (columns B_*: one array for the descent's kernels to take, a node's
+    # numbers side by side): centre of its box, half the box's diagonal (its bounding sphere's radius), axis of
+    # the normal cone, cos and sin of the cone's spread, cos of the emission spread about any normal, power (a
+    # sphere's a quarter of it: _light_bounds), 1.0 if two-sided
+    node_bounds: np.ndarray
     node_second: np.ndarray  # (M,) index of the second child (the first is node + 1); -1 for a leaf
     node_light: np.ndarray  # (M,) the light of a leaf, -1 otherwise
     light_trail: np.ndarray  # (n_bounded,) bit trail from the root to each light's leaf (bit d: 1 = second child)
@@ -287,7 +287,7 @@ def _side_costs(k, side_scratch, kr, first, stop, step, plus, out):
             out[x] = np.inf
 
 
-@jit
+@jit_alloc
 def _saoh_split(order, start, end, centroid, lo, hi, phi, w, cos_o, cos_e, scratch, side_scratch):
     """Partition ``order[start:end]`` by the cheapest of pbrt-v4's bucket splits (12 buckets of centroid along each
     axis; cost = sum over both sides of power x M_omega x surface area x the aspect regulariser) and return the
@@ -370,7 +370,7 @@ def _saoh_split(order, start, end, centroid, lo, hi, phi, w, cos_o, cos_e, scrat
     return n_left
 
 
-@jit
+@jit_alloc
 def _build_tree(
     lo, hi, phi, w, cos_o, cos_e, two, emitting, n_lo, n_hi, n_phi, n_w, n_cos_o, n_cos_e, n_two, second, leaf, trail
 ):
@@ -458,40 +458,42 @@ def _sin_sub_clamped(sin_a, cos_a, sin_b, cos_b):
     return sin_a * cos_b - cos_a * sin_b
 
 
-@jit
-def node_importance(sel, i, px, py, pz, nx, ny, nz):
-    """pbrt-v4 LightBounds::Importance of node i for a receiver at p with normal n."""
+@jit_inline
+def node_importance(bounds, i, px, py, pz, nx, ny, nz):
+    """pbrt-v4 LightBounds::Importance of node i (row i of ``node_bounds``) for a receiver at p with normal n."""
     # the box's centre, its bounding sphere's radius and the cone's sine are the node's own (build_selector): three
     # of the seven square roots this took per call, at two calls per level of every descent
-    c = sel.node_center[i]
-    radius = sel.node_radius[i]
-    dx, dy, dz = px - c[0], py - c[1], pz - c[2]
+    b = bounds[i]
+    radius = b[B_RADIUS]
+    dx, dy, dz = px - b[B_CENTER], py - b[B_CENTER + 1], pz - b[B_CENTER + 2]
     d2 = dx * dx + dy * dy + dz * dz
+    # square roots and divisions are what this costs (both go through one divider per core, four to six cycles
+    # each): one reciprocal of the distance serves the direction, the bounding sphere's sine and the falloff
     dist = math.sqrt(d2)
-    d2 = max(d2, radius)  # pbrt-v4: max(d2, Length(diagonal) / 2)
+    inv_dist = 1.0 / dist if dist > 0.0 else 0.0
+    falloff = 1.0 / max(d2, radius)  # pbrt-v4: max(d2, Length(diagonal) / 2)
     if dist > 0.0:
-        wx, wy, wz = dx / dist, dy / dist, dz / dist
+        wx, wy, wz = dx * inv_dist, dy * inv_dist, dz * inv_dist
     else:
         wx, wy, wz = 0.0, 0.0, 1.0
-    w = sel.node_w[i]
-    cos_w = w[0] * wx + w[1] * wy + w[2] * wz
-    if sel.node_two_sided[i] == 1:
+    cos_w = b[B_AXIS] * wx + b[B_AXIS + 1] * wy + b[B_AXIS + 2] * wz
+    if b[B_TWO_SIDED] == 1.0:
         cos_w = abs(cos_w)
     sin_w = math.sqrt(max(0.0, 1.0 - cos_w * cos_w))
     # directions subtended by the box's bounding sphere: sin(theta_b) = radius / dist
     if dist <= radius:
         cos_b, sin_b = -1.0, 0.0
     else:
-        sin_b = radius / dist
+        sin_b = radius * inv_dist
         cos_b = math.sqrt(max(0.0, 1.0 - sin_b * sin_b))
-    cos_o = sel.node_cos_o[i]
-    sin_o = sel.node_sin_o[i]
+    cos_o = b[B_COS_O]
+    sin_o = b[B_SIN_O]
     cos_x = _cos_sub_clamped(sin_w, cos_w, sin_o, cos_o)
     sin_x = _sin_sub_clamped(sin_w, cos_w, sin_o, cos_o)
     cos_p = _cos_sub_clamped(sin_x, cos_x, sin_b, cos_b)
-    if cos_p <= sel.node_cos_e[i]:
+    if cos_p <= b[B_COS_E]:
         return 0.0
-    importance = sel.node_phi[i] * cos_p / d2
+    importance = b[B_PHI] * cos_p * falloff
     if nx != 0.0 or ny != 0.0 or nz != 0.0:
         cos_i = abs(wx * nx + wy * ny + wz * nz)
         sin_i = math.sqrt(max(0.0, 1.0 - cos_i * cos_i))
@@ -500,15 +502,21 @@ def node_importance(sel, i, px, py, pz, nx, ny, nz):
 
 
 @jit
-def _child_weights(sel, a, b, px, py, pz, nx, ny, nz):
+def _child_weights(bounds, a, b, px, py, pz, nx, ny, nz):
     """Importances of children a and b; where both are zero (the parent's looser bound let the descent reach a
     subtree that cannot light the receiver), their powers instead, so that the pmf over all lights sums to one
     (pbrt-v4 returns no light there; either way the sample contributes nothing and nothing is biased)."""
-    ia = node_importance(sel, a, px, py, pz, nx, ny, nz)
-    ib = node_importance(sel, b, px, py, pz, nx, ny, nz)
+    ia = node_importance(bounds, a, px, py, pz, nx, ny, nz)
+    ib = node_importance(bounds, b, px, py, pz, nx, ny, nz)
     if ia == 0.0 and ib == 0.0:
-        return sel.node_phi[a], sel.node_phi[b]
+        return bounds[a, B_PHI], bounds[b, B_PHI]
     return ia, ib
+
+
+@jit_inline
+def _no_bounds(sel):
+    """No bounded light emits (or the selector keeps no bounds)."""
+    return sel.node_bounds.shape[0] == 0 or sel.node_bounds[0, B_PHI] <= 0.0
 
 
 @jit_inline
@@ -518,7 +526,7 @@ def _infinite_importance(sel, i, nx, ny, nz):
     return math.pi * max(e, sel.inf_floor[i])
 
 
-@jit
+@jit_inline
 def infinite_probability(sel, px, py, pz, nx, ny, nz):
     """(probability of choosing an infinite light for a receiver at p with normal n, the infinite lights' summed
     importance) for ``power`` and ``bvh`` (see the module docstring): I_inf / (I_inf + I_area); 0 without infinite
@@ -529,9 +537,9 @@ def infinite_probability(sel, px, py, pz, nx, ny, nz):
     i_inf = 0.0
     for i in range(n_inf):
         i_inf += _infinite_importance(sel, i, nx, ny, nz)
-    if sel.node_phi.shape[0] == 0 or sel.node_phi[0] <= 0.0:
+    if _no_bounds(sel):
         return 1.0, i_inf
-    i_area = node_importance(sel, 0, px, py, pz, nx, ny, nz)
+    i_area = node_importance(sel.node_bounds, 0, px, py, pz, nx, ny, nz)
     if i_inf + i_area <= 0.0:
         return 0.5, i_inf
     return i_inf / (i_inf + i_area), i_inf
@@ -590,13 +598,13 @@ def select_light(sel, px, py, pz, nx, ny, nz, u):
         width = cdf[lo + 1] - cdf[lo]
         return lo, pmf * width, _rescaled(u, cdf[lo], width)
     # BVH
-    if sel.node_phi.shape[0] == 0 or sel.node_phi[0] <= 0.0:
+    if _no_bounds(sel):
         return -1, 0.0, u
     node = 0
     while sel.node_second[node] >= 0:
         a = node + 1
         b = sel.node_second[node]
-        ia, ib = _child_weights(sel, a, b, px, py, pz, nx, ny, nz)
+        ia, ib = _child_weights(sel.node_bounds, a, b, px, py, pz, nx, ny, nz)
         pa = ia / (ia + ib)
         if u < pa:
             node = a
@@ -629,7 +637,7 @@ def selector_pmf(sel, px, py, pz, nx, ny, nz, light):
         pmf = 1.0 - p_inf
     if sel.mode == POWER:
         return pmf * (sel.cdf[light + 1] - sel.cdf[light])
-    if sel.node_phi.shape[0] == 0 or sel.node_phi[0] <= 0.0:
+    if _no_bounds(sel):
         return 0.0
     bits = sel.light_trail[light]
     node = 0
@@ -637,7 +645,7 @@ def selector_pmf(sel, px, py, pz, nx, ny, nz, light):
     while sel.node_second[node] >= 0:
         a = node + 1
         b = sel.node_second[node]
-        ia, ib = _child_weights(sel, a, b, px, py, pz, nx, ny, nz)
+        ia, ib = _child_weights(sel.node_bounds, a, b, px, py, pz, nx, ny, nz)
         if (bits >> depth) & 1:
             pmf *= ib / (ia + ib)
             node = b
@@ -715,18 +723,25 @@ def build_selector(mode: str, lights: LightArrays, *, env_irradiance=None) -> Li
         inf_b,
         inf_floor,
         cdf,
-        np.ascontiguousarray(0.5 * (nodes["lo"] + nodes["hi"])),
-        0.5 * np.linalg.norm(nodes["hi"] - nodes["lo"], axis=1),
-        nodes["phi"],
-        nodes["w"],
-        nodes["cos_o"],
-        np.sqrt(np.maximum(0.0, 1.0 - nodes["cos_o"] ** 2)),
-        nodes["cos_e"],
-        nodes["two"],
+        _bounds_rows(nodes),
         nodes["second"],
         nodes["light"],
         trail,
     )
+
+
+def _bounds_rows(nodes: dict) -> np.ndarray:
+    """The nodes' bounds as rows of ``LightSelector.node_bounds``."""
+    rows = np.zeros((nodes["phi"].shape[0], BOUNDS_WIDTH))
+    rows[:, B_CENTER : B_CENTER + 3] = 0.5 * (nodes["lo"] + nodes["hi"])
+    rows[:, B_RADIUS] = 0.5 * np.linalg.norm(nodes["hi"] - nodes["lo"], axis=1)
+    rows[:, B_AXIS : B_AXIS + 3] = nodes["w"]
+    rows[:, B_COS_O] = nodes["cos_o"]
+    rows[:, B_SIN_O] = np.sqrt(np.maximum(0.0, 1.0 - nodes["cos_o"] ** 2))
+    rows[:, B_COS_E] = nodes["cos_e"]
+    rows[:, B_PHI] = nodes["phi"]
+    rows[:, B_TWO_SIDED] = nodes["two"]
+    return rows
 
 
 def _environment_row() -> LightArrays:

@@ -25,7 +25,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .._numba import jit, jit_inline
+from .._numba import jit, jit_alloc, jit_inline
 
 __all__ = ["LEAF_SIZE", "SHAPES_FOR_BVH", "ShapeTree", "build_shape_tree", "empty_shape_tree"]
 
@@ -95,7 +95,7 @@ def _subtree_nodes(n, leaf):
     return 1 + _subtree_nodes(half, leaf) + _subtree_nodes(n - half, leaf)
 
 
-@jit
+@jit_alloc
 def sort_along_widest_axis(centroid, items, start, end):
     """Sort ``items[start:end]`` (rows of ``centroid``) along the axis where their centroids spread the most: the
     median split of this tree and of the light BVH (emitters/selection.py).  Stable, so the same tree everywhere."""
@@ -114,7 +114,7 @@ def sort_along_widest_axis(centroid, items, start, end):
     items[start:end] = items[start:end][np.argsort(keys, kind="mergesort")].copy()
 
 
-@jit
+@jit_alloc
 def _build(lo, hi, leaf):
     n = lo.shape[0]
     m = _subtree_nodes(n, leaf)

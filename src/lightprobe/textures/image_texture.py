@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._numba import jit, jit_inline
+from .._numba import jit, jit_alloc, jit_inline
 from ..color import srgb_to_linear
 from ..errors import ImageError, ParameterError
 
@@ -323,7 +323,7 @@ def lookup_batch(table: TextureTable, t: int, uv: np.ndarray, *, srgb: bool) -> 
     return _lookup_batch(table.table, table.bytes, table.floats, int(t), uv, bool(srgb))
 
 
-@jit
+@jit_alloc
 def _lookup_batch(table, texel_bytes, texel_floats, t, uv, srgb):
     out = np.empty((uv.shape[0], 4))
     for n in range(uv.shape[0]):
