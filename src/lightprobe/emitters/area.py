@@ -198,24 +198,23 @@ def light_radiance(lights, l, cos_light):
 
 # --- solid angles ----------------------------------------------------------------------------------------------------
 @jit
-def _spherical_triangle(px, py, pz, g):
-    """Unit vectors a, b, c from p to the triangle's vertices, the angle alpha at a, and the solid angle
-    (Girard: alpha + beta + gamma - pi, with pbrt-v4's robust angles).  Solid angle 0 when degenerate."""
-    ax, ay, az = normalize(g[0] - px, g[1] - py, g[2] - pz)
-    bx, by, bz = normalize(g[3] - px, g[4] - py, g[5] - pz)
-    cx, cy, cz = normalize(g[6] - px, g[7] - py, g[8] - pz)
-    nab = _cross(ax, ay, az, bx, by, bz)
-    nbc = _cross(bx, by, bz, cx, cy, cz)
-    nca = _cross(cx, cy, cz, ax, ay, az)
-    if _dot3(nab, nab) == 0.0 or _dot3(nbc, nbc) == 0.0 or _dot3(nca, nca) == 0.0:
-        return (ax, ay, az), (bx, by, bz), (cx, cy, cz), 0.0, 0.0
-    nab = _normalize3(nab)
-    nbc = _normalize3(nbc)
-    nca = _normalize3(nca)
-    alpha = _angle_between(nab[0], nab[1], nab[2], -nca[0], -nca[1], -nca[2])
-    beta = _angle_between(nbc[0], nbc[1], nbc[2], -nab[0], -nab[1], -nab[2])
-    gamma = _angle_between(nca[0], nca[1], nca[2], -nbc[0], -nbc[1], -nbc[2])
-    return (ax, ay, az), (bx, by, bz), (cx, cy, cz), alpha, max(0.0, alpha + beta + gamma - math.pi)
+def _triangle_directions(px, py, pz, g):
+    """Unit vectors a, b, c from p to the triangle's vertices."""
+    return (
+        normalize(g[0] - px, g[1] - py, g[2] - pz),
+        normalize(g[3] - px, g[4] - py, g[5] - pz),
+        normalize(g[6] - px, g[7] - py, g[8] - pz),
+    )
+
+
+@jit
+def _triangle_solid_angle(a, b, c):
+    """Solid angle of the spherical triangle of unit vectors a, b, c (Van Oosterom and Strackee 1983, as pbrt-v4's
+    ``SphericalTriangleArea``): 2 atan2(|a . (b x c)|, 1 + a.b + b.c + c.a).  One atan2 where Girard's theorem
+    (alpha + beta + gamma - pi) takes three angles, three normalised cross products and a difference that cancels
+    for small triangles; 0 for a degenerate triangle."""
+    bc = _cross(b[0], b[1], b[2], c[0], c[1], c[2])
+    return 2.0 * math.atan2(abs(_dot3(a, bc)), 1.0 + _dot3(a, b) + _dot3(b, c) + _dot3(c, a))
 
 
 @jit
@@ -281,14 +280,27 @@ def _solid_angle_mode(lights, l, px, py, pz):
     if kind == LIGHT_RECT:
         if not _is_rectangle(g):
             return False, 0.0, 0.0
-        _, _, _, x0, y0, z0, eu, ev = _rect_frame(px, py, pz, g)
-        if z0 == 0.0:
-            return False, 0.0, 0.0
-        _, _, g0, g1, g2, g3 = _rect_solid_angle_terms(x0, y0, z0, x0 + eu, y0 + ev)
-        omega = g0 + g1 + g2 + g3 - TWO_PI
+        omega = _rect_solid_angle(_rect_frame(px, py, pz, g))
     else:
-        omega = _spherical_triangle(px, py, pz, g)[4]
-    return MIN_SOLID_ANGLE <= omega <= MAX_SOLID_ANGLE, omega, 0.0
+        a, b, c = _triangle_directions(px, py, pz, g)
+        omega = _triangle_solid_angle(a, b, c)
+    return _spherical(omega), omega, 0.0
+
+
+@jit_inline
+def _spherical(omega):
+    """Whether a solid angle omega is sampled spherically (else by area: the module docstring's fallbacks)."""
+    return MIN_SOLID_ANGLE <= omega <= MAX_SOLID_ANGLE
+
+
+@jit
+def _rect_solid_angle(frame):
+    """Solid angle of the rectangle in Urena et al.'s frame (0 when p lies in its plane: area sampling then)."""
+    _, _, _, x0, y0, z0, eu, ev = frame
+    if z0 == 0.0:
+        return 0.0
+    _, _, g0, g1, g2, g3 = _rect_solid_angle_terms(x0, y0, z0, x0 + eu, y0 + ev)
+    return g0 + g1 + g2 + g3 - TWO_PI
 
 
 # --- the strategies --------------------------------------------------------------------------------------------------
@@ -324,9 +336,10 @@ def _area_to_solid_angle(lights, l, distance, cos_light):
 
 
 @jit
-def _sample_spherical_rect(g, px, py, pz, u0, u1):
-    """Ureña et al. 2013 (pbrt-v4 SampleSphericalRectangle): a point on the rectangle, uniform in solid angle."""
-    ax, ay, az, x0, y0, z0, eu, ev = _rect_frame(px, py, pz, g)
+def _sample_spherical_rect(frame, px, py, pz, u0, u1):
+    """Urena et al. 2013 (pbrt-v4 SampleSphericalRectangle): a point on the rectangle, uniform in solid angle;
+    ``frame`` is ``_rect_frame`` of the rectangle from p (computed once for the solid angle and the sample)."""
+    ax, ay, az, x0, y0, z0, eu, ev = frame
     x1, y1 = x0 + eu, y0 + ev
     b0, b1, g0, g1, g2, g3 = _rect_solid_angle_terms(x0, y0, z0, x1, y1)
     au = u0 * (g0 + g1 - TWO_PI) + (u0 - 1.0) * (g2 + g3)
@@ -352,13 +365,20 @@ def _sample_spherical_rect(g, px, py, pz, u0, u1):
 
 
 @jit
-def _sample_spherical_triangle(g, px, py, pz, u0, u1):
-    """Arvo 1995 (pbrt-v4 SampleSphericalTriangle): a unit direction uniform in the triangle's solid angle."""
-    a, b, c, alpha, omega = _spherical_triangle(px, py, pz, g)
+def _sample_spherical_triangle(a, b, c, omega, u0, u1):
+    """Arvo 1995 (pbrt-v4 SampleSphericalTriangle): a unit direction uniform in the solid angle omega of the
+    spherical triangle of unit vectors a, b, c (``_triangle_solid_angle``, computed once for the density and the
+    sample).  The angle alpha at a enters only through its cosine and sine, taken from the unit normals of the
+    planes (a, b) and (c, a) as their dot and cross products: no inverse and forward trigonometry."""
+    nab = _normalize3(_cross(a[0], a[1], a[2], b[0], b[1], b[2]))
+    nca = _normalize3(_cross(c[0], c[1], c[2], a[0], a[1], a[2]))
+    cos_alpha = -_dot3(nab, nca)  # alpha: the angle between n_ab and -n_ca
+    sx, sy, sz = _cross(nab[0], nab[1], nab[2], nca[0], nca[1], nca[2])
+    sin_alpha = math.sqrt(sx * sx + sy * sy + sz * sz)
     ap = math.pi + u0 * omega  # the sub-triangle's area plus pi
-    cos_alpha, sin_alpha = math.cos(alpha), math.sin(alpha)
-    sin_phi = math.sin(ap) * cos_alpha - math.cos(ap) * sin_alpha
-    cos_phi = math.cos(ap) * cos_alpha + math.sin(ap) * sin_alpha
+    sin_ap, cos_ap = math.sin(ap), math.cos(ap)
+    sin_phi = sin_ap * cos_alpha - cos_ap * sin_alpha
+    cos_phi = cos_ap * cos_alpha + sin_ap * sin_alpha
     k1 = cos_phi + cos_alpha
     k2 = sin_phi - sin_alpha * _dot3(a, b)
     cos_bp = (k2 + (k2 * cos_phi - k1 * sin_phi) * cos_alpha) / ((k2 * sin_phi + k1 * cos_phi) * sin_alpha)
@@ -413,31 +433,39 @@ def light_sample(lights, l, strategy, px, py, pz, nx, ny, nz, u0, u1):
         return 0.0, 0.0, 1.0, math.inf, 0.0, 0.0, 0.0, 0.0
     g = lights.geom[l]
     if strategy == SOLID_ANGLE:
-        spherical, omega, cos_max = _solid_angle_mode(lights, l, px, py, pz)
-        if spherical:
-            kind = lights.kind[l]
-            if kind == LIGHT_TRIANGLE:
-                wx, wy, wz = _sample_spherical_triangle(g, px, py, pz, u0, u1)
+        kind = lights.kind[l]
+        # the solid angle is computed once, for the choice of method, the sample and its density
+        if kind == LIGHT_TRIANGLE:
+            a, b, c = _triangle_directions(px, py, pz, g)
+            omega = _triangle_solid_angle(a, b, c)
+            if _spherical(omega):
+                wx, wy, wz = _sample_spherical_triangle(a, b, c, omega, u0, u1)
                 return _toward(lights, l, px, py, pz, wx, wy, wz, 1.0 / omega)
-            if kind == LIGHT_RECT:
-                qx, qy, qz = _sample_spherical_rect(g, px, py, pz, u0, u1)
-                wx, wy, wz = normalize(qx - px, qy - py, qz - pz)
-                return _toward(lights, l, px, py, pz, wx, wy, wz, 1.0 / omega)
-            # sphere: a direction uniform in the cone of directions that hit it
-            cx, cy, cz = normalize(g[0] - px, g[1] - py, g[2] - pz)
-            ts, tt = coordinate_system(cx, cy, cz)
-            one_minus_cos = u1 * (1.0 - cos_max)
-            cos_t = 1.0 - one_minus_cos
-            sin_t = math.sqrt(max(0.0, one_minus_cos * (2.0 - one_minus_cos)))
-            phi = TWO_PI * u0
-            wx, wy, wz = to_world(ts, tt, (cx, cy, cz), sin_t * math.cos(phi), sin_t * math.sin(phi), cos_t)
-            wx, wy, wz = normalize(wx, wy, wz)
-            rec = _toward(lights, l, px, py, pz, wx, wy, wz, 1.0 / omega)
-            if rec[3] == math.inf:  # the cone's rim grazes the sphere: round-off, take the tangent point's distance
-                d = math.sqrt((g[0] - px) ** 2 + (g[1] - py) ** 2 + (g[2] - pz) ** 2)
-                r, gg, b = light_radiance(lights, l, 1e-12)
-                return wx, wy, wz, math.sqrt(max(0.0, d * d - g[3] * g[3])), r, gg, b, 1.0 / omega
-            return rec
+        elif kind == LIGHT_RECT:
+            if _is_rectangle(g):
+                frame = _rect_frame(px, py, pz, g)
+                omega = _rect_solid_angle(frame)
+                if _spherical(omega):
+                    qx, qy, qz = _sample_spherical_rect(frame, px, py, pz, u0, u1)
+                    wx, wy, wz = normalize(qx - px, qy - py, qz - pz)
+                    return _toward(lights, l, px, py, pz, wx, wy, wz, 1.0 / omega)
+        else:  # a sphere: a direction uniform in the cone of directions that hit it
+            spherical, omega, cos_max = _solid_angle_mode(lights, l, px, py, pz)
+            if spherical:
+                cx, cy, cz = normalize(g[0] - px, g[1] - py, g[2] - pz)
+                ts, tt = coordinate_system(cx, cy, cz)
+                one_minus_cos = u1 * (1.0 - cos_max)
+                cos_t = 1.0 - one_minus_cos
+                sin_t = math.sqrt(max(0.0, one_minus_cos * (2.0 - one_minus_cos)))
+                phi = TWO_PI * u0
+                wx, wy, wz = to_world(ts, tt, (cx, cy, cz), sin_t * math.cos(phi), sin_t * math.sin(phi), cos_t)
+                wx, wy, wz = normalize(wx, wy, wz)
+                rec = _toward(lights, l, px, py, pz, wx, wy, wz, 1.0 / omega)
+                if rec[3] == math.inf:  # the cone's rim grazes the sphere (round-off): the tangent point's distance
+                    d = math.sqrt((g[0] - px) ** 2 + (g[1] - py) ** 2 + (g[2] - pz) ** 2)
+                    r, gg, b = light_radiance(lights, l, 1e-12)
+                    return wx, wy, wz, math.sqrt(max(0.0, d * d - g[3] * g[3])), r, gg, b, 1.0 / omega
+                return rec
     # area sampling (the strategy itself, or the fallback of solid-angle sampling)
     q, nq = _sample_area_point(lights, l, px, py, pz, u0, u1)
     dx, dy, dz = q[0] - px, q[1] - py, q[2] - pz
