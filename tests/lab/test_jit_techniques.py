@@ -2,6 +2,7 @@
 estimator like the render core (z-test), deterministic on any thread count, resumable, and every way a call can go
 wrong one clear error."""
 
+import functools
 from pathlib import Path
 
 import numba
@@ -27,8 +28,15 @@ def check(name, path=TECHNIQUES, **kwargs):
                            **kwargs)  # fmt: skip
 
 
+@functools.cache
+def _module(path):
+    """A technique file imported once per test module: its njit functions are then the same objects in every render
+    here, so the loops compiled for them (5-12 s each) compile once, not per test."""
+    return load_module(path)
+
+
 def _njit_mis(heuristic="balance"):
-    example = load_module(EXAMPLE)
+    example = _module(EXAMPLE)
     techniques = (
         GuardedTechnique(example.PhongLobes(), "PhongLobes"),
         GuardedTechnique(example.EnvironmentMap(), "EnvironmentMap"),
@@ -127,7 +135,7 @@ def test_njit_techniques_under_mis_match_the_render_core(exercise_scene, seed):
 
 def test_the_z_test_sees_an_njit_heuristic_that_over_weights(exercise_scene):
     scene, reference = exercise_scene
-    jit = load_module(TECHNIQUES)
+    jit = _module(TECHNIQUES)
     strategy = LabStrategy((builtin("bsdf"), builtin("light")), jit.over_weighted)
     result = render_lab(scene, strategy, RenderSettings(spp=32, seed=1))
     assert result.stats["estimator"].endswith("compiled)")
@@ -139,7 +147,7 @@ def test_the_compiled_and_numpy_estimators_agree(exercise_scene):
     """The same njit techniques with a NumPy heuristic go through the NumPy estimator (each technique a batch
     through its compiled loop): the same image to rounding."""
     scene, _ = exercise_scene
-    solutions = load_module(SOLUTIONS)
+    solutions = _module(SOLUTIONS)
     compiled = render_lab(scene, _njit_mis("njit"), RenderSettings(spp=4, seed=7))
     numpy_path = render_lab(scene, _njit_mis(solutions.balance_heuristic), RenderSettings(spp=4, seed=7))
     assert numpy_path.stats["estimator"].endswith("NumPy)")
@@ -164,7 +172,7 @@ def test_deterministic_on_any_thread_count_and_resumable(exercise_scene):
 
 def test_a_failing_njit_technique_keeps_what_was_rendered(exercise_scene):
     scene, _ = exercise_scene
-    jit = load_module(TECHNIQUES)
+    jit = _module(TECHNIQUES)
     counting = jit.FailsLater(samples=10**12)
     render_lab(scene, LabStrategy((GuardedTechnique(counting, "FailsLater"),)), RenderSettings(spp=1, seed=1))
     per_pass = counting.data[0][0]
