@@ -7,8 +7,9 @@ directory named after a fingerprint of every source file of this package (``$XDG
 or ``~/.cache/...``): any edit starts a fresh cache, and older ones are removed.  Set ``NUMBA_CACHE_DIR`` to choose
 the location yourself.
 
-Scalar kernels (one sample, returning tuples) are plain ``njit`` functions; batch kernels loop over samples and
-are the only ones marked ``parallel``.  The renderer's stages are plain functions over a claimed range of a pass
+Scalar kernels (one sample, returning tuples) are ``njit`` functions without reference counting (``jit``; the few
+that allocate arrays, ``jit_alloc``, keep it); batch kernels loop over samples and are the only ones marked
+``parallel``.  The renderer's stages are plain functions over a claimed range of a pass
 (``jit_body``: compiled without reference counting) that one parallel loop calls (``integrators/pipeline.py``).
 """
 
