@@ -50,6 +50,40 @@ def rng():
     return np.random.default_rng(12345)
 
 
+# Files that open the suite on the two workers (pytest-xdist hands each worker its files in this order, two at a
+# time: FIRST_FILES[0] and [2] to one, [1] and [3] to the other).  The render core compiles once, in about 100 s
+# from an empty cache, and is then loaded from Numba's disk cache: test_cli.py renders in its first test, so one
+# worker compiles the core at once while the other runs the core-free sampler and map tests (about 330 s); when
+# both reached a render at the same moment both compiled it (decisions.md 89).
+FIRST_FILES = (
+    "tests/test_cli.py",
+    "tests/bsdfs/test_bsdfs.py",
+    "tests/geometry/test_scene_file.py",
+    "tests/emitters/test_envmap.py",
+)
+
+
+def pytest_collection_modifyitems(config, items):
+    """Order the files: FIRST_FILES first, then the others by their number of tests, most first (what
+    pytest-xdist's own reordering does, turned off in pyproject.toml so that this order is kept); a file's tests
+    keep their order.  Only the schedule changes: every test runs the same."""
+
+    def file_of(item) -> str:  # as pytest-xdist names a file's scope: the node id's path
+        return item.nodeid.split("::", 1)[0]
+
+    counts: dict[str, int] = {}
+    for item in items:
+        counts[file_of(item)] = counts.get(file_of(item), 0) + 1
+
+    def rank(item):
+        name = file_of(item)
+        if name in FIRST_FILES:
+            return (0, FIRST_FILES.index(name), name)
+        return (1, -counts[name], name)
+
+    items.sort(key=rank)
+
+
 @pytest.fixture(autouse=True)
 def _fresh_warnings():
     """Each test hears every file warning anew (lightprobe warns once per file and process)."""

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from lightprobe._numba import jit
+from lightprobe._numba import jit_alloc
 from lightprobe.bsdfs import Lambert
 from lightprobe.emitters.envmap import EnvironmentMap
 from lightprobe.geometry.camera import Camera
@@ -27,7 +27,7 @@ PLACES = [
 ]
 
 
-@jit
+@jit_alloc
 def _triangle_errors(a, b, c, n):
     out = np.empty(a.shape[0])
     for i in range(a.shape[0]):
@@ -35,7 +35,7 @@ def _triangle_errors(a, b, c, n):
     return out
 
 
-@jit
+@jit_alloc
 def _point_errors(p, n, extent):
     out = np.empty(p.shape[0])
     for i in range(p.shape[0]):
