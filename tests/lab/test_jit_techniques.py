@@ -100,6 +100,13 @@ def test_a_slow_njit_technique_is_stopped():
     assert "took longer than 0.2 s" in check("Slow", time_limit=0.2).first_failure.message
 
 
+def test_compiling_is_not_counted_against_the_time_limit():
+    """Numba compiles a fresh technique's loops in seconds, before its first call's limit starts: a fast technique
+    passes under a limit shorter than its compile (and the limit's signal never lands inside the compiler)."""
+    report = check("Cosine", time_limit=0.5)
+    assert report.passed, report.text()
+
+
 def test_njit_functions_that_cannot_be_called_are_refused_at_load():
     with pytest.raises(TechniqueError, match=r"TakesSelf.sample: an njit function cannot take self: make it a "
                        r"@staticmethod"):  # fmt: skip

@@ -348,17 +348,23 @@ class JitTechnique:
             self.data(),
         )
 
-    def sample(self, u, ctx):
-        u = np.ascontiguousarray(u, dtype=np.float64)
+    def sample(self, u, ctx, *, rows: int | None = None):
+        u = np.ascontiguousarray(u, dtype=np.float64)[:rows]
         wi, pdf = np.empty((u.shape[0], 3)), np.empty(u.shape[0])
         self.call(_sample_rows, self.sample_fn, "sample", u, self.arguments(ctx), (wi, pdf))
         return wi, pdf
 
-    def pdf(self, wi, ctx):
-        wi = np.ascontiguousarray(wi, dtype=np.float64)
+    def pdf(self, wi, ctx, *, rows: int | None = None):
+        wi = np.ascontiguousarray(wi, dtype=np.float64)[:rows]
         out = np.empty(wi.shape[0])
         self.call(_pdf_rows, self.pdf_fn, "pdf", wi, self.arguments(ctx), (out,))
         return out
+
+    def compile(self, method: str, inputs, ctx) -> None:
+        """Compile ``method``'s loop for these arguments' types (a call on no rows): the caller does this before
+        it starts a call's time limit, so that Numba's compile (seconds) is not counted as the technique's time,
+        and a limit's signal never lands inside the compiler."""
+        getattr(self, method)(inputs, ctx, rows=0)
 
     def call(self, loop, func, method: str, inputs: np.ndarray, arguments: tuple, outputs: tuple) -> None:
         """``loop`` over the rows of ``inputs``, its failures as one-line errors naming the sample."""

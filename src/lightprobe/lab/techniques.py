@@ -259,6 +259,8 @@ class GuardedTechnique:
         self.jit = jit_functions(technique, label)
         # what every call goes through: the technique itself, or the NumPy contract around its njit functions
         self.technique = technique if self.jit is None else JitTechnique(technique, label, self.jit)
+        #: the user's njit functions, whose loops compile before a call's time limit starts
+        self._compiled_loops = isinstance(self.technique, JitTechnique)
         #: lightprobe's own technique (``builtin``), whose njit twins have cached loops
         self.builtin = False
         self.kind = getattr(technique, "kind", "bsdf")
@@ -283,6 +285,8 @@ class GuardedTechnique:
 
     def _call(self, method: str, check: str, args, first_input: np.ndarray, input_name: str):
         fn = getattr(self.technique, method)
+        if self._compiled_loops and method in ("sample", "pdf"):
+            self.technique.compile(method, *args)  # outside the time limit: compiling is not the technique's time
         try:
             with _time_limit(self.time_limit):
                 return fn(*args)
