@@ -285,9 +285,9 @@ class GuardedTechnique:
 
     def _call(self, method: str, check: str, args, first_input: np.ndarray, input_name: str):
         fn = getattr(self.technique, method)
-        if self._compiled_loops and method in ("sample", "pdf"):
-            self.technique.compile(method, *args)  # outside the time limit: compiling is not the technique's time
         try:
+            if self._compiled_loops and method in ("sample", "pdf"):
+                self.technique.compile(method, *args)  # before the time limit: compiling is not the technique's time
             with _time_limit(self.time_limit):
                 return fn(*args)
         except _TooLong:
