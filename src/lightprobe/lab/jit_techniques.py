@@ -335,14 +335,15 @@ class JitTechnique:
     def data(self) -> tuple:
         return technique_data(self.technique, self.label)
 
-    def arguments(self, ctx) -> tuple:
-        """The per-row arrays and the shared records of a :class:`~lightprobe.lab.techniques.Context`."""
+    def arguments(self, ctx, rows: int | None = None) -> tuple:
+        """The per-row arrays (the first ``rows`` rows, all when None) and the shared records of a
+        :class:`~lightprobe.lab.techniques.Context`."""
         n = len(ctx)
         return (
-            np.ascontiguousarray(ctx.wo, dtype=np.float64),
-            np.ascontiguousarray(np.broadcast_to(ctx.normal, (n, 3)), dtype=np.float64),
-            np.ascontiguousarray(np.broadcast_to(ctx.frame, (n, 3, 3)), dtype=np.float64),
-            np.ascontiguousarray(np.broadcast_to(ctx.position, (n, 3)), dtype=np.float64),
+            np.ascontiguousarray(ctx.wo[:rows], dtype=np.float64),
+            np.ascontiguousarray(np.broadcast_to(ctx.normal, (n, 3))[:rows], dtype=np.float64),
+            np.ascontiguousarray(np.broadcast_to(ctx.frame, (n, 3, 3))[:rows], dtype=np.float64),
+            np.ascontiguousarray(np.broadcast_to(ctx.position, (n, 3))[:rows], dtype=np.float64),
             material_record(ctx.material),
             environment_record(ctx.environment),
             self.data(),
@@ -351,19 +352,19 @@ class JitTechnique:
     def sample(self, u, ctx, *, rows: int | None = None):
         u = np.ascontiguousarray(u, dtype=np.float64)[:rows]
         wi, pdf = np.empty((u.shape[0], 3)), np.empty(u.shape[0])
-        self.call(_sample_rows, self.sample_fn, "sample", u, self.arguments(ctx), (wi, pdf))
+        self.call(_sample_rows, self.sample_fn, "sample", u, self.arguments(ctx, rows), (wi, pdf))
         return wi, pdf
 
     def pdf(self, wi, ctx, *, rows: int | None = None):
         wi = np.ascontiguousarray(wi, dtype=np.float64)[:rows]
         out = np.empty(wi.shape[0])
-        self.call(_pdf_rows, self.pdf_fn, "pdf", wi, self.arguments(ctx), (out,))
+        self.call(_pdf_rows, self.pdf_fn, "pdf", wi, self.arguments(ctx, rows), (out,))
         return out
 
     def compile(self, method: str, inputs, ctx) -> None:
-        """Compile ``method``'s loop for these arguments' types (a call on no rows): the caller does this before
-        it starts a call's time limit, so that Numba's compile (seconds) is not counted as the technique's time,
-        and a limit's signal never lands inside the compiler."""
+        """Compile ``method``'s loop for these arguments' types (a call on no rows, its arrays empty: once compiled,
+        this costs nothing): the caller does this before it starts a call's time limit, so that Numba's compile
+        (seconds) is not counted as the technique's time, and a limit's signal never lands inside the compiler."""
         getattr(self, method)(inputs, ctx, rows=0)
 
     def call(self, loop, func, method: str, inputs: np.ndarray, arguments: tuple, outputs: tuple) -> None:
