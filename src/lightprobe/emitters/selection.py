@@ -24,7 +24,10 @@ then the environment map, the last row).
     O(depth) per pick and per pmf.  Nodes split where pbrt-v4's surface area orientation heuristic puts the cost
     lowest (12 buckets of centroids per axis; power x the measure of the normal cone x surface area per side), so
     lights that face apart do not share a node; where no bucket split separates the lights, and below depth 32,
-    at the median centroid along the axis of largest extent (decisions.md 81).
+    at the median centroid along the axis of largest extent (decisions.md 81).  The binary tree is then collapsed
+    to eight children a node (:func:`_collapse`), whose importances the descent computes at once in vector lanes
+    (``light_tree_lanes.py``): a third of the levels, each child weighed among seven siblings rather than one
+    (decisions.md 90).
 
 The infinite lights (``power`` and ``bvh``) are kept apart from the bounded ones, as pbrt-v4's ``BVHLightSampler``
 keeps them, and chosen *per shading point*: together with probability I_inf / (I_inf + I_area), each in proportion
@@ -63,6 +66,19 @@ from .kinds import (
     LightArrays,
     concatenate,
 )
+from .light_tree_lanes import (
+    B_AXIS,
+    B_CENTER,
+    B_COS_E,
+    B_COS_O,
+    B_PHI,
+    B_RADIUS,
+    B_SIN_O,
+    B_TWO_SIDED,
+    BOUNDS_WIDTH,
+    WIDTH,
+    child_importances,
+)
 from .punctual import punctual_power
 
 __all__ = [
@@ -78,10 +94,8 @@ __all__ = [
 
 SELECTORS = {"uniform": 0, "power": 1, "bvh": 2}
 UNIFORM, POWER, BVH = 0, 1, 2
-MAX_DEPTH = 62  # bit trails are int64
-# the columns of LightSelector.node_bounds
-B_CENTER, B_RADIUS, B_AXIS, B_COS_O, B_SIN_O, B_COS_E, B_PHI, B_TWO_SIDED = 0, 3, 4, 7, 8, 9, 10, 11
-BOUNDS_WIDTH = 12
+MAX_DEPTH = 62  # the binary tree's depth: its eight-wide collapse's trails are int64 (TRAIL_BITS per level)
+TRAIL_BITS = 3  # a light's trail holds the child (0 .. WIDTH - 1) taken at each level of the eight-wide tree
 
 
 class LightSelector(NamedTuple):
@@ -95,16 +109,14 @@ class LightSelector(NamedTuple):
     inf_b: np.ndarray  # (infinite lights, 3)
     inf_floor: np.ndarray  # (infinite lights,)
     cdf: np.ndarray  # (bounded lights + 1,) power CDF over the bounded lights (POWER), empty otherwise
-    # the light bounds: a tree (BVH) or its root alone (POWER: for the environment's share), empty without area
-    # lights or in UNIFORM mode; node 0 is the root
-    # (M, 12) each node's bounds in one row (columns B_*: one array for the descent's kernels to take, a node's
-    # numbers side by side): centre of its box, half the box's diagonal (its bounding sphere's radius), axis of
-    # the normal cone, cos and sin of the cone's spread, cos of the emission spread about any normal, power (a
-    # sphere's a quarter of it: _light_bounds), 1.0 if two-sided
+    # (1, 12) the bounds of every bounded light together (the environment's share: infinite_probability), columns
+    # B_* (light_tree_lanes.py; a sphere's power a quarter of it: _light_bounds); (0, 12) without bounded lights
+    # or in UNIFORM mode
     node_bounds: np.ndarray
-    node_second: np.ndarray  # (M,) index of the second child (the first is node + 1); -1 for a leaf
-    node_light: np.ndarray  # (M,) the light of a leaf, -1 otherwise
-    light_trail: np.ndarray  # (n_bounded,) bit trail from the root to each light's leaf (bit d: 1 = second child)
+    # the light tree (BVH), eight children a node (light_tree_lanes.py), node 0 the root; empty unless BVH:
+    wide_bounds: np.ndarray  # (M, 12 * 8) each node's children's bounds: column f * 8 + c is field f of child c
+    wide_child: np.ndarray  # (M, 8) child c: a node (>= 0), a light l (-2 - l), or none (-1)
+    light_trail: np.ndarray  # (n_bounded,) each light's path from the root: bits 3d .. 3d + 2 the child at depth d
 
 
 # --- light bounds (pbrt-v4 LightBounds, DirectionCone) ----------------------------------------------------------------
@@ -202,15 +214,14 @@ def _union(wax, way, waz, cos_a, wbx, wby, wbz, cos_b):
 
 
 def _build_bvh(lights: LightArrays):
-    """The BVH's node arrays (a dict), each light's bit trail, and the node count, built in compiled code
-    (:func:`_build_tree`; 100,000 lights in a fraction of a second, where the NumPy builder took 4.7 s)."""
+    """The binary BVH's node arrays (a dict) and its node count, built in compiled code (:func:`_build_tree`;
+    100,000 lights in a fraction of a second, where the NumPy builder took 4.7 s)."""
     lo, hi, phi, w, cos_o, cos_e, two = _light_bounds(lights)
     emitting = np.nonzero(phi > 0)[0]  # a light with no power is never picked (its pmf is 0)
     m = max(1, 2 * emitting.size - 1)
     nodes = _root_nodes(m)
-    trail = np.zeros(lo.shape[0], np.int64)
     if emitting.size == 0:
-        return nodes, trail, 0
+        return nodes, 0
     if math.ceil(math.log2(emitting.size)) > MAX_DEPTH:
         raise ParameterError(f"light BVH deeper than {MAX_DEPTH} levels ({lo.shape[0]} lights)")
     _build_tree(
@@ -223,9 +234,8 @@ def _build_bvh(lights: LightArrays):
         two,
         emitting,
         *(nodes[k] for k in ("lo", "hi", "phi", "w", "cos_o", "cos_e", "two", "second", "light")),
-        trail,
     )
-    return nodes, trail, m
+    return nodes, m
 
 
 SAOH_BUCKETS = 12  # pbrt-v4's
@@ -372,7 +382,7 @@ def _saoh_split(order, start, end, centroid, lo, hi, phi, w, cos_o, cos_e, scrat
 
 @jit_alloc
 def _build_tree(
-    lo, hi, phi, w, cos_o, cos_e, two, emitting, n_lo, n_hi, n_phi, n_w, n_cos_o, n_cos_e, n_two, second, leaf, trail
+    lo, hi, phi, w, cos_o, cos_e, two, emitting, n_lo, n_hi, n_phi, n_w, n_cos_o, n_cos_e, n_two, second, leaf
 ):
     """Splits by pbrt-v4's surface area orientation heuristic (:func:`_saoh_split`; median splits along the axis of
     largest centroid extent where it finds none), depth first: node i's first child is i + 1, its second
@@ -380,14 +390,14 @@ def _build_tree(
     order = emitting.copy()
     centroid = 0.5 * (lo + hi)
     m = n_phi.shape[0]
-    stack = np.empty((MAX_DEPTH + 2, 5), np.int64)  # node, start, end, depth, bits
+    stack = np.empty((MAX_DEPTH + 2, 4), np.int64)  # node, start, end, depth
     scratch = np.empty((SAOH_BUCKETS, 10))
     side_scratch = np.empty((SAOH_BUCKETS, 3))
-    stack[0, 0], stack[0, 1], stack[0, 2], stack[0, 3], stack[0, 4] = 0, 0, order.shape[0], 0, 0
+    stack[0, 0], stack[0, 1], stack[0, 2], stack[0, 3] = 0, 0, order.shape[0], 0
     top = 1
     while top > 0:
         top -= 1
-        node, start, end, depth, bits = stack[top, 0], stack[top, 1], stack[top, 2], stack[top, 3], stack[top, 4]
+        node, start, end, depth = stack[top, 0], stack[top, 1], stack[top, 2], stack[top, 3]
         for a in range(3):
             n_lo[node, a] = np.inf
             n_hi[node, a] = -np.inf
@@ -408,7 +418,6 @@ def _build_tree(
             for a in range(3):
                 n_w[node, a] = w[light, a]
             n_cos_o[node] = cos_o[light]
-            trail[light] = bits
             continue
         if depth < SAOH_DEPTH:
             half = _saoh_split(order, start, end, centroid, lo, hi, phi, w, cos_o, cos_e, scratch, side_scratch)
@@ -418,19 +427,12 @@ def _build_tree(
             sort_along_widest_axis(centroid, order, start, end)
             half = (end - start) // 2
         second[node] = node + 2 * half
-        stack[top, 0], stack[top, 1], stack[top, 2], stack[top, 3], stack[top, 4] = (
-            node + 2 * half,
-            start + half,
-            end,
-            depth + 1,
-            bits | (1 << depth),
-        )
-        stack[top + 1, 0], stack[top + 1, 1], stack[top + 1, 2], stack[top + 1, 3], stack[top + 1, 4] = (
+        stack[top, 0], stack[top, 1], stack[top, 2], stack[top, 3] = node + 2 * half, start + half, end, depth + 1
+        stack[top + 1, 0], stack[top + 1, 1], stack[top + 1, 2], stack[top + 1, 3] = (
             node + 1,
             start,
             start + half,
             depth + 1,
-            bits,
         )
         top += 2
     for node in range(m - 1, -1, -1):  # children have larger indices than their parent
@@ -440,6 +442,63 @@ def _build_tree(
         a = node + 1
         x, y, z, c = _union(n_w[a, 0], n_w[a, 1], n_w[a, 2], n_cos_o[a], n_w[b, 0], n_w[b, 1], n_w[b, 2], n_cos_o[b])
         n_w[node, 0], n_w[node, 1], n_w[node, 2], n_cos_o[node] = x, y, z, c
+
+
+@jit_alloc
+def _collapse(rows, second, leaf, n_bounded):
+    """The eight-wide tree of the binary one (node i's children i + 1 and ``second[i]``, bounds ``rows``, a leaf's
+    light ``leaf[i]``): a wide node's children are its binary node's descendants, each internal one replaced by its
+    two children, the shallowest first, while there are fewer than eight.  So every internal child of a wide node is
+    three binary levels below it (its descendants at one and two levels, at most 2 + 4, are always replaced), and a
+    binary tree of MAX_DEPTH levels gives trails of at most 21 levels of TRAIL_BITS.  Returns (wide_bounds,
+    wide_child, light_trail, deepest level)."""
+    m = second.shape[0]
+    wide_bounds = np.zeros((m, BOUNDS_WIDTH * WIDTH))
+    for node in range(m):
+        for c in range(WIDTH):
+            wide_bounds[node, B_COS_E * WIDTH + c] = 2.0  # an empty child: importance 0 (and power 0)
+    wide_child = np.full((m, WIDTH), -1, np.int64)
+    trail = np.zeros(n_bounded, np.int64)
+    stack = np.empty((m, 4), np.int64)  # binary node, wide node, trail, depth
+    kids = np.empty(WIDTH, np.int64)
+    level = np.empty(WIDTH, np.int64)
+    stack[0, 0], stack[0, 1], stack[0, 2], stack[0, 3] = 0, 0, 0, 0
+    top, count, deepest = 1, 1, 0
+    while top > 0:
+        top -= 1
+        binary, wide, bits, depth = stack[top, 0], stack[top, 1], stack[top, 2], stack[top, 3]
+        deepest = max(deepest, depth)
+        if second[binary] < 0:  # a tree of one light
+            kids[0], level[0], n = binary, 0, 1
+        else:
+            kids[0], kids[1], level[0], level[1], n = binary + 1, second[binary], 1, 1, 2
+        while n < WIDTH:
+            best = -1  # the shallowest internal child, the first of equals
+            for c in range(n):
+                if second[kids[c]] >= 0 and (best < 0 or level[c] < level[best]):
+                    best = c
+            if best < 0:
+                break
+            node, depth_below = kids[best], level[best] + 1
+            for c in range(n - 1, best, -1):
+                kids[c + 1], level[c + 1] = kids[c], level[c]
+            kids[best], kids[best + 1] = node + 1, second[node]
+            level[best] = level[best + 1] = depth_below
+            n += 1
+        for c in range(n):
+            kid = kids[c]
+            for f in range(BOUNDS_WIDTH):
+                wide_bounds[wide, f * WIDTH + c] = rows[kid, f]
+            path = bits | (c << (TRAIL_BITS * depth))
+            if second[kid] < 0:
+                wide_child[wide, c] = -2 - leaf[kid]
+                trail[leaf[kid]] = path
+            else:
+                wide_child[wide, c] = count
+                stack[top, 0], stack[top, 1], stack[top, 2], stack[top, 3] = kid, count, path, depth + 1
+                top += 1
+                count += 1
+    return wide_bounds[:count].copy(), wide_child[:count].copy(), trail, deepest
 
 
 # --- kernels ---------------------------------------------------------------------------------------------------------
@@ -461,31 +520,30 @@ def _sin_sub_clamped(sin_a, cos_a, sin_b, cos_b):
 @jit_inline
 def node_importance(bounds, i, px, py, pz, nx, ny, nz):
     """pbrt-v4 LightBounds::Importance of node i (row i of ``node_bounds``) for a receiver at p with normal n."""
-    # the box's centre, its bounding sphere's radius and the cone's sine are the node's own (build_selector): three
-    # of the seven square roots this took per call, at two calls per level of every descent
+    # the box's centre, its bounding sphere's radius and the cone's sine are the node's own (build_selector)
     b = bounds[i]
     radius = b[B_RADIUS]
     dx, dy, dz = px - b[B_CENTER], py - b[B_CENTER + 1], pz - b[B_CENTER + 2]
     d2 = dx * dx + dy * dy + dz * dz
-    # square roots and divisions are what this costs (both go through one divider per core, four to six cycles
-    # each): one reciprocal of the distance serves the direction, the bounding sphere's sine and the falloff
+    # The descent waits for each level's importances, so what counts is the longest chain of dependent square roots
+    # and divisions: each cosine is a dot product with d and each sine sqrt(d2 - (a . d)^2), both scaled by 1 / |d|
+    # at the end, so the four square roots run side by side instead of after the direction's (the eight-wide
+    # descent's pick: 80 -> ... ns a level, decisions.md 90).  At d = 0 (inv_dist 0) every cosine and sine is 0:
+    # inside the bound, cos_p is 1 as before.
     dist = math.sqrt(d2)
     inv_dist = 1.0 / dist if dist > 0.0 else 0.0
     falloff = 1.0 / max(d2, radius)  # pbrt-v4: max(d2, Length(diagonal) / 2)
-    if dist > 0.0:
-        wx, wy, wz = dx * inv_dist, dy * inv_dist, dz * inv_dist
-    else:
-        wx, wy, wz = 0.0, 0.0, 1.0
-    cos_w = b[B_AXIS] * wx + b[B_AXIS + 1] * wy + b[B_AXIS + 2] * wz
+    along = b[B_AXIS] * dx + b[B_AXIS + 1] * dy + b[B_AXIS + 2] * dz
     if b[B_TWO_SIDED] == 1.0:
-        cos_w = abs(cos_w)
-    sin_w = math.sqrt(max(0.0, 1.0 - cos_w * cos_w))
+        along = abs(along)
+    cos_w = along * inv_dist
+    sin_w = math.sqrt(max(0.0, d2 - along * along)) * inv_dist
     # directions subtended by the box's bounding sphere: sin(theta_b) = radius / dist
     if dist <= radius:
         cos_b, sin_b = -1.0, 0.0
     else:
         sin_b = radius * inv_dist
-        cos_b = math.sqrt(max(0.0, 1.0 - sin_b * sin_b))
+        cos_b = math.sqrt(max(0.0, d2 - radius * radius)) * inv_dist
     cos_o = b[B_COS_O]
     sin_o = b[B_SIN_O]
     cos_x = _cos_sub_clamped(sin_w, cos_w, sin_o, cos_o)
@@ -495,22 +553,27 @@ def node_importance(bounds, i, px, py, pz, nx, ny, nz):
         return 0.0
     importance = b[B_PHI] * cos_p * falloff
     if nx != 0.0 or ny != 0.0 or nz != 0.0:
-        cos_i = abs(wx * nx + wy * ny + wz * nz)
-        sin_i = math.sqrt(max(0.0, 1.0 - cos_i * cos_i))
+        facing = abs(nx * dx + ny * dy + nz * dz)
+        cos_i = facing * inv_dist
+        sin_i = math.sqrt(max(0.0, d2 - facing * facing)) * inv_dist
         importance *= _cos_sub_clamped(sin_i, cos_i, sin_b, cos_b)
     return max(importance, 0.0)
 
 
-@jit
-def _child_weights(bounds, a, b, px, py, pz, nx, ny, nz):
-    """Importances of children a and b; where both are zero (the parent's looser bound let the descent reach a
-    subtree that cannot light the receiver), their powers instead, so that the pmf over all lights sums to one
-    (pbrt-v4 returns no light there; either way the sample contributes nothing and nothing is biased)."""
-    ia = node_importance(bounds, a, px, py, pz, nx, ny, nz)
-    ib = node_importance(bounds, b, px, py, pz, nx, ny, nz)
-    if ia == 0.0 and ib == 0.0:
-        return bounds[a, B_PHI], bounds[b, B_PHI]
-    return ia, ib
+@jit_inline
+def _child_weights(wide_bounds, node, px, py, pz, nx, ny, nz):
+    """(the eight children's importances, their sum) for the receiver, the eight at once (light_tree_lanes.py);
+    where all are zero (the parent's looser bound let the descent reach a subtree that cannot light the receiver),
+    their powers instead, so that the pmf over all lights sums to one (pbrt-v4 returns no light there; either way
+    the sample contributes nothing and nothing is biased)."""
+    w = child_importances(wide_bounds, node, px, py, pz, nx, ny, nz)
+    total = ((w[0] + w[1]) + (w[2] + w[3])) + ((w[4] + w[5]) + (w[6] + w[7]))
+    if total > 0.0:
+        return w, total
+    phi = B_PHI * WIDTH
+    row = wide_bounds[node]
+    w = (row[phi], row[phi + 1], row[phi + 2], row[phi + 3], row[phi + 4], row[phi + 5], row[phi + 6], row[phi + 7])
+    return w, ((w[0] + w[1]) + (w[2] + w[3])) + ((w[4] + w[5]) + (w[6] + w[7]))
 
 
 @jit_inline
@@ -597,24 +660,29 @@ def select_light(sel, px, py, pz, nx, ny, nz, u):
                 hi = mid
         width = cdf[lo + 1] - cdf[lo]
         return lo, pmf * width, _rescaled(u, cdf[lo], width)
-    # BVH
+    # BVH: down the eight-wide tree, each child in proportion to its weight
     if _no_bounds(sel):
         return -1, 0.0, u
     node = 0
-    while sel.node_second[node] >= 0:
-        a = node + 1
-        b = sel.node_second[node]
-        ia, ib = _child_weights(sel.node_bounds, a, b, px, py, pz, nx, ny, nz)
-        pa = ia / (ia + ib)
-        if u < pa:
-            node = a
-            pmf *= pa
-            u = _rescaled(u, 0.0, pa)
-        else:
-            node = b
-            pmf *= ib / (ia + ib)  # the very expression selector_pmf uses, so both report the same bits
-            u = _rescaled(u, pa, 1.0 - pa)
-    return sel.node_light[node], pmf, u
+    while True:
+        w, total = _child_weights(sel.wide_bounds, node, px, py, pz, nx, ny, nz)
+        scale = 1.0 / total
+        chosen, start, width, lo = -1, 0.0, 0.0, 0.0
+        for c in range(WIDTH):
+            share = w[c] * scale  # the very expression selector_pmf uses, so both report the same bits
+            if share > 0.0:
+                chosen, start, width = c, lo, share  # the last child with a share, where rounding leaves u past all
+                if u < lo + share:
+                    break
+            lo += share
+        if chosen < 0:
+            return -1, 0.0, u
+        pmf *= width
+        u = _rescaled(u, start, width)
+        child = sel.wide_child[node, chosen]
+        if child < 0:
+            return -2 - child, pmf, u
+        node = child
 
 
 @jit_inline
@@ -639,21 +707,19 @@ def selector_pmf(sel, px, py, pz, nx, ny, nz, light):
         return pmf * (sel.cdf[light + 1] - sel.cdf[light])
     if _no_bounds(sel):
         return 0.0
-    bits = sel.light_trail[light]
+    trail = sel.light_trail[light]
     node = 0
-    depth = 0
-    while sel.node_second[node] >= 0:
-        a = node + 1
-        b = sel.node_second[node]
-        ia, ib = _child_weights(sel.node_bounds, a, b, px, py, pz, nx, ny, nz)
-        if (bits >> depth) & 1:
-            pmf *= ib / (ia + ib)
-            node = b
-        else:
-            pmf *= ia / (ia + ib)
-            node = a
-        depth += 1
-    return pmf if sel.node_light[node] == light else 0.0
+    while True:
+        slot = trail & (WIDTH - 1)
+        trail >>= TRAIL_BITS
+        w, total = _child_weights(sel.wide_bounds, node, px, py, pz, nx, ny, nz)
+        pmf *= w[slot] * (1.0 / total)
+        child = sel.wide_child[node, slot]
+        if child == -1:
+            return 0.0
+        if child < 0:
+            return pmf if -2 - child == light else 0.0  # a light without power (never picked) ends elsewhere
+        node = child
 
 
 @jit_parallel
@@ -701,19 +767,26 @@ def build_selector(mode: str, lights: LightArrays, *, env_irradiance=None) -> Li
         raise ParameterError("an environment row must be the table's last, with env_irradiance given")
     bounded = LightArrays(*(a[:n_bounded] for a in lights))
     inf_a, inf_b, inf_floor = _infinite_terms(LightArrays(*(a[n_bounded:] for a in lights)), env)
-    emptyi = np.zeros(0, np.int64)
+    trail = np.zeros(0, np.int64)
+    wide_bounds, wide_child = np.zeros((0, BOUNDS_WIDTH * WIDTH)), np.zeros((0, WIDTH), np.int64)
     cdf = np.zeros(0)
     if mode == "uniform":
-        nodes, trail = _no_nodes(), emptyi
+        nodes = _no_nodes()
     elif mode == "bvh":
-        nodes, trail, _ = _build_bvh(bounded)
+        nodes, m = _build_bvh(bounded)
+        if m > 0:
+            wide_bounds, wide_child, trail, deepest = _collapse(
+                _bounds_rows(nodes), nodes["second"], nodes["light"], n_bounded
+            )
+            assert TRAIL_BITS * (deepest + 1) <= 63, deepest  # _collapse: at most 21 levels of a 62-level tree
+        nodes = {k: v[:1] for k, v in nodes.items()}  # the root's bounds: the environment's share
     else:
         phi = power_of_lights(bounded)
         weights = phi if phi.sum() > 0 else np.ones(n_bounded)
         cdf = np.concatenate([[0.0], np.cumsum(weights) / weights.sum()]) if n_bounded else np.zeros(0)
         if n_bounded:
             cdf[-1] = 1.0
-        nodes, trail = _root_only(bounded), emptyi
+        nodes = _root_only(bounded)
     return LightSelector(
         SELECTORS[mode],
         n,
@@ -724,8 +797,8 @@ def build_selector(mode: str, lights: LightArrays, *, env_irradiance=None) -> Li
         inf_floor,
         cdf,
         _bounds_rows(nodes),
-        nodes["second"],
-        nodes["light"],
+        wide_bounds,
+        wide_child,
         trail,
     )
 
