@@ -453,13 +453,11 @@ def _collapse(rows, second, leaf, n_bounded):
     binary tree of MAX_DEPTH levels gives trails of at most 21 levels of TRAIL_BITS.  Returns (wide_bounds,
     wide_child, light_trail, deepest level)."""
     m = second.shape[0]
-    wide_bounds = np.zeros((m, BOUNDS_WIDTH * WIDTH))
-    for node in range(m):
-        for c in range(WIDTH):
-            wide_bounds[node, B_COS_E * WIDTH + c] = 2.0  # an empty child: importance 0 (and power 0)
-    wide_child = np.full((m, WIDTH), -1, np.int64)
+    cap = max(1, (m - 1) // 2)  # a wide node is an internal binary node (or a one-light root)
+    kids_of = np.full((cap, WIDTH), -1, np.int64)  # each wide node's children as binary nodes
+    wide_child = np.full((cap, WIDTH), -1, np.int64)
     trail = np.zeros(n_bounded, np.int64)
-    stack = np.empty((m, 4), np.int64)  # binary node, wide node, trail, depth
+    stack = np.empty((cap, 4), np.int64)  # binary node, wide node, trail, depth
     kids = np.empty(WIDTH, np.int64)
     level = np.empty(WIDTH, np.int64)
     stack[0, 0], stack[0, 1], stack[0, 2], stack[0, 3] = 0, 0, 0, 0
@@ -487,8 +485,7 @@ def _collapse(rows, second, leaf, n_bounded):
             n += 1
         for c in range(n):
             kid = kids[c]
-            for f in range(BOUNDS_WIDTH):
-                wide_bounds[wide, f * WIDTH + c] = rows[kid, f]
+            kids_of[wide, c] = kid
             path = bits | (c << (TRAIL_BITS * depth))
             if second[kid] < 0:
                 wide_child[wide, c] = -2 - leaf[kid]
@@ -498,7 +495,16 @@ def _collapse(rows, second, leaf, n_bounded):
                 stack[top, 0], stack[top, 1], stack[top, 2], stack[top, 3] = kid, count, path, depth + 1
                 top += 1
                 count += 1
-    return wide_bounds[:count].copy(), wide_child[:count].copy(), trail, deepest
+    wide_bounds = np.zeros((count, BOUNDS_WIDTH * WIDTH))
+    for wide in range(count):
+        for c in range(WIDTH):
+            kid = kids_of[wide, c]
+            if kid < 0:
+                wide_bounds[wide, B_COS_E * WIDTH + c] = 2.0  # an empty child: importance 0 (and power 0)
+                continue
+            for f in range(BOUNDS_WIDTH):
+                wide_bounds[wide, f * WIDTH + c] = rows[kid, f]
+    return wide_bounds, wide_child[:count].copy(), trail, deepest
 
 
 # --- kernels ---------------------------------------------------------------------------------------------------------
