@@ -6,11 +6,21 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from numba import njit
 
 from lightprobe.geometry.intersect import rectangle_rows
 from lightprobe.geometry.raytracer import _closest_analytic_batch, _occluded_analytic_batch
 from lightprobe.geometry.scene import SceneArrays
-from lightprobe.geometry.shape_bvh import LEAF_SIZE, SHAPES_FOR_BVH, build_shape_tree, empty_shape_tree, shape_boxes
+from lightprobe.geometry.shape_bvh import (
+    LEAF_SIZE,
+    SHAPES_FOR_BVH,
+    box_entered,
+    build_shape_tree,
+    empty_shape_tree,
+    shape_boxes,
+)
+from lightprobe.geometry.shape_tree_lanes import boxes_entered
+from lightprobe.geometry.wide_tree import collapse
 
 
 def _shapes(n_spheres, n_rects, seed, large=False):
@@ -123,3 +133,53 @@ def test_the_tree_holds_each_shape_once_in_boxes_that_contain_it():
         assert tree.skip[node] <= tree.skip.shape[0]
         assert np.all(tree.lo[inner] >= tree.lo[node]) and np.all(tree.hi[inner] <= tree.hi[node])
     assert tree.skip[0] == tree.skip.shape[0]  # the root's subtree is the whole tree
+
+
+@njit
+def _masks(boxes, origins, inverse, tmax, out):
+    for i in range(origins.shape[0]):
+        o, inv = origins[i], inverse[i]
+        for node in range(boxes.shape[0]):
+            out[i, node] = boxes_entered(boxes, node, o[0], o[1], o[2], inv[0], inv[1], inv[2], tmax[i])
+
+
+@njit
+def _scalar_masks(lo, hi, kids, origins, inverse, tmax, out):
+    for i in range(origins.shape[0]):
+        o, inv = origins[i], inverse[i]
+        for node in range(kids.shape[0]):
+            bits = 0
+            for c in range(8):
+                if kids[node, c] >= 0 and box_entered(
+                    o[0], o[1], o[2], inv[0], inv[1], inv[2], lo, hi, kids[node, c], tmax[i]
+                ):
+                    bits |= 1 << c
+            out[i, node] = bits
+
+
+def test_the_eight_wide_walk_tests_the_binary_trees_boxes():
+    """The tree the rays walk is the binary tree eight children a node: each wide node's children are binary nodes
+    (every leaf once), their boxes the binary boxes, and the vector slab test enters exactly the children the scalar
+    ``box_entered`` enters (axis-aligned rays: 1 / 0 slabs), never a missing one (a NaN box)."""
+    spheres, rects = _shapes(200, 1500, seed=5, large=True)
+    tree = build_shape_tree(spheres, rects)
+    m = tree.skip.shape[0]
+    second = np.where(tree.count == 0, tree.skip[np.minimum(np.arange(m) + 1, m - 1)], -1)
+    kids, child, parent, _, _ = collapse(second, np.arange(1, m + 1))
+    np.testing.assert_array_equal(child, tree.child)
+    np.testing.assert_array_equal(parent, tree.parent)
+    leaves = -2 - child[child <= -2]
+    assert np.array_equal(np.sort(leaves), np.flatnonzero(tree.count > 0))
+    present = kids >= 0
+    assert np.all(present.sum(axis=1) >= 2) and np.all(
+        np.isnan(tree.boxes.reshape(-1, 6, 8).transpose(0, 2, 1)[~present])
+    )
+    origins, dirs, tmax = _rays(300, seed=11)
+    with np.errstate(divide="ignore"):
+        inverse = 1.0 / dirs
+    vector = np.empty((300, child.shape[0]), np.int64)
+    scalar = np.empty_like(vector)
+    _masks(tree.boxes, origins, inverse, tmax, vector)
+    _scalar_masks(tree.lo, tree.hi, kids, origins, inverse, tmax, scalar)
+    np.testing.assert_array_equal(vector, scalar)
+    assert np.count_nonzero(vector) > 500 and np.count_nonzero(vector & (vector - 1)) > 100  # some with several

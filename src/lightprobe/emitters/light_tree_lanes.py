@@ -22,11 +22,11 @@ from llvmlite import ir
 from numba import types
 from numba.extending import intrinsic
 
+from ..geometry.wide_tree import WIDTH
 from ..simd import F64, FLAGS, I32, I64, LANES, VF32, VF64, Lanes, array_structs, c_array, llvm_function
 
 __all__ = ["BOUNDS_WIDTH", "WIDTH", "child_importances"]
 
-WIDTH = LANES  # children per node of the light tree
 # a node's bounds, the fields of a row of LightSelector.node_bounds (and of each child in wide_bounds): centre of
 # its box, half the box's diagonal (its bounding sphere's radius), axis of the normal cone, cos and sin of the
 # cone's spread, cos of the emission spread about any normal, power, 1.0 if two-sided

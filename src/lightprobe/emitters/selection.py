@@ -53,6 +53,7 @@ from .._numba import jit, jit_alloc, jit_inline, jit_parallel, prange
 from ..color import luminance
 from ..errors import ParameterError
 from ..geometry.shape_bvh import sort_along_widest_axis
+from ..geometry.wide_tree import PATH_BITS, collapse
 from .area import area_power
 from .kinds import (
     LIGHT_DIRECTIONAL,
@@ -95,7 +96,7 @@ __all__ = [
 SELECTORS = {"uniform": 0, "power": 1, "bvh": 2}
 UNIFORM, POWER, BVH = 0, 1, 2
 MAX_DEPTH = 62  # the binary tree's depth: its eight-wide collapse's trails are int64 (TRAIL_BITS per level)
-TRAIL_BITS = 3  # a light's trail holds the child (0 .. WIDTH - 1) taken at each level of the eight-wide tree
+TRAIL_BITS = PATH_BITS  # a light's trail holds the child (0 .. WIDTH - 1) taken at each level of the eight-wide tree
 
 
 class LightSelector(NamedTuple):
@@ -444,67 +445,21 @@ def _build_tree(
         n_w[node, 0], n_w[node, 1], n_w[node, 2], n_cos_o[node] = x, y, z, c
 
 
-@jit_alloc
 def _collapse(rows, second, leaf, n_bounded):
     """The eight-wide tree of the binary one (node i's children i + 1 and ``second[i]``, bounds ``rows``, a leaf's
-    light ``leaf[i]``): a wide node's children are its binary node's descendants, each internal one replaced by its
-    two children, the shallowest first, while there are fewer than eight.  So every internal child of a wide node is
-    three binary levels below it (its descendants at one and two levels, at most 2 + 4, are always replaced), and a
-    binary tree of MAX_DEPTH levels gives trails of at most 21 levels of TRAIL_BITS.  Returns (wide_bounds,
-    wide_child, light_trail, deepest level)."""
-    m = second.shape[0]
-    cap = max(1, (m - 1) // 2)  # a wide node is an internal binary node (or a one-light root)
-    kids_of = np.full((cap, WIDTH), -1, np.int64)  # each wide node's children as binary nodes
-    wide_child = np.full((cap, WIDTH), -1, np.int64)
+    light ``leaf[i]``; geometry/wide_tree.py): (wide_bounds, wide_child, light_trail, deepest level).  A binary
+    tree of MAX_DEPTH levels gives trails of at most 21 levels of TRAIL_BITS."""
+    kids, child, _, path, deepest = collapse(second, np.arange(1, second.shape[0] + 1))
+    leaves = child <= -2
+    child[leaves] = -2 - leaf[-2 - child[leaves]]  # a binary leaf's number -> its light's
     trail = np.zeros(n_bounded, np.int64)
-    stack = np.empty((cap, 4), np.int64)  # binary node, wide node, trail, depth
-    kids = np.empty(WIDTH, np.int64)
-    level = np.empty(WIDTH, np.int64)
-    stack[0, 0], stack[0, 1], stack[0, 2], stack[0, 3] = 0, 0, 0, 0
-    top, count, deepest = 1, 1, 0
-    while top > 0:
-        top -= 1
-        binary, wide, bits, depth = stack[top, 0], stack[top, 1], stack[top, 2], stack[top, 3]
-        deepest = max(deepest, depth)
-        if second[binary] < 0:  # a tree of one light
-            kids[0], level[0], n = binary, 0, 1
-        else:
-            kids[0], kids[1], level[0], level[1], n = binary + 1, second[binary], 1, 1, 2
-        while n < WIDTH:
-            best = -1  # the shallowest internal child, the first of equals
-            for c in range(n):
-                if second[kids[c]] >= 0 and (best < 0 or level[c] < level[best]):
-                    best = c
-            if best < 0:
-                break
-            node, depth_below = kids[best], level[best] + 1
-            for c in range(n - 1, best, -1):
-                kids[c + 1], level[c + 1] = kids[c], level[c]
-            kids[best], kids[best + 1] = node + 1, second[node]
-            level[best] = level[best + 1] = depth_below
-            n += 1
-        for c in range(n):
-            kid = kids[c]
-            kids_of[wide, c] = kid
-            path = bits | (c << (TRAIL_BITS * depth))
-            if second[kid] < 0:
-                wide_child[wide, c] = -2 - leaf[kid]
-                trail[leaf[kid]] = path
-            else:
-                wide_child[wide, c] = count
-                stack[top, 0], stack[top, 1], stack[top, 2], stack[top, 3] = kid, count, path, depth + 1
-                top += 1
-                count += 1
-    wide_bounds = np.zeros((count, BOUNDS_WIDTH * WIDTH))
-    for wide in range(count):
-        for c in range(WIDTH):
-            kid = kids_of[wide, c]
-            if kid < 0:
-                wide_bounds[wide, B_COS_E * WIDTH + c] = 2.0  # an empty child: importance 0 (and power 0)
-                continue
-            for f in range(BOUNDS_WIDTH):
-                wide_bounds[wide, f * WIDTH + c] = rows[kid, f]
-    return wide_bounds, wide_child[:count].copy(), trail, deepest
+    is_leaf = second < 0
+    trail[leaf[is_leaf]] = path[is_leaf]
+    fields = rows[np.maximum(kids, 0)]  # (W, 8, 12): child c's bounds, field by field below
+    fields[kids < 0] = 0.0
+    fields[kids < 0, B_COS_E] = 2.0  # an empty child: importance 0 (and power 0)
+    wide_bounds = np.ascontiguousarray(fields.transpose(0, 2, 1).reshape(-1, BOUNDS_WIDTH * WIDTH))
+    return wide_bounds, child, trail, deepest
 
 
 # --- kernels ---------------------------------------------------------------------------------------------------------

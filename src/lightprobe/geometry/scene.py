@@ -88,6 +88,9 @@ class SceneArrays(NamedTuple):
     tree_count: np.ndarray
     tree_prims: np.ndarray
     tree_loose: np.ndarray
+    tree_boxes: np.ndarray
+    tree_child: np.ndarray
+    tree_parent: np.ndarray
 
 
 class Scene:

@@ -7,11 +7,13 @@ A scene file with thousands of rectangle lights would pay for all of them on eve
 scene carries this hierarchy and every analytic ray query walks it instead (decisions.md 70 has the measurements).
 The shapes stay exact: the tree only culls, each candidate is intersected by the same float64 routines.
 
-Layout: nodes in depth-first order with an *escape* index (a threaded BVH, Smits 1998): a ray that misses node i's
-box, or has tested leaf i, continues at ``skip[i]``, one that enters an interior node at i + 1.  No stack, so the
-traversal is a plain loop in a Numba kernel.  Boxes are padded by far more than their float64 rounding, so no ray
-that meets a shape can miss its box.  Built in compiled code by median splits along the axis of largest centroid
-extent (as the light BVH, ``emitters/selection.py``): 100,000 shapes in well under a second.
+Layout: nodes in depth-first order with an *escape* index (a threaded BVH, Smits 1998): node i's subtree is the
+range (i, ``skip[i]``), an interior node's children i + 1 and ``skip[i + 1]``.  Boxes are padded by far more than
+their float64 rounding, so no ray that meets a shape can miss its box.  Built in compiled code by median splits
+along the axis of largest centroid extent (as the light BVH, ``emitters/selection.py``): 100,000 shapes in well
+under a second.  Rays walk the same tree collapsed to eight children a node (``wide_tree.py``; ``boxes``,
+``child``, ``parent``): one vector slab test per node for its eight children (``shape_tree_lanes.py``, whose scalar
+twin is :func:`box_entered`), where the threaded walk tested one box at a time (decisions.md 90).
 
 The few largest shapes (at most ``MAX_LOOSE``, each more than a quarter of the scene's extent: a ground, a dome)
 stay out of the tree and are tested first: in it, their boxes would be part of every node above them.
@@ -26,6 +28,9 @@ from typing import NamedTuple
 import numpy as np
 
 from .._numba import jit, jit_alloc, jit_inline
+from ..errors import ParameterError
+from .shape_tree_lanes import BOXES_WIDTH
+from .wide_tree import WIDTH, collapse
 
 __all__ = ["LEAF_SIZE", "SHAPES_FOR_BVH", "ShapeTree", "build_shape_tree", "empty_shape_tree"]
 
@@ -35,6 +40,7 @@ SHAPES_FOR_BVH = 16
 LEAF_SIZE = 2
 MAX_LOOSE = 4  # large shapes kept out of the tree at most
 _PAD = 1e-9  # relative to each box's size and coordinates
+MAX_WIDE_DEPTH = 8  # levels of the eight-wide tree: a ray's walk keeps a byte per level in one int64
 
 
 class ShapeTree(NamedTuple):
@@ -47,12 +53,19 @@ class ShapeTree(NamedTuple):
     count: np.ndarray  # (N,) int64: a leaf's number of shapes; 0 for an interior node
     prims: np.ndarray  # (P,) int64: shape numbers in leaf order
     loose: np.ndarray  # (K,) int64: large shapes tested one by one before the tree (a ground, a dome)
+    # the same tree eight children a node (geometry/wide_tree.py), which the rays walk (intersect._first_hit):
+    boxes: np.ndarray  # (W, 48) float64: the children's boxes (shape_tree_lanes.py), NaN for a missing child
+    child: np.ndarray  # (W, 8) int64: a child's wide node (>= 0), -2 - i for leaf i above, -1 for none
+    parent: np.ndarray  # (W,) int64: each wide node's parent (-1: the root)
 
 
 def empty_shape_tree() -> ShapeTree:
     z3 = np.zeros((0, 3))
     zi = np.zeros(0, np.int64)
-    return ShapeTree(z3, z3.copy(), zi, zi.copy(), zi.copy(), zi.copy(), zi.copy())
+    return ShapeTree(
+        z3, z3.copy(), zi, zi.copy(), zi.copy(), zi.copy(), zi.copy(), np.zeros((0, BOXES_WIDTH)),
+        np.zeros((0, WIDTH), np.int64), zi.copy(),
+    )  # fmt: skip
 
 
 def shape_boxes(spheres: np.ndarray, rects: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -83,7 +96,24 @@ def build_shape_tree(spheres: np.ndarray, rects: np.ndarray) -> ShapeTree:
         loose = loose[:0]
     rest = np.setdiff1d(np.arange(n), loose)
     node_lo, node_hi, skip, first, count, prims = _build(lo[rest] - pad[rest], hi[rest] + pad[rest], LEAF_SIZE)
-    return ShapeTree(node_lo, node_hi, skip, first, count, np.ascontiguousarray(rest[prims]), np.sort(loose))
+    boxes, child, parent = _eight_wide(node_lo, node_hi, skip, count)
+    return ShapeTree(
+        node_lo, node_hi, skip, first, count, np.ascontiguousarray(rest[prims]), np.sort(loose), boxes, child, parent
+    )
+
+
+def _eight_wide(node_lo, node_hi, skip, count):
+    """The tree eight children a node: (boxes, child, parent) of :class:`ShapeTree`.  An internal node i's children
+    are i + 1 and the node after that one's subtree, skip[i + 1]."""
+    m = skip.shape[0]
+    second = np.where(count == 0, skip[np.minimum(np.arange(m) + 1, m - 1)], -1)
+    kids, child, parent, _, deepest = collapse(second, np.arange(1, m + 1))
+    if deepest >= MAX_WIDE_DEPTH:
+        raise ParameterError(f"too many spheres and rectangles for the shape hierarchy ({count.sum()} in it)")
+    lo, hi = node_lo[np.maximum(kids, 0)], node_hi[np.maximum(kids, 0)]  # (W, 8, 3)
+    lo[kids < 0] = hi[kids < 0] = np.nan  # a missing child (shape_tree_lanes.py drops NaN boxes)
+    boxes = np.concatenate([lo.transpose(0, 2, 1), hi.transpose(0, 2, 1)], axis=1).reshape(-1, BOXES_WIDTH)
+    return np.ascontiguousarray(boxes), child, parent
 
 
 @jit
