@@ -488,9 +488,9 @@ def node_importance(bounds, i, px, py, pz, nx, ny, nz):
     d2 = dx * dx + dy * dy + dz * dz
     # The descent waits for each level's importances, so what counts is the longest chain of dependent square roots
     # and divisions: each cosine is a dot product with d and each sine sqrt(d2 - (a . d)^2), both scaled by 1 / |d|
-    # at the end, so the four square roots run side by side instead of after the direction's (the eight-wide
-    # descent's pick: 80 -> ... ns a level, decisions.md 90).  At d = 0 (inv_dist 0) every cosine and sine is 0:
-    # inside the bound, cos_p is 1 as before.
+    # at the end, so the four square roots run side by side instead of after the direction's (in the eight-wide
+    # descent's float64 lanes, a level's importances 80 -> 76 ns; decisions.md 90).  At d = 0 (inv_dist 0) every
+    # cosine and sine is 0: inside the bound, cos_p is 1 as before.
     dist = math.sqrt(d2)
     inv_dist = 1.0 / dist if dist > 0.0 else 0.0
     falloff = 1.0 / max(d2, radius)  # pbrt-v4: max(d2, Length(diagonal) / 2)
