@@ -64,7 +64,7 @@ from ..emitters.envmap import env_pdf, env_sample, placeholder_environment
 from ..sampling.mis import mis_weight
 
 # techniques imports this module only inside its functions
-from .techniques import TechniqueError, _row, _TooLong, _user_line
+from .technique_errors import TechniqueError, _row, _TooLong, _user_line
 
 __all__ = [
     "EnvironmentRecord",

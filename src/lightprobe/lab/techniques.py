@@ -42,7 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import LightprobeError
+from .technique_errors import TechniqueError, _row, _TooLong, _user_line
 
 __all__ = [
     "KINDS",
@@ -62,10 +62,6 @@ SUPPORTS = ("hemisphere", "sphere")
 UNIT_TOLERANCE = 1e-4
 #: seconds one call may take before it is stopped (per batch; batches hold at most a few hundred thousand samples)
 DEFAULT_TIME_LIMIT = 60.0
-
-
-class TechniqueError(LightprobeError):
-    """A user technique failed a check or could not be loaded; the message names the function and the sample."""
 
 
 @dataclass
@@ -174,23 +170,6 @@ def load_module(path: str | Path, *, what: str = "technique file"):
     return module
 
 
-_PACKAGE = Path(__file__).resolve().parents[1]
-
-
-def _user_line(exc: BaseException, file: Path | None = None) -> str:
-    """': line N of NAME' for the deepest frame of the traceback in ``file`` (default: any file outside
-    lightprobe), or ''."""
-    tb = exc.__traceback__
-    found = ""
-    while tb is not None:
-        name = Path(tb.tb_frame.f_code.co_filename)
-        mine = name.resolve() == file.resolve() if file is not None else _PACKAGE not in name.resolve().parents
-        if mine and name.suffix == ".py":
-            found = f": line {tb.tb_lineno}" + ("" if file is not None else f" of {name.name}")
-        tb = tb.tb_next
-    return found
-
-
 def load_technique(spec: str, *, time_limit: float = DEFAULT_TIME_LIMIT) -> GuardedTechnique:
     """The technique ``FILE.py:NAME`` (``FILE.py`` alone when the file defines exactly one): a class is
     instantiated without arguments, an instance (or any object with ``sample`` and ``pdf``) used as it is."""
@@ -218,10 +197,6 @@ def load_technique(spec: str, *, time_limit: float = DEFAULT_TIME_LIMIT) -> Guar
 
 
 # --- calling a technique safely -----------------------------------------------------------------------------------
-class _TooLong(Exception):
-    pass
-
-
 @contextmanager
 def _time_limit(seconds: float):
     """Raise _TooLong in the main thread after ``seconds`` (SIGALRM); elsewhere, no limit."""
@@ -239,10 +214,6 @@ def _time_limit(seconds: float):
     finally:
         signal.setitimer(signal.ITIMER_REAL, 0.0)
         signal.signal(signal.SIGALRM, previous)
-
-
-def _row(a: np.ndarray, i: int) -> str:
-    return np.array2string(np.asarray(a[i]), precision=6, separator=", ", suppress_small=False)
 
 
 class GuardedTechnique:
