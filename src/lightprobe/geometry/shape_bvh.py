@@ -55,7 +55,7 @@ class ShapeTree(NamedTuple):
     loose: np.ndarray  # (K,) int64: large shapes tested one by one before the tree (a ground, a dome)
     # the same tree eight children a node (geometry/wide_tree.py), which the rays walk (intersect._first_hit):
     boxes: np.ndarray  # (W, 48) float64: the children's boxes (shape_tree_lanes.py), NaN for a missing child
-    child: np.ndarray  # (W, 8) int64: a child's wide node (>= 0), -2 - i for leaf i above, -1 for none
+    child: np.ndarray  # (W, 8) int64: a child's wide node (>= 0), -2 - i for the leaf that is node i above, -1: none
     parent: np.ndarray  # (W,) int64: each wide node's parent (-1: the root)
 
 
