@@ -23,7 +23,7 @@ from numba import types
 from numba.extending import intrinsic
 
 from ..geometry.wide_tree import WIDTH
-from ..simd import F64, FLAGS, I32, I64, LANES, VF32, VF64, Lanes, array_structs, c_array, llvm_function
+from ..simd import F32, F64, I32, I64, LANES, VF32, VF64, Lanes, Lanes32, array_structs, c_array, dot3
 
 __all__ = ["BOUNDS_WIDTH", "WIDTH", "child_importances"]
 
@@ -43,31 +43,18 @@ def _sin_sub_clamped(v: Lanes, sin_a, cos_a, sin_b, cos_b):
     return v.b.select(v.gt(cos_a, cos_b), v.f(0.0), v.sub(v.mul(sin_a, cos_b), v.mul(cos_a, sin_b)))
 
 
-class Lanes32(Lanes):
-    """:class:`Lanes` over eight float32 lanes (one 256-bit register): the operations the importances take."""
-
-    def f(self, x):
-        return ir.Constant(VF32, [float(x)] * LANES)
-
-    def sqrt(self, a):
-        return self.b.call(llvm_function(self.b, "llvm.sqrt.v8f32", VF32, VF32), [a], fastmath=FLAGS)
-
-    def fabs(self, a):
-        return self.b.call(llvm_function(self.b, "llvm.fabs.v8f32", VF32, VF32), [a])
-
-
 def importances(v: Lanes32, field, d, n, has_normal):
     """selection.node_importance for eight nodes whose bound fields are ``field(f)`` (float32 vectors), a receiver
     at ``d`` from their centres (float32 vectors, the differences taken in float64) with normal ``n`` (vectors of
     one value each); ``has_normal``: an i1, n is not 0."""
     b = v.b
     radius = field(B_RADIUS)
-    d2 = v.add(v.add(v.mul(d[0], d[0]), v.mul(d[1], d[1])), v.mul(d[2], d[2]))
+    d2 = dot3(v, d, d)
     dist = v.sqrt(d2)
     positive = v.gt(dist, v.f(0.0))
     inv_dist = b.select(positive, v.div(v.f(1.0), dist), v.f(0.0))
     falloff = v.div(v.f(1.0), v.fmax(d2, radius))
-    along = v.add(v.add(v.mul(field(B_AXIS), d[0]), v.mul(field(B_AXIS + 1), d[1])), v.mul(field(B_AXIS + 2), d[2]))
+    along = dot3(v, [field(B_AXIS + i) for i in range(3)], d)
     along = b.select(b.fcmp_ordered("==", field(B_TWO_SIDED), v.f(1.0)), v.fabs(along), along)
     cos_w = v.mul(along, inv_dist)
     sin_w = v.mul(v.sqrt(v.fmax(v.f(0.0), v.sub(d2, v.mul(along, along)))), inv_dist)
@@ -79,7 +66,7 @@ def importances(v: Lanes32, field, d, n, has_normal):
     sin_x = _sin_sub_clamped(v, sin_w, cos_w, sin_o, cos_o)
     cos_p = _cos_sub_clamped(v, sin_x, cos_x, sin_b, cos_b)
     importance = v.mul(v.mul(field(B_PHI), cos_p), falloff)
-    facing = v.fabs(v.add(v.add(v.mul(n[0], d[0]), v.mul(n[1], d[1])), v.mul(n[2], d[2])))
+    facing = v.fabs(dot3(v, n, d))
     cos_i = v.mul(facing, inv_dist)
     sin_i = v.mul(v.sqrt(v.fmax(v.f(0.0), v.sub(d2, v.mul(facing, facing)))), inv_dist)
     at_receiver = b.select(has_normal, _cos_sub_clamped(v, sin_i, cos_i, sin_b, cos_b), v.f(1.0))
@@ -116,7 +103,7 @@ def child_importances(typingctx, bounds, node, px, py, pz, nx, ny, nz):
         # the receiver from each centre in float64 (a scene far from the origin keeps its small lights' offsets),
         # then float32
         d = [b.fptrunc(v.sub(v.splat(scalars[i], VF64), loaded(B_CENTER + i)), VF32) for i in range(3)]
-        n = [v.splat(b.fptrunc(x, ir.FloatType()), VF32) for x in scalars[3:]]
+        n = [v.splat(b.fptrunc(x, F32), VF32) for x in scalars[3:]]
         zero = ir.Constant(F64, 0.0)
         has_normal = b.or_(
             b.or_(b.fcmp_unordered("!=", scalars[3], zero), b.fcmp_unordered("!=", scalars[4], zero)),

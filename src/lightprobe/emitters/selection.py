@@ -522,19 +522,25 @@ def node_importance(bounds, i, px, py, pz, nx, ny, nz):
 
 
 @jit_inline
+def _sum8(w):
+    """The sum of eight weights, pairwise (the same bits wherever a node's weights are summed)."""
+    return ((w[0] + w[1]) + (w[2] + w[3])) + ((w[4] + w[5]) + (w[6] + w[7]))
+
+
+@jit_inline
 def _child_weights(wide_bounds, node, px, py, pz, nx, ny, nz):
     """(the eight children's importances, their sum) for the receiver, the eight at once (light_tree_lanes.py);
     where all are zero (the parent's looser bound let the descent reach a subtree that cannot light the receiver),
     their powers instead, so that the pmf over all lights sums to one (pbrt-v4 returns no light there; either way
     the sample contributes nothing and nothing is biased)."""
     w = child_importances(wide_bounds, node, px, py, pz, nx, ny, nz)
-    total = ((w[0] + w[1]) + (w[2] + w[3])) + ((w[4] + w[5]) + (w[6] + w[7]))
+    total = _sum8(w)
     if total > 0.0:
         return w, total
     phi = B_PHI * WIDTH
     row = wide_bounds[node]
     w = (row[phi], row[phi + 1], row[phi + 2], row[phi + 3], row[phi + 4], row[phi + 5], row[phi + 6], row[phi + 7])
-    return w, ((w[0] + w[1]) + (w[2] + w[3])) + ((w[4] + w[5]) + (w[6] + w[7]))
+    return w, _sum8(w)
 
 
 @jit_inline

@@ -226,7 +226,7 @@ def _first_hit(s, ox, oy, oz, dx, dy, dz, tmax, any_hit):
     leaf's shapes): the helpers are inlined into the kernels, and each call site is a copy that Numba compiles
     (with three sites the area-light path compiled in 208 s, with one in 178 s: decisions.md 73)."""
     best, kind, index = tmax, MISS, -1
-    n_nodes = s.tree_child.shape[0]
+    n_nodes = s.tree_skip.shape[0]  # no tree: every shape in turn (the stages test the same array)
     # source of candidates: 0 every shape (no tree), 1 the loose shapes, 2 the current leaf's shapes
     source = 0 if n_nodes == 0 else 1
     j, end = 0, s.spheres.shape[0] + s.rects.shape[0] if n_nodes == 0 else s.tree_loose.shape[0]

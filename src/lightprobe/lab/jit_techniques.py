@@ -62,8 +62,6 @@ from ..bsdfs.base import PARAM_SIZE
 from ..bsdfs.dispatch import bsdf_pdf, bsdf_sample
 from ..emitters.envmap import env_pdf, env_sample, placeholder_environment
 from ..sampling.mis import mis_weight
-
-# techniques imports this module only inside its functions
 from .technique_errors import TechniqueError, _row, _TooLong, _user_line
 
 __all__ = [

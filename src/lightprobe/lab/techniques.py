@@ -42,6 +42,8 @@ from pathlib import Path
 
 import numpy as np
 
+from . import jit_techniques as jt
+from .jit_techniques import JitTechnique, jit_functions, technique_data
 from .technique_errors import TechniqueError, _row, _TooLong, _user_line
 
 __all__ = [
@@ -220,8 +222,6 @@ class GuardedTechnique:
     """A technique whose every call is checked: see the module docstring."""
 
     def __init__(self, technique, label: str, *, time_limit: float = DEFAULT_TIME_LIMIT):
-        from .jit_techniques import JitTechnique, jit_functions
-
         self.user = technique
         self.label = label
         self.time_limit = time_limit
@@ -250,8 +250,6 @@ class GuardedTechnique:
 
     def data(self) -> tuple:
         """What njit code sees as ``ctx.data``: the technique's ``data`` attribute, a tuple (after ``prepare``)."""
-        from .jit_techniques import technique_data
-
         return technique_data(self.user, self.label)
 
     def _call(self, method: str, check: str, args, first_input: np.ndarray, input_name: str):
@@ -381,8 +379,6 @@ class BuiltinEnvironment:
 def builtin(kind: str) -> GuardedTechnique:
     """lightprobe's technique of ``kind`` ("bsdf" or "light"), guarded like a user's: its NumPy methods for batch
     calls, its njit twins (the same kernels) for the laboratory's compiled estimator."""
-    from . import jit_techniques as jt
-
     obj = BuiltinBSDF() if kind == "bsdf" else BuiltinEnvironment()
     guarded = GuardedTechnique(obj, "lightprobe:" + ("brdf" if kind == "bsdf" else "env"), time_limit=0.0)
     guarded.builtin = True

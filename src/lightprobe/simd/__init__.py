@@ -36,6 +36,7 @@ __all__ = [
     "VI32",
     "VI64",
     "Lanes",
+    "Lanes32",
     "array_structs",
     "c_array",
     "dot3",
@@ -284,6 +285,20 @@ class Lanes:
         b.branch(loop)
         b.position_at_end(done)
         return lo_phi
+
+
+class Lanes32(Lanes):
+    """:class:`Lanes` over eight float32 lanes (one 256-bit register): constants, square root and absolute value in
+    float32; the other operations take their operands' type."""
+
+    def f(self, x):
+        return ir.Constant(VF32, [float(x)] * LANES)
+
+    def sqrt(self, a):
+        return self.b.call(llvm_function(self.b, "llvm.sqrt.v8f32", VF32, VF32), [a], fastmath=FLAGS)
+
+    def fabs(self, a):
+        return self.b.call(llvm_function(self.b, "llvm.fabs.v8f32", VF32, VF32), [a])
 
 
 def ir_loop(v: Lanes, count, carried, body):
