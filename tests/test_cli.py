@@ -20,6 +20,39 @@ def sky(tmp_path):
     return write_image(tmp_path / "sky.exr", sky_with_sun(64, 32, sun_diameter_deg=6.0))
 
 
+# First in the file, as tests/conftest.py's FIRST_FILES assumes: this render compiles the render core while the
+# other worker runs tests that need none of it (decisions.md 89).
+def test_render_demo_with_variance_png_and_sidecar(tmp_path):
+    out = tmp_path / "demo.exr"
+    preview = tmp_path / "demo.png"
+    assert (
+        main(
+            [
+                "render",
+                "--demo",
+                "--width",
+                "40",
+                "--spp",
+                "2",
+                "-o",
+                str(out),
+                "--variance",
+                "--png",
+                str(preview),
+                "-q",
+            ]
+        )
+        == 0
+    )
+    img = read_image(out)
+    assert img.shape == (25, 40, 6) and np.all(np.isfinite(img))
+    assert read_image(preview).shape[:2] == (25, 40)
+    meta = json.loads((tmp_path / "demo.exr.json").read_text())
+    for key in ("seconds", "samples_per_s", "rays_per_s", "spp_done", "strategy", "seed", "machine"):
+        assert key in meta
+    assert meta["spp_done"] == 2 and meta["strategy"] == "mis"
+
+
 def test_experiment_shading_point(capsys, tmp_path):
     out = tmp_path / "table.md"
     assert (
@@ -111,37 +144,6 @@ def test_help_texts_keep_their_bracketed_defaults(command, expected):
     assert expected in out.stdout, out.stdout
     lines = [line.rstrip() for line in out.stdout.splitlines()]
     assert not [line for line in lines if line.endswith(" .") or " . " in line], out.stdout
-
-
-def test_render_demo_with_variance_png_and_sidecar(tmp_path):
-    out = tmp_path / "demo.exr"
-    preview = tmp_path / "demo.png"
-    assert (
-        main(
-            [
-                "render",
-                "--demo",
-                "--width",
-                "40",
-                "--spp",
-                "2",
-                "-o",
-                str(out),
-                "--variance",
-                "--png",
-                str(preview),
-                "-q",
-            ]
-        )
-        == 0
-    )
-    img = read_image(out)
-    assert img.shape == (25, 40, 6) and np.all(np.isfinite(img))
-    assert read_image(preview).shape[:2] == (25, 40)
-    meta = json.loads((tmp_path / "demo.exr.json").read_text())
-    for key in ("seconds", "samples_per_s", "rays_per_s", "spp_done", "strategy", "seed", "machine"):
-        assert key in meta
-    assert meta["spp_done"] == 2 and meta["strategy"] == "mis"
 
 
 def test_render_scene_file_with_defaults_and_overrides(tmp_path, capsys):

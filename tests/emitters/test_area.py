@@ -195,3 +195,37 @@ def test_the_environment_map_honours_the_same_contract():
     assert np.all(np.isinf(s.distance)) and not s.delta
     np.testing.assert_allclose(env.pdf_li(p, n, s.direction), s.pdf, rtol=1e-12)
     np.testing.assert_allclose(env.eval(s.direction), s.radiance)
+
+
+def test_the_spherical_rectangles_solid_angle_is_its_two_triangles():
+    """Urena's four internal angles (atan2 of each corner's products, decisions.md 91) against the solid angles of the
+    rectangle's two triangles (Van Oosterom and Strackee), from receivers near, far, grazing its plane and far off
+    its normal, for rectangles from 1 mm to 10 m: agreement to 1e-9 relative, or 1e-14 sr where the four angles'
+    sum, less 2 pi, cancels (the tiny solid angles of far, grazing receivers: the previous formula, with normalised
+    cross products, erred alike, 4e-9 relative at 9e-8 sr)."""
+    from lightprobe.emitters.area import _rect_frame, _rect_solid_angle, _triangle_directions, _triangle_solid_angle
+
+    rng = np.random.default_rng(91)
+    worst = 0.0
+    for _ in range(400):
+        size = 10.0 ** rng.uniform(-3.0, 1.0)
+        eu = rng.normal(size=3)
+        eu *= size * rng.uniform(0.2, 1.0) / np.linalg.norm(eu)
+        ev = np.cross(eu, rng.normal(size=3))
+        ev *= size * rng.uniform(0.2, 1.0) / np.linalg.norm(ev)
+        origin = rng.normal(size=3)
+        n = np.cross(eu, ev) / np.linalg.norm(np.cross(eu, ev))
+        offset = rng.normal(size=3) * size * 10.0 ** rng.uniform(-1.0, 2.0)
+        p = origin + 0.5 * (eu + ev) + offset
+        if abs((p - origin) @ n) < 1e-6 * size:  # in the plane: no spherical rectangle
+            continue
+        g = np.concatenate([origin, eu, ev, n, np.zeros(3)])
+        omega, terms = _rect_solid_angle(_rect_frame(p[0], p[1], p[2], g))
+        corners = [origin, origin + eu, origin + eu + ev, origin + ev]
+        halves = 0.0
+        for a, b, c in ((corners[0], corners[1], corners[2]), (corners[0], corners[2], corners[3])):
+            tri = np.concatenate([a, b, c])
+            halves += _triangle_solid_angle(*_triangle_directions(p[0], p[1], p[2], tri))
+        assert omega > 0.0 and len(terms) == 6
+        worst = max(worst, abs(omega - halves) / (halves + 1e-5))
+    assert worst < 1e-9, worst

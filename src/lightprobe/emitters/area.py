@@ -115,14 +115,6 @@ def _cross(ax, ay, az, bx, by, bz):
 
 
 @jit
-def _angle_between(ax, ay, az, bx, by, bz):
-    """Angle between unit vectors, accurate near 0 and pi (pbrt-v4's AngleBetween)."""
-    if _dot(ax, ay, az, bx, by, bz) < 0.0:
-        return math.pi - 2.0 * math.asin(min(1.0, 0.5 * math.sqrt((ax + bx) ** 2 + (ay + by) ** 2 + (az + bz) ** 2)))
-    return 2.0 * math.asin(min(1.0, 0.5 * math.sqrt((bx - ax) ** 2 + (by - ay) ** 2 + (bz - az) ** 2)))
-
-
-@jit
 def _triangle_hit(ox, oy, oz, dx, dy, dz, g):
     """Moeller-Trumbore: t of the hit with triangle (g[0:3], g[3:6], g[6:9]), or inf."""
     e1x, e1y, e1z = g[3] - g[0], g[4] - g[1], g[5] - g[2]
@@ -244,16 +236,21 @@ def _rect_frame(px, py, pz, g):
 
 @jit
 def _rect_solid_angle_terms(x0, y0, z0, x1, y1):
-    """Edge-plane normals' z components b0, b1 and the four internal angles of the spherical rectangle."""
-    n0 = _normalize3(_cross(x0, y0, z0, x1, y0, z0))
-    n1 = _normalize3(_cross(x1, y0, z0, x1, y1, z0))
-    n2 = _normalize3(_cross(x1, y1, z0, x0, y1, z0))
-    n3 = _normalize3(_cross(x0, y1, z0, x0, y0, z0))
-    g0 = _angle_between(-n0[0], -n0[1], -n0[2], n1[0], n1[1], n1[2])
-    g1 = _angle_between(-n1[0], -n1[1], -n1[2], n2[0], n2[1], n2[2])
-    g2 = _angle_between(-n2[0], -n2[1], -n2[2], n3[0], n3[1], n3[2])
-    g3 = _angle_between(-n3[0], -n3[1], -n3[2], n0[0], n0[1], n0[2])
-    return n0[2], n2[2], g0, g1, g2, g3
+    """Edge-plane normals' z components b0, b1 and the four internal angles g0..g3 of the spherical rectangle
+    (Urena et al. 2013, eq. 4-5), in the rectangle's own frame, where the edge planes' normals have one zero
+    component each: n0 ~ (0, z0, -y0), n1 ~ (-z0, 0, x1), n2 ~ (0, -z0, y1), n3 ~ (z0, 0, -x0).  The angle between
+    -n_i and n_(i+1) is then atan2(|z0| |corner|, the corners' coordinate product), with |corner| the distance to the
+    corner the two edges share: one square root and one atan2 an angle, accurate near 0 and pi, and no normalised
+    cross products (decisions.md 91)."""
+    az = abs(z0)
+    z2 = z0 * z0
+    g0 = math.atan2(az * math.sqrt(x1 * x1 + y0 * y0 + z2), y0 * x1)
+    g1 = math.atan2(az * math.sqrt(x1 * x1 + y1 * y1 + z2), -x1 * y1)
+    g2 = math.atan2(az * math.sqrt(x0 * x0 + y1 * y1 + z2), x0 * y1)
+    g3 = math.atan2(az * math.sqrt(x0 * x0 + y0 * y0 + z2), -x0 * y0)
+    b0 = -y0 / math.sqrt(z2 + y0 * y0)
+    b1 = y1 / math.sqrt(z2 + y1 * y1)
+    return b0, b1, g0, g1, g2, g3
 
 
 @jit
@@ -280,7 +277,7 @@ def _solid_angle_mode(lights, l, px, py, pz):
     if kind == LIGHT_RECT:
         if not _is_rectangle(g):
             return False, 0.0, 0.0
-        omega = _rect_solid_angle(_rect_frame(px, py, pz, g))
+        omega, _ = _rect_solid_angle(_rect_frame(px, py, pz, g))
     else:
         a, b, c = _triangle_directions(px, py, pz, g)
         omega = _triangle_solid_angle(a, b, c)
@@ -295,12 +292,15 @@ def _spherical(omega):
 
 @jit
 def _rect_solid_angle(frame):
-    """Solid angle of the rectangle in Urena et al.'s frame (0 when p lies in its plane: area sampling then)."""
+    """(solid angle, terms) of the rectangle in Urena et al.'s frame, the terms those of ``_rect_solid_angle_terms``
+    (computed once for the solid angle and the sample); a solid angle of 0 when p lies in its plane (area sampling
+    then)."""
     _, _, _, x0, y0, z0, eu, ev = frame
     if z0 == 0.0:
-        return 0.0
-    _, _, g0, g1, g2, g3 = _rect_solid_angle_terms(x0, y0, z0, x0 + eu, y0 + ev)
-    return g0 + g1 + g2 + g3 - TWO_PI
+        return 0.0, (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    terms = _rect_solid_angle_terms(x0, y0, z0, x0 + eu, y0 + ev)
+    _, _, g0, g1, g2, g3 = terms
+    return g0 + g1 + g2 + g3 - TWO_PI, terms
 
 
 # --- the strategies --------------------------------------------------------------------------------------------------
@@ -336,12 +336,13 @@ def _area_to_solid_angle(lights, l, distance, cos_light):
 
 
 @jit
-def _sample_spherical_rect(frame, px, py, pz, u0, u1):
+def _sample_spherical_rect(frame, terms, px, py, pz, u0, u1):
     """Urena et al. 2013 (pbrt-v4 SampleSphericalRectangle): a point on the rectangle, uniform in solid angle;
-    ``frame`` is ``_rect_frame`` of the rectangle from p (computed once for the solid angle and the sample)."""
+    ``frame`` is ``_rect_frame`` of the rectangle from p and ``terms`` its ``_rect_solid_angle`` terms (computed
+    once for the solid angle and the sample)."""
     ax, ay, az, x0, y0, z0, eu, ev = frame
     x1, y1 = x0 + eu, y0 + ev
-    b0, b1, g0, g1, g2, g3 = _rect_solid_angle_terms(x0, y0, z0, x1, y1)
+    b0, b1, g0, g1, g2, g3 = terms
     au = u0 * (g0 + g1 - TWO_PI) + (u0 - 1.0) * (g2 + g3)
     fu = (math.cos(au) * b0 - b1) / math.sin(au)
     cu = math.copysign(1.0 / math.sqrt(fu * fu + b0 * b0), fu)
@@ -407,6 +408,19 @@ def _toward(lights, l, px, py, pz, wx, wy, wz, pdf):
 
 
 @jit
+def _toward_plane(lights, l, px, py, pz, wx, wy, wz, pdf):
+    """As ``_toward`` for a direction known to point into planar light l's solid angle (a spherical sample): the
+    distance to its plane, with no test of its edges (round-off at an edge must not drop the sample)."""
+    g = lights.geom[l]
+    cos_light = -_dot(g[9], g[10], g[11], wx, wy, wz)
+    t = _dot(g[0] - px, g[1] - py, g[2] - pz, g[9], g[10], g[11]) / -cos_light if cos_light != 0.0 else math.inf
+    if not t > 0.0 or t == math.inf:
+        return wx, wy, wz, math.inf, 0.0, 0.0, 0.0, pdf
+    r, gg, b = light_radiance(lights, l, cos_light)
+    return wx, wy, wz, t, r, gg, b, pdf
+
+
+@jit
 def _behind(lights, l, px, py, pz):
     """p cannot receive light from l: behind (or in the plane of) a one-sided planar light."""
     if lights.kind[l] == LIGHT_SPHERE or lights.two_sided[l] == 1:
@@ -440,15 +454,18 @@ def light_sample(lights, l, strategy, px, py, pz, nx, ny, nz, u0, u1):
             omega = _triangle_solid_angle(a, b, c)
             if _spherical(omega):
                 wx, wy, wz = _sample_spherical_triangle(a, b, c, omega, u0, u1)
-                return _toward(lights, l, px, py, pz, wx, wy, wz, 1.0 / omega)
+                return _toward_plane(lights, l, px, py, pz, wx, wy, wz, 1.0 / omega)
         elif kind == LIGHT_RECT:
             if _is_rectangle(g):
                 frame = _rect_frame(px, py, pz, g)
-                omega = _rect_solid_angle(frame)
+                omega, terms = _rect_solid_angle(frame)
                 if _spherical(omega):
-                    qx, qy, qz = _sample_spherical_rect(frame, px, py, pz, u0, u1)
-                    wx, wy, wz = normalize(qx - px, qy - py, qz - pz)
-                    return _toward(lights, l, px, py, pz, wx, wy, wz, 1.0 / omega)
+                    qx, qy, qz = _sample_spherical_rect(frame, terms, px, py, pz, u0, u1)
+                    dx, dy, dz = qx - px, qy - py, qz - pz
+                    dist = math.sqrt(dx * dx + dy * dy + dz * dz)
+                    wx, wy, wz = dx / dist, dy / dist, dz / dist
+                    r, gg, b = light_radiance(lights, l, -_dot(g[9], g[10], g[11], wx, wy, wz))
+                    return wx, wy, wz, dist, r, gg, b, 1.0 / omega
         else:  # a sphere: a direction uniform in the cone of directions that hit it
             spherical, omega, cos_max = _solid_angle_mode(lights, l, px, py, pz)
             if spherical:
