@@ -237,7 +237,7 @@ def _rect_frame(px, py, pz, g):
 @jit
 def _rect_solid_angle_terms(x0, y0, z0, x1, y1):
     """Edge-plane normals' z components b0, b1 and the four internal angles g0..g3 of the spherical rectangle
-    (Urena et al. 2013, eq. 4-5), in the rectangle's own frame, where the edge planes' normals have one zero
+    (Urena et al. 2013), in the rectangle's own frame, where the edge planes' normals have one zero
     component each: n0 ~ (0, z0, -y0), n1 ~ (-z0, 0, x1), n2 ~ (0, -z0, y1), n3 ~ (z0, 0, -x0).  The angle between
     -n_i and n_(i+1) is then atan2(|z0| |corner|, the corners' coordinate product), with |corner| the distance to the
     corner the two edges share: one square root and one atan2 an angle, accurate near 0 and pi, and no normalised
