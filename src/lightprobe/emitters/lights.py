@@ -73,14 +73,10 @@ def _environment_sample(env, compensated, u0, u1):
     return wx, wy, wz, r, g, b, pdf
 
 
-@jit
-def _environment_pdf(env, compensated, wx, wy, wz):
-    return env_pdf(env, compensated, wx, wy, wz)
-
-
 # The two dispatchers are inlined into their callers and each kind's work is a call that takes only that kind's
 # data: a call taking the environment's record (about 25 arrays, passed by value, decision 23) cost a light sample of
-# any kind 30-70 ns; so split, a sample costs what the kind's own sampler called directly does (decisions.md 91).
+# any kind 30-70 ns; so split, a sample costs what the kind's own sampler called directly does.  The environment's
+# density is inlined (every BSDF ray that escapes asks for it; the compile took no longer: decisions.md 91).
 @jit_inline
 def light_sample_of(lights, env, l, strategy, compensated, px, py, pz, nx, ny, nz, u0, u1):
     """A :class:`LightSample` of light l from point p (normal n) with the pair (u0, u1)."""
@@ -105,7 +101,7 @@ def light_pdf_of(lights, env, l, strategy, compensated, px, py, pz, nx, ny, nz, 
     """Density per steradian with which :func:`light_sample_of` produces unit direction w (0 for a delta light)."""
     kind = lights.kind[l]
     if kind == LIGHT_ENVIRONMENT:
-        return _environment_pdf(env, compensated, wx, wy, wz)
+        return env_pdf(env, compensated, wx, wy, wz)
     if kind == LIGHT_DIRECTIONAL:
         return directional_pdf(lights.geom[l], wx, wy, wz)
     if kind == LIGHT_POINT or kind == LIGHT_SPOT:
