@@ -13,7 +13,10 @@ once and cached in ``--cache``; its relMSE floor, mean(var / (ref^2 + 0.01)), is
 ``true_efficiency`` (it is at most a tenth of every error measured). Each configuration renders ``--seeds`` images at
 ``--spp``; relMSE is their mean, seconds their median (the renderer's own timing, kernels compiled first). Mitsuba
 runs every sampler at 1 + 1 and 4 + 4 emitter + BSDF samples (its ``direct`` integrator), on ``many`` also with each
-emitter's ``sampling_weight`` set to its power ("power"); lightprobe every selector with its defaults.
+emitter's ``sampling_weight`` set to its power ("power"); lightprobe every selector with its defaults.  Each row also
+gives ``relmse_emitter_edges``, the share of relMSE from the pixels next to a directly seen emitter (its outline: a
+pixel there is mostly the count of its camera samples that hit the emitter, so this part measures the camera
+samples' stratification, not the lights' sampling; decisions.md 91).
 Renderers run in alternating subprocesses (A B A B) so that drifting machine load hits both alike.  One JSON line
 per configuration, then the best of each renderer per scene and their ratio.
 """
@@ -39,13 +42,40 @@ def _relmse(image, ref) -> float:
     return float(np.mean((image - ref) ** 2 / (ref**2 + 0.01)))
 
 
-def _row(who, scene, config, errors, seconds, floor) -> dict:
+def _emitter_edges(args) -> np.ndarray:
+    """(H, W) bool: the pixels whose centre sees an emitter directly (lightprobe's object-id pass), grown by one
+    pixel, so every pixel an emitter's outline crosses is in: where a pixel's estimate is mostly how many of its
+    camera samples hit the emitter, whatever the lights' sampling."""
+    from lightprobe.analysis.masks import object_id_pass
+    from lightprobe.reference_scenes import build
+
+    scene = build(args.scene, resolution=tuple(args.resolution), lights=_lights(args, args.scene))
+    ids, _ = object_id_pass(scene)
+    emitters = [i for i, o in enumerate(scene.objects) if o.emission is not None]
+    seen = np.isin(ids, emitters)
+    near = seen.copy()
+    near[1:] |= seen[:-1]
+    near[:-1] |= seen[1:]
+    grown = near.copy()
+    grown[:, 1:] |= near[:, :-1]
+    grown[:, :-1] |= near[:, 1:]
+    return grown
+
+
+def _edge_relmse(image, ref, edges) -> float:
+    """The emitter edges' share of relMSE: their pixels' terms summed, over all pixels (total = edges + the rest)."""
+    per_pixel = np.mean((image - ref) ** 2 / (ref**2 + 0.01), axis=2)
+    return float(per_pixel[edges].sum() / per_pixel.size)
+
+
+def _row(who, scene, config, errors, seconds, floor, edge_errors) -> dict:
     e, t = float(np.mean(errors)), float(np.median(seconds))
     return {
         "renderer": who,
         "scene": scene,
         "config": config,
         "relmse": e,
+        "relmse_emitter_edges": float(np.mean(edge_errors)),
         "seconds": round(t, 3),
         "efficiency": 1.0 / (e * t),
         "true_efficiency": 1.0 / (max(e - floor, 1e-30) * t),
@@ -79,6 +109,7 @@ def _mitsuba_worker(args) -> None:
             return
         ref = np.load(ref_file)
         floor = float(np.mean(ref["variance"] / (ref["mean"].astype(np.float64) ** 2 + 0.01)))
+        edge_mask = _emitter_edges(args)
         for sampler in MITSUBA_SAMPLERS:
             for n in (1, 4):
                 for weights in (False, True) if args.scene == "many" else (False,):
@@ -87,14 +118,15 @@ def _mitsuba_worker(args) -> None:
                     d["sensor"]["sampler"] = {"type": sampler, "sample_count": args.spp}
                     scene = mi.load_dict(d)
                     mi.render(scene, spp=args.spp, seed=10_000)  # compile
-                    errors, seconds = [], []
+                    errors, seconds, edges = [], [], []
                     for s in range(args.seeds):
                         start = time.perf_counter()
                         x = np.array(mi.render(scene, spp=args.spp, seed=s + 1), dtype=np.float64)
                         seconds.append(time.perf_counter() - start)
                         errors.append(_relmse(x, ref["mean"]))
+                        edges.append(_edge_relmse(x, ref["mean"], edge_mask))
                     config = f"{sampler} {n}+{n}" + (" power" if weights else "")
-                    print(json.dumps(_row("mitsuba", args.scene, config, errors, seconds, floor)), flush=True)
+                    print(json.dumps(_row("mitsuba", args.scene, config, errors, seconds, floor, edges)), flush=True)
 
 
 def _lightprobe_worker(args) -> None:
@@ -104,16 +136,19 @@ def _lightprobe_worker(args) -> None:
 
     ref = np.load(_reference_file(args, args.scene))
     floor = float(np.mean(ref["variance"] / (ref["mean"].astype(np.float64) ** 2 + 0.01)))
+    edge_mask = _emitter_edges(args)
     lights = _lights(args, args.scene)
     render(build(args.scene, resolution=(32, 24), lights=lights), RenderSettings(spp=4))  # compile
     for selector in args.selectors:
-        errors, seconds = [], []
+        errors, seconds, edges = [], [], []
         for s in range(args.seeds):
             scene = build(args.scene, resolution=tuple(args.resolution), lights=lights)
             r = render(scene, RenderSettings(spp=args.spp, seed=s + 20, light_sampler=selector))
-            errors.append(_relmse(r.image.astype(np.float64), ref["mean"]))
+            image = r.image[..., :3].astype(np.float64)
+            errors.append(_relmse(image, ref["mean"]))
+            edges.append(_edge_relmse(image, ref["mean"], edge_mask))
             seconds.append(r.stats["seconds"])
-        print(json.dumps(_row("lightprobe", args.scene, selector, errors, seconds, floor)), flush=True)
+        print(json.dumps(_row("lightprobe", args.scene, selector, errors, seconds, floor, edges)), flush=True)
 
 
 REFERENCE_PASSES = {"area": 64, "many": 128}
@@ -203,7 +238,8 @@ def main() -> int:
             f"{scene}: lightprobe best {best['lightprobe']['config']} efficiency {best['lightprobe']['efficiency']:.0f}"
             f" (relMSE {best['lightprobe']['relmse']:.3g}, {best['lightprobe']['seconds']} s); Mitsuba best "
             f"{best['mitsuba']['config']} {best['mitsuba']['efficiency']:.0f} (relMSE {best['mitsuba']['relmse']:.3g},"
-            f" {best['mitsuba']['seconds']} s): {ratio:.2f}x",
+            f" {best['mitsuba']['seconds']} s): {ratio:.2f}x; relMSE at the emitters' edges "
+            f"{best['lightprobe']['relmse_emitter_edges']:.3g} and {best['mitsuba']['relmse_emitter_edges']:.3g}",
             flush=True,
         )
     return 0
