@@ -38,10 +38,6 @@ ROOT = Path(__file__).resolve().parent.parent
 MITSUBA_SAMPLERS = ("independent", "stratified", "multijitter", "ldsampler")
 
 
-def _relmse(image, ref) -> float:
-    return float(np.mean((image - ref) ** 2 / (ref**2 + 0.01)))
-
-
 def _emitter_edges(args) -> np.ndarray:
     """(H, W) bool: the pixels whose centre sees an emitter directly (lightprobe's object-id pass), grown by one
     pixel, so every pixel an emitter's outline crosses is in: where a pixel's estimate is mostly how many of its
@@ -62,10 +58,11 @@ def _emitter_edges(args) -> np.ndarray:
     return grown
 
 
-def _edge_relmse(image, ref, edges) -> float:
-    """The emitter edges' share of relMSE: their pixels' terms summed, over all pixels (total = edges + the rest)."""
+def _relmse(image, ref, edges) -> tuple[float, float]:
+    """(relMSE, the emitter edges' share of it: their pixels' terms summed over all pixels, so total = edges + the
+    rest)."""
     per_pixel = np.mean((image - ref) ** 2 / (ref**2 + 0.01), axis=2)
-    return float(per_pixel[edges].sum() / per_pixel.size)
+    return float(per_pixel.mean()), float(per_pixel[edges].sum() / per_pixel.size)
 
 
 def _row(who, scene, config, errors, seconds, floor, edge_errors) -> dict:
@@ -123,8 +120,9 @@ def _mitsuba_worker(args) -> None:
                         start = time.perf_counter()
                         x = np.array(mi.render(scene, spp=args.spp, seed=s + 1), dtype=np.float64)
                         seconds.append(time.perf_counter() - start)
-                        errors.append(_relmse(x, ref["mean"]))
-                        edges.append(_edge_relmse(x, ref["mean"], edge_mask))
+                        error, edge_error = _relmse(x, ref["mean"], edge_mask)
+                        errors.append(error)
+                        edges.append(edge_error)
                     config = f"{sampler} {n}+{n}" + (" power" if weights else "")
                     print(json.dumps(_row("mitsuba", args.scene, config, errors, seconds, floor, edges)), flush=True)
 
@@ -145,8 +143,9 @@ def _lightprobe_worker(args) -> None:
             scene = build(args.scene, resolution=tuple(args.resolution), lights=lights)
             r = render(scene, RenderSettings(spp=args.spp, seed=s + 20, light_sampler=selector))
             image = r.image[..., :3].astype(np.float64)
-            errors.append(_relmse(image, ref["mean"]))
-            edges.append(_edge_relmse(image, ref["mean"], edge_mask))
+            error, edge_error = _relmse(image, ref["mean"], edge_mask)
+            errors.append(error)
+            edges.append(edge_error)
             seconds.append(r.stats["seconds"])
         print(json.dumps(_row("lightprobe", args.scene, selector, errors, seconds, floor, edges)), flush=True)
 

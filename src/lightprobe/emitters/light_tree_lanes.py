@@ -23,7 +23,7 @@ from numba import types
 from numba.extending import intrinsic
 
 from ..geometry.wide_tree import WIDTH
-from ..simd import F32, F64, I32, I64, LANES, VF32, VF64, Lanes, Lanes32, array_structs, c_array, dot3
+from ..simd import F32, F64, I32, LANES, VF32, VF64, Lanes, Lanes32, array_structs, c_array, dot3, row_vector
 
 __all__ = ["BOUNDS_WIDTH", "WIDTH", "child_importances"]
 
@@ -90,11 +90,10 @@ def child_importances(typingctx, bounds, node, px, py, pz, nx, ny, nz):
     def codegen(context, builder, signature, args):
         (bounds_a,) = array_structs(context, builder, signature, args, 1)
         v, b = Lanes(builder), builder
-        row = b.mul(context.cast(b, args[1], signature.args[1], types.int64), I64(BOUNDS_WIDTH * LANES))
+        node_i = context.cast(b, args[1], signature.args[1], types.int64)
 
         def loaded(f):
-            at = b.gep(bounds_a.data, [b.add(row, I64(f * LANES))])
-            return b.load(b.bitcast(at, VF64.as_pointer()), align=8)
+            return row_vector(v, bounds_a, node_i, BOUNDS_WIDTH * LANES, f * LANES)
 
         def field(f):
             return b.fptrunc(loaded(f), VF32)

@@ -16,7 +16,7 @@ from llvmlite import ir
 from numba import types
 from numba.extending import intrinsic
 
-from ..simd import I64, LANES, VF64, Lanes, array_structs, c_array
+from ..simd import I64, LANES, VF64, Lanes, array_structs, c_array, row_vector
 
 __all__ = ["BOXES_WIDTH", "boxes_entered"]
 
@@ -38,11 +38,10 @@ def boxes_entered(typingctx, boxes, node, ox, oy, oz, ix, iy, iz, tmax):
     def codegen(context, builder, signature, args):
         (boxes_a,) = array_structs(context, builder, signature, args, 1)
         v, b = Lanes(builder), builder
-        row = b.mul(context.cast(b, args[1], signature.args[1], types.int64), I64(BOXES_WIDTH))
+        node_i = context.cast(b, args[1], signature.args[1], types.int64)
 
         def corner(column):
-            at = b.gep(boxes_a.data, [b.add(row, I64(column * LANES))])
-            return b.load(b.bitcast(at, VF64.as_pointer()), align=8)
+            return row_vector(v, boxes_a, node_i, BOXES_WIDTH, column * LANES)
 
         o = [v.splat(context.cast(b, args[2 + a], signature.args[2 + a], f64), VF64) for a in range(3)]
         inv = [v.splat(context.cast(b, args[5 + a], signature.args[5 + a], f64), VF64) for a in range(3)]

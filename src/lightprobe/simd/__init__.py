@@ -43,6 +43,7 @@ __all__ = [
     "ir_loop",
     "llvm_function",
     "pointers",
+    "row_vector",
     "splat_row",
 ]
 
@@ -351,6 +352,13 @@ def splat_row(v: Lanes, array, i, width, fields):
     """Elements ``fields`` of row i of a C-contiguous float64 (N, width) array, each splatted to the lanes."""
     base = v.b.mul(i, I64(width))
     return [v.splat(v.b.load(v.b.gep(array.data, [v.b.add(base, I64(f))])), VF64) for f in fields]
+
+
+def row_vector(v: Lanes, array, i, width, column):
+    """Elements ``column`` .. ``column`` + 7 of row i of a C-contiguous float64 (N, width) array, as one vector: a
+    field of eight children stored side by side (the wide trees' rows)."""
+    at = v.b.gep(array.data, [v.b.add(v.b.mul(i, I64(width)), I64(column))])
+    return v.b.load(v.b.bitcast(at, VF64.as_pointer()), align=8)
 
 
 def dot3(v: Lanes, x, y):
