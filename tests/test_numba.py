@@ -1,0 +1,86 @@
+"""The Numba configuration every kernel shares (``lightprobe._numba``): the inliner's one-pass copy."""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+from numba.core import inline_closurecall
+from numba.core.compiler import run_frontend
+
+from lightprobe import _numba
+
+
+def _branchy(x, n):  # several blocks (a loop, branches), several variables
+    total = 0.0
+    for i in range(n):
+        if x > i:
+            total += x - i
+        else:
+            total -= 0.5 * i
+    return total if total > 0 else -total
+
+
+def test_the_inliner_copies_a_function_in_one_pass_on_this_numba():
+    # Installed on the Numba the project pins: without it the render core compiles about a fifth slower
+    # (decisions.md 92).  A Numba whose inliner copies some other way fails here, so that the loss is seen.
+    assert _numba.INLINE_COPY_IN_ONE_PASS, "lightprobe._numba could not install the inliner's one-pass copy"
+    assert inline_closurecall.copy is not __import__("copy")
+
+
+def test_a_functions_blocks_copied_after_its_copy_share_one_new_scope():
+    function_ir = run_frontend(_branchy)
+    assert len(function_ir.blocks) >= 4
+    scope = next(iter(function_ir.blocks.values())).scope
+    assert all(block.scope is scope for block in function_ir.blocks.values())
+
+    function_ir.copy()  # what the inliner's copy_ir does first, then one deepcopy per block
+    copies = {label: inline_closurecall.copy.deepcopy(block) for label, block in function_ir.blocks.items()}
+    new_scopes = {id(block.scope) for block in copies.values()}
+    assert len(new_scopes) == 1 and id(scope) not in new_scopes  # one copied scope, not the original's
+    for label, block in copies.items():  # a deep copy: same statements, none of the original objects
+        original = function_ir.blocks[label]
+        assert [str(s) for s in block.body] == [str(s) for s in original.body]
+        assert all(a is not b for a, b in zip(block.body, original.body, strict=True))
+
+    # a block copied again outside such a copy gets its own scope, as copy.deepcopy gives it
+    again = inline_closurecall.copy.deepcopy(next(iter(function_ir.blocks.values())))
+    assert again.scope is not scope and id(again.scope) not in new_scopes
+    assert inline_closurecall.copy.copy is __import__("copy").copy  # the rest of the module is the real one
+
+
+@njit(inline="always")
+def _inner(x, n):
+    return _branchy_jit(x, n) + _branchy_jit(-x, n)
+
+
+_branchy_jit = njit(inline="always")(_branchy)
+
+
+@njit(inline="always")
+def _middle(x, n):
+    a = _inner(x, n)
+    if a > 3.0:
+        return a + _inner(x + 1.0, n)
+    return a - _inner(x - 1.0, n)
+
+
+@njit
+def _outer(xs, n):
+    out = np.empty_like(xs)
+    for i in range(xs.size):
+        out[i] = _middle(xs[i], n) + _branchy_jit(xs[i], n)
+    return out
+
+
+def test_nested_inlined_helpers_compute_what_python_computes():
+    # helpers inlined into helpers at several sites: each site renames and rewires its own copy of the callee
+    def inner(x, n):
+        return _branchy(x, n) + _branchy(-x, n)
+
+    def middle(x, n):
+        a = inner(x, n)
+        return a + inner(x + 1.0, n) if a > 3.0 else a - inner(x - 1.0, n)
+
+    xs = np.linspace(-7.0, 9.0, 41)
+    expected = np.array([middle(x, 6) + _branchy(x, 6) for x in xs])
+    np.testing.assert_array_equal(_outer(xs, 6), expected)
