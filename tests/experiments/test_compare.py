@@ -7,6 +7,7 @@ import pytest
 
 from lightprobe.errors import LightprobeError
 from lightprobe.experiments.compare import compare, parse_strategy
+from lightprobe.integrators.settings import AUTO_BSDF_SAMPLES
 from lightprobe.integrators.wavefront import RenderSettings, render
 
 from ..integrators.test_wavefront import small_scene
@@ -52,8 +53,8 @@ def test_equal_samples(scene_and_reference):
         assert set(r.metrics) >= {"mse", "relmse", "psnr", "flip", "bias", "efficiency", "relative_efficiency"}
     by = {r.label: r for r in runs}
     # each run states the settings render used: the automatic allocation and heuristic made concrete
-    assert (by["mis-power"].settings.n_bsdf, by["mis-power"].settings.heuristic) == (4, "power")
-    assert by["brdf"].settings.n_bsdf == 4 and by["env"].settings.heuristic == "balance"
+    assert (by["mis-power"].settings.n_bsdf, by["mis-power"].settings.heuristic) == (AUTO_BSDF_SAMPLES, "power")
+    assert by["brdf"].settings.n_bsdf == AUTO_BSDF_SAMPLES and by["env"].settings.heuristic == "balance"
     assert max(r.metrics["relative_efficiency"] for r in runs) == 1.0
     # MIS with the renderer's defaults beats either technique alone at equal rays (here 0.00088 against brdf's
     # 0.0081 and env's 0.0011: this scene's 12-degree sun suits 5 stratified environment samples, which tie

@@ -18,6 +18,7 @@ from lightprobe.geometry.camera import Camera
 from lightprobe.geometry.scene import Scene
 from lightprobe.geometry.shapes import Rectangle, Sphere
 from lightprobe.integrators import wavefront
+from lightprobe.integrators.settings import AUTO_BSDF_SAMPLES, AUTO_ENV_SAMPLES
 from lightprobe.integrators.wavefront import RenderSettings, render, result_from
 from lightprobe.peer import find_peers, peer_scene
 
@@ -109,7 +110,7 @@ def test_automatic_compensation_is_per_material():
 
 
 def test_automatic_sample_allocation_and_heuristic():
-    """n_bsdf, n_env and heuristic None (decisions.md 33, 34): 4 BSDF + 4 environment samples and the balance
+    """n_bsdf, n_env and heuristic None (decisions.md 33, 34, 93): 8 BSDF + 8 environment samples and the balance
     heuristic where an environment map is the only light, 1 + 1 and power with area lights; single techniques take
     as many slots; given values are kept.  The stats report what was used, and an automatic render is the explicit
     one, bit for bit."""
@@ -121,19 +122,21 @@ def test_automatic_sample_allocation_and_heuristic():
         stats = render(scene, RenderSettings(spp=1, **options)).stats
         return stats["n_bsdf"], stats["n_env"], stats["heuristic"]
 
-    assert used(env_scene) == (4, 4, "balance")
+    auto_counts = (AUTO_BSDF_SAMPLES, AUTO_ENV_SAMPLES)
+    assert auto_counts == (8, 8)
+    assert used(env_scene) == (*auto_counts, "balance")
     assert used(lit) == (1, 1, "power")
     # a single technique takes as many directions as MIS: equal samples are equal rays
-    assert used(env_scene, strategy="brdf") == (4, 4, "balance")
+    assert used(env_scene, strategy="brdf") == (*auto_counts, "balance")
     assert used(env_scene, n_bsdf=1, n_env=2, heuristic="power") == (1, 2, "power")
     assert used(lit, n_bsdf=2, n_env=3, heuristic="balance") == (2, 3, "balance")
     auto = render(env_scene, RenderSettings(spp=4, seed=5)).image
-    explicit = render(env_scene, RenderSettings(spp=4, seed=5, n_bsdf=4, n_env=4, heuristic="balance")).image
+    explicit = render(env_scene, RenderSettings(spp=4, seed=5, n_bsdf=8, n_env=8, heuristic="balance")).image
     np.testing.assert_array_equal(auto, explicit)
     assert not np.array_equal(auto, render(env_scene, RenderSettings(spp=4, seed=5, n_env=1)).image)
-    # the 64-slot limit applies to the counts actually used: 1 + 63 is fine with area lights, 4 + 63 is not
+    # the 64-slot limit applies to the counts actually used: 1 + 63 is fine with area lights, 8 + 63 is not
     assert used(lit, n_env=63) == (1, 63, "power")
-    with pytest.raises(ParameterError, match="got 4 and 63"):
+    with pytest.raises(ParameterError, match="got 8 and 63"):
         render(env_scene, RenderSettings(spp=1, n_env=63))
 
 

@@ -63,7 +63,7 @@ def test_a_technique_alone_matches_too(exercise_scene):
     scene, reference = exercise_scene
     strategy, _ = parse_lab_token(f"{SOLUTIONS}:EnvironmentMapSampler")
     result = render_lab(scene, strategy, RenderSettings(spp=32, seed=3))
-    assert result.stats["directions_per_sample"] == 8  # the 4 + 4 of an environment-lit scene, all its own
+    assert result.stats["directions_per_sample"] == 16  # the 8 + 8 of an environment-lit scene, all its own
     verdict = _z(result, reference)
     assert abs(verdict["pooled_z"]) < 4.0, verdict
 

@@ -37,9 +37,9 @@ __all__ = [
 HEURISTICS = {"balance": 1.0, "power": 2.0}
 DIFFUSE = "diffuse"  # mis_compensation's automatic choice: the compensated PDF on Lambertian materials only
 
-# n_bsdf=None and n_env=None in scenes lit by an environment map alone (decisions.md 33, 34); else 1 each
-AUTO_BSDF_SAMPLES = 4
-AUTO_ENV_SAMPLES = 4
+# n_bsdf=None and n_env=None in scenes lit by an environment map alone (decisions.md 33, 34, 93); else 1 each
+AUTO_BSDF_SAMPLES = 8
+AUTO_ENV_SAMPLES = 8
 LAST_SAMPLE = 2**56  # a sample index times 64 shading slots stays below 2^63 (sampling.rng.group_slot)
 
 _KINDS = {"integer": numbers.Integral, "number": numbers.Real, "string": str, "true or false": bool}
@@ -254,12 +254,14 @@ class RenderSettings:
 
     def resolved(self, environment_only: bool) -> RenderSettings:
         """These settings with the automatic choices made, for a scene lit by an environment map alone or not.
-        Measured on the peer and demo scenes and on eight of the seeds' sphere scenes (decisions.md 33, 34): where
-        the environment is the only light, 4 BSDF + 4 environment samples per camera sample with the balance
-        heuristic give the lowest error per second, or within 1.7x of it, everywhere (a camera sample's samples of
-        one technique are one stratified set; they cost no extra camera ray); with 4000 area lights a second BSDF
-        sample loses, so 1 + 1 and power.  The single-technique strategies take the same counts, so that every
-        strategy traces n_bsdf + n_env directions per camera sample and equal samples mean equal rays."""
+        Measured on the peer scene and on eight of the seeds' sphere scenes (decisions.md 33, 34, 93): where the
+        environment is the only light, 8 BSDF + 8 environment samples per camera sample with the balance heuristic
+        give the lowest error per second of the allocations measured on the peer scene at 16, 64 and 256 spp, and
+        beat 4 + 4 in seven of the eight sphere scenes (a camera sample's samples of one technique are one
+        stratified Sobol' set, whose error falls faster than 1/n; they cost no extra camera ray); with 4000 area
+        lights a second BSDF sample loses, so 1 + 1 and power.  The single-technique strategies take the same
+        counts, so that every strategy traces n_bsdf + n_env directions per camera sample and equal samples mean
+        equal rays."""
         n_bsdf = self.n_bsdf if self.n_bsdf is not None else (AUTO_BSDF_SAMPLES if environment_only else 1)
         n_env = self.n_env if self.n_env is not None else (AUTO_ENV_SAMPLES if environment_only else 1)
         heuristic = self.heuristic if self.heuristic is not None else ("balance" if environment_only else "power")
