@@ -1,6 +1,6 @@
 """The laboratory's estimator against the render core: what a user technique costs.
 
-Renders the Krivanek exercise's scene (``lightprobe exercise init``; 96x72, 4 BSDF + 4 environment directions per
+Renders the Krivanek exercise's scene (``lightprobe exercise init``; 96x72, 8 BSDF + 8 environment directions per
 camera sample) at ``--spp`` samples per pixel with
 
 - ``core``: the render core's MIS (``render``);

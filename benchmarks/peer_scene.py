@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
-"""Benchmark: the peer scene of ../shared/peers (512x512, the renderer's defaults: MIS with 4 BSDF + 4
-environment samples per camera sample, decisions 33 and 34).
+"""Benchmark: the peer scene of ../shared/peers (512x512, the renderer's defaults: MIS with 8 BSDF + 8
+environment samples per camera sample, decisions 33, 34 and 93).
 
     python benchmarks/peer_scene.py                 # 16, 64 and 256 spp, one JSON line each (fresh process each)
     python benchmarks/peer_scene.py --spp 64        # one configuration, one JSON line

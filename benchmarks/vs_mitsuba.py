@@ -20,8 +20,8 @@ emitter + 4 BSDF samples (``render.py --spp 256 --passes 32 --sampler multijitte
 --bsdf-samples 4 --seed 100000``; 20 minutes on this 2-core machine), whose own noise in the relMSE is 6.0e-7: a
 hundredth of lightprobe's error at 64 spp (decisions.md 78).
 
-Mitsuba runs each sampler at 1 emitter + 1 BSDF sample and at 4 + 4 (its ``direct`` integrator), lightprobe its
-defaults.  Renderers alternate (A B A B ...) so that drifting machine load hits both alike.  One JSON line per run:
+Mitsuba runs each sampler at 1 emitter + 1 BSDF sample, at 4 + 4 and at 8 + 8 (its ``direct`` integrator; 8 + 8
+is lightprobe's own allocation in this scene, decisions.md 93), lightprobe its defaults.  Renderers alternate (A B A B ...) so that drifting machine load hits both alike.  One JSON line per run:
 renderer, configuration, spp, seconds, samples_per_s, relmse, efficiency = 1 / (relMSE x seconds) and its ratio to
 Mitsuba's ``independent 1+1`` at the same spp; then a table of the best run per configuration, and the verdicts
 against Mitsuba's best configuration.  Each run also gets ``true_efficiency`` = 1 / ((relMSE - floor) x seconds),
@@ -40,7 +40,7 @@ from pathlib import Path
 # Mitsuba's fifth sampler, ``orthogonal``, gives no image of the peer scene (3.9.1: the kit's render.py ends
 # without output, at every spp); ``--samplers orthogonal`` still asks for it
 MITSUBA_SAMPLERS = ("independent", "stratified", "multijitter", "ldsampler")
-MITSUBA_SAMPLES = (1, 4)  # emitter + BSDF samples per camera sample: 1 + 1 and 4 + 4
+MITSUBA_SAMPLES = (1, 4, 8)  # emitter + BSDF samples per camera sample: 1 + 1, 4 + 4 and 8 + 8
 BASE = "independent 1+1"  # the configuration the efficiency ratios are taken against
 
 
