@@ -8,8 +8,8 @@
     python benchmarks/vs_mitsuba.py --adaptive               # lightprobe with --adaptive too ("sobol, adaptive")
 
 The area-light scene (a rectangle, a sphere and a ring of triangle lights under a dim sky) and the many-light scene
-(600 small rectangles over three decades of power) run through ``benchmarks/lights_vs_mitsuba.py`` with this
-command's ``--reps``; its own docstring says how.
+(2,000 small rectangles over three decades of power, by default) run through ``benchmarks/lights_vs_mitsuba.py``
+with this command's ``--reps``; its own docstring says how.
 
 Mitsuba runs through the peer kit's own scripts (``../shared/peers/mitsuba/``) in a Python that can import it:
 this one (``pip install -e '.[peers]'``), or the one given with ``--mitsuba-python``.  Without Mitsuba the
@@ -18,10 +18,11 @@ reference and the scene assets are made once and cached outside the repository (
 ``~/.cache/lightprobe/peer``), with the peer kit's command: 8192 spp of Mitsuba's ``multijitter`` sampler with 4
 emitter + 4 BSDF samples (``render.py --spp 256 --passes 32 --sampler multijitter --emitter-samples 4
 --bsdf-samples 4 --seed 100000``; 20 minutes on this 2-core machine), whose own noise in the relMSE is 6.0e-7: a
-hundredth of lightprobe's error at 64 spp (decisions.md 78).
+fortieth of lightprobe's error at 64 spp, a seventh of it at 256 (decisions.md 78, 93).
 
 Mitsuba runs each sampler at 1 emitter + 1 BSDF sample, at 4 + 4 and at 8 + 8 (its ``direct`` integrator; 8 + 8
-is lightprobe's own allocation in this scene, decisions.md 93), lightprobe its defaults.  Renderers alternate (A B A B ...) so that drifting machine load hits both alike.  One JSON line per run:
+is lightprobe's own allocation in this scene, decisions.md 93), lightprobe its defaults.  Renderers alternate
+(A B A B ...) so that drifting machine load hits both alike.  One JSON line per run:
 renderer, configuration, spp, seconds, samples_per_s, relmse, efficiency = 1 / (relMSE x seconds) and its ratio to
 Mitsuba's ``independent 1+1`` at the same spp; then a table of the best run per configuration, and the verdicts
 against Mitsuba's best configuration.  Each run also gets ``true_efficiency`` = 1 / ((relMSE - floor) x seconds),
