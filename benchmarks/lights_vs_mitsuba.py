@@ -59,10 +59,12 @@ def _emitter_edges(args) -> np.ndarray:
 
 
 def _relmse(image, ref, edges) -> tuple[float, float]:
-    """(relMSE, the emitter edges' share of it: their pixels' terms summed over all pixels, so total = edges + the
-    rest)."""
-    per_pixel = np.mean((image - ref) ** 2 / (ref**2 + 0.01), axis=2)
-    return float(per_pixel.mean()), float(per_pixel[edges].sum() / per_pixel.size)
+    """(relMSE, the emitter edges' share of it: their pixels' relMSE times their fraction of the image, so total =
+    edges + the rest; as ``peer_scene.py`` splits its error by object)."""
+    from lightprobe.analysis.metrics import relmse
+
+    share = relmse(image, ref, edges) * float(edges.mean()) if edges.any() else 0.0
+    return relmse(image, ref), share
 
 
 def _row(who, scene, config, errors, seconds, floor, edge_errors) -> dict:
