@@ -2,8 +2,9 @@
 """Benchmark: area lights and many lights, lightprobe's light selectors against Mitsuba 3's best configuration.
 
     pip install -e '.[peers]'                          # Mitsuba 3.9.1 (Debian: apt-get install libllvm19)
-    python benchmarks/lights_vs_mitsuba.py             # scenes area and many, 320x240, 64 spp, 4 seeds, 2 reps
+    python benchmarks/lights_vs_mitsuba.py             # scenes area and many, 320x240, 64 spp, 8 seeds, 2 reps
     python benchmarks/lights_vs_mitsuba.py --scenes area --selectors bvh --reps 1
+    python benchmarks/lights_vs_mitsuba.py --selectors bvh --adaptive   # each selector with --adaptive too
 
 The scenes are :mod:`lightprobe.reference_scenes` ``area`` (a rectangle, a sphere and a 16-triangle ring light over a
 16 m ground under a dim sky) and ``many`` (``--many-lights`` small rectangle lights, 2,000 by default, over three
@@ -11,9 +12,12 @@ decades of power, no sky), at ``--resolution``. The reference of each is Mitsuba
 + 1, passes of 64 spp: 64 for ``area``, 128 for ``many``, whose error is larger; ``--ref-passes`` sets both), made
 once and cached in ``--cache``; its relMSE floor, mean(var / (ref^2 + 0.01)), is printed and subtracted for
 ``true_efficiency`` (it is at most a tenth of every error measured). Each configuration renders ``--seeds`` images at
-``--spp``; relMSE is their mean, seconds their median (the renderer's own timing, kernels compiled first). Mitsuba
+``--spp`` (8 by default: an image's relMSE is heavy-tailed, a few pixels on a bright emitter's outline that one
+camera sample in hundreds hits, so one seed in four can read 3-4x the median; decisions.md 94); relMSE is their mean,
+seconds their median (the renderer's own timing, kernels compiled first). Mitsuba
 runs every sampler at 1 + 1 and 4 + 4 emitter + BSDF samples (its ``direct`` integrator), on ``many`` also with each
-emitter's ``sampling_weight`` set to its power ("power"); lightprobe every selector with its defaults.  Each row also
+emitter's ``sampling_weight`` set to its power ("power"); lightprobe every selector with its defaults (and, with
+``--adaptive``, with per-pixel adaptive sampling: "bvh adaptive").  Each row also
 gives ``relmse_emitter_edges``, the share of relMSE from the pixels next to a directly seen emitter (its outline: a
 pixel there is mostly the count of its camera samples that hit the emitter, so this part measures the camera
 samples' stratification, not the lights' sampling; decisions.md 91).
@@ -139,17 +143,21 @@ def _lightprobe_worker(args) -> None:
     edge_mask = _emitter_edges(args)
     lights = _lights(args, args.scene)
     render(build(args.scene, resolution=(32, 24), lights=lights), RenderSettings(spp=4))  # compile
-    for selector in args.selectors:
+    configs = [(selector, False) for selector in args.selectors]
+    configs += [(selector, True) for selector in args.selectors if args.adaptive]
+    for selector, adaptive in configs:
         errors, seconds, edges = [], [], []
         for s in range(args.seeds):
             scene = build(args.scene, resolution=tuple(args.resolution), lights=lights)
-            r = render(scene, RenderSettings(spp=args.spp, seed=s + 20, light_sampler=selector))
+            settings = RenderSettings(spp=args.spp, seed=s + 20, light_sampler=selector, adaptive=adaptive)
+            r = render(scene, settings)
             image = r.image[..., :3].astype(np.float64)
             error, edge_error = _relmse(image, ref["mean"], edge_mask)
             errors.append(error)
             edges.append(edge_error)
             seconds.append(r.stats["seconds"])
-        print(json.dumps(_row("lightprobe", args.scene, selector, errors, seconds, floor, edges)), flush=True)
+        config = selector + (" adaptive" if adaptive else "")
+        print(json.dumps(_row("lightprobe", args.scene, config, errors, seconds, floor, edges)), flush=True)
 
 
 REFERENCE_PASSES = {"area": 64, "many": 128}
@@ -190,6 +198,7 @@ def _run(args, worker: str, scene: str, *extra: str) -> list[dict]:
         *args.selectors,
         "--many-lights",
         str(args.many_lights),
+        *(["--adaptive"] if args.adaptive else []),
         *extra,
     ]
     out = subprocess.run(cmd, capture_output=True, text=True, env=os.environ.copy())
@@ -206,7 +215,10 @@ def main() -> int:
     parser.add_argument("--scenes", nargs="*", default=["area", "many"], choices=["area", "many"])
     parser.add_argument("--selectors", nargs="*", default=["power", "bvh"])
     parser.add_argument("--spp", type=int, default=64)
-    parser.add_argument("--seeds", type=int, default=4, help="images per configuration (relMSE: their mean)")
+    parser.add_argument(
+        "--adaptive", action="store_true", help="also each lightprobe selector with per-pixel adaptive sampling"
+    )
+    parser.add_argument("--seeds", type=int, default=8, help="images per configuration (relMSE: their mean) [8]")
     parser.add_argument("--reps", type=int, default=2, help="repetitions of the A B sequence")
     parser.add_argument("--resolution", type=int, nargs=2, default=[320, 240])
     parser.add_argument("--many-lights", type=int, default=2000, help="the many-light scene's lights [2000]")

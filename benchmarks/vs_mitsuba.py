@@ -13,12 +13,14 @@ with this command's ``--reps``; its own docstring says how.
 
 Mitsuba runs through the peer kit's own scripts (``../shared/peers/mitsuba/``) in a Python that can import it:
 this one (``pip install -e '.[peers]'``), or the one given with ``--mitsuba-python``.  Without Mitsuba the
-benchmark says so and measures lightprobe alone (against a reference it finds, or none).  The 8192-spp Mitsuba
-reference and the scene assets are made once and cached outside the repository (``--cache``, default
-``~/.cache/lightprobe/peer``), with the peer kit's command: 8192 spp of Mitsuba's ``multijitter`` sampler with 4
-emitter + 4 BSDF samples (``render.py --spp 256 --passes 32 --sampler multijitter --emitter-samples 4
---bsdf-samples 4 --seed 100000``; 20 minutes on this 2-core machine), whose own noise in the relMSE is 6.0e-7: a
-fortieth of lightprobe's error at 64 spp, a seventh of it at 256 (decisions.md 78, 93).
+benchmark says so and measures lightprobe alone (against a reference it finds, or none).  The Mitsuba reference
+and the scene assets are made once and cached outside the repository (``--cache``, default
+``~/.cache/lightprobe/peer``), with the peer kit's command: three independent renders of 8192 spp of Mitsuba's
+``multijitter`` sampler with 4 emitter + 4 BSDF samples (``render.py --spp 256 --passes 32 --sampler multijitter
+--emitter-samples 4 --bsdf-samples 4 --seed 100000 + 32 k``; about 12 minutes each on this 2-core machine, each
+kept as it finishes), averaged into ``ref24576mj.exr``, whose own noise in the relMSE is 2.0e-7: a hundredth of
+lightprobe's error at 64 spp, a twentieth of it at 256 (decision 94; one 8192-spp render's, 6.0e-7, was a seventh at
+256: decisions.md 78, 93).
 
 Mitsuba runs each sampler at 1 emitter + 1 BSDF sample, at 4 + 4 and at 8 + 8 (its ``direct`` integrator; 8 + 8
 is lightprobe's own allocation in this scene, decisions.md 93), lightprobe its defaults.  Renderers alternate
@@ -37,6 +39,8 @@ import json
 import subprocess
 import sys
 from pathlib import Path
+
+import numpy as np
 
 # Mitsuba's fifth sampler, ``orthogonal``, gives no image of the peer scene (3.9.1: the kit's render.py ends
 # without output, at every spp); ``--samplers orthogonal`` still asks for it
@@ -79,20 +83,57 @@ def _assets(py: str | None, kit: Path, cache: Path) -> Path:
     return assets
 
 
-def _reference(py: str | None, kit: Path, cache: Path) -> Path | None:
-    ref = cache / "ref8192mj.exr"
+REFERENCE_CHUNKS = 3  # the peer reference: 3 independent Mitsuba renders of 8192 spp, averaged (24,576 spp)
+CHUNK_PASSES, CHUNK_PASS_SPP = 32, 256  # one chunk: 32 passes of 256 spp (Mitsuba's llvm variant keeps <= 256 a pass)
+
+
+def _chunk_file(cache: Path, k: int) -> Path:
+    """Chunk k's image (its variance beside it, ``_var``); chunk 0 is the 8192-spp reference of decisions 78-93."""
+    return cache / ("ref8192mj.exr" if k == 0 else f"ref8192mj_{k}.exr")
+
+
+def _variance_file(image: Path) -> Path:
+    return image.with_name(image.stem + "_var.exr")
+
+
+def _reference(py: str | None, kit: Path, cache: Path, chunks: int = REFERENCE_CHUNKS) -> Path | None:
+    """The peer reference: Mitsuba ``multijitter``, 4 emitter + 4 BSDF samples, ``chunks`` x 8192 spp (relMSE floor
+    2.0e-7 at 3 chunks, a twentieth of lightprobe's error at 256 spp; one chunk's 6.0e-7 was a seventh: decision
+    94).  Each chunk is a render of its own with its own seeds, kept in ``cache`` as it finishes, so an interrupted
+    build resumes; the reference is their mean, its variance the mean of theirs / chunks."""
+    ref = cache / f"ref{8192 * chunks}mj.exr"
     if ref.exists():
         return ref
     if py is None:
         return None
     assets = _assets(py, kit, cache)
-    print(f"making the 8192-spp Mitsuba reference in {ref} (about 20 minutes on 2 cores) ...", file=sys.stderr)
-    cmd = [py, str(kit / "mitsuba" / "render.py"), "--assets", str(assets), "--spp", "256", "--passes", "32"]
-    cmd += ["--sampler", "multijitter", "--emitter-samples", "4", "--bsdf-samples", "4"]
-    cmd += ["--reps", "1", "--no-warmup", "--seed", "100000", "--out", str(ref)]
-    cmd += ["--variance-out", str(cache / "ref8192mj_var.exr")]
-    subprocess.run(cmd, check=True, capture_output=True)
+    for k in range(chunks):
+        out = _chunk_file(cache, k)
+        if out.exists() and _variance_file(out).exists():
+            continue
+        print(
+            f"making chunk {k + 1} of {chunks} of the {8192 * chunks}-spp Mitsuba reference in {out} (about 12 minutes"
+            " on 2 cores each; finished chunks are kept) ...",
+            file=sys.stderr,
+        )
+        cmd = [py, str(kit / "mitsuba" / "render.py"), "--assets", str(assets), "--spp", str(CHUNK_PASS_SPP)]
+        cmd += ["--passes", str(CHUNK_PASSES), "--sampler", "multijitter", "--emitter-samples", "4"]
+        cmd += ["--bsdf-samples", "4", "--reps", "1", "--no-warmup", "--seed", str(100_000 + CHUNK_PASSES * k)]
+        cmd += ["--out", str(out), "--variance-out", str(_variance_file(out))]
+        subprocess.run(cmd, check=True, capture_output=True)
+    _average_chunks([_chunk_file(cache, k) for k in range(chunks)], ref)
     return ref
+
+
+def _average_chunks(chunks: list[Path], out: Path) -> None:
+    """``out``: the mean of independent renders ``chunks`` (equal spp each), with ``out``'s ``_var`` file the
+    variance of that mean (the mean of their variances / their number)."""
+    from lightprobe.io.images import read_image, write_image  # importable: _kit() put src on the path
+
+    means = [read_image(str(c))[:, :, :3].astype(np.float64) for c in chunks]
+    variances = [read_image(str(_variance_file(c)))[:, :, :3].astype(np.float64) for c in chunks]
+    write_image(str(_variance_file(out)), (np.mean(variances, axis=0) / len(chunks)).astype(np.float32))
+    write_image(str(out), np.mean(means, axis=0).astype(np.float32))  # last: its presence means "complete"
 
 
 def main() -> int:
