@@ -40,6 +40,20 @@ def test_a_pixel_is_sampled_by_its_neighbours_noise_not_its_own():
     assert counts.mean() <= 64
 
 
+def test_a_thin_noisy_line_gives_its_neighbours_its_own_noise():
+    """A one-pixel-wide noisy column (a small emitter's outline) in a quiet image: the pixels beside it get the count
+    that the line's noise asks for, not a third of it -- the noisiest neighbour decides, not the ring's mean (which
+    left an outline pixel with 3 noisy neighbours of 8 below one with all 8 noisy: decision 95)."""
+    variance = np.full((9, 9), 0.01)
+    variance[:, 4] = 100.0
+    counts = sample_counts(*pilot_stats(variance), spp=64).reshape(9, 9)
+    beside = counts[1:-1, [3, 5]]
+    line = counts[1:-1, 4]  # its own neighbours on the line are as noisy as it is
+    assert beside.min() == counts.max() and line.max() == counts.max()  # all at the noisiest level
+    assert counts[:, [0, 1, 7, 8]].max() < counts.max()  # quiet pixels away from it stay below
+    assert counts.mean() <= 64
+
+
 def test_counts_follow_the_noise_within_the_budget():
     rng = np.random.default_rng(0)
     variance = np.exp(rng.normal(0.0, 2.0, (16, 24)))
