@@ -104,8 +104,9 @@ def _reference(py: str | None, kit: Path, cache: Path, chunks: int = REFERENCE_C
     ref = cache / f"ref{8192 * chunks}mj.exr"
     if ref.exists():
         return ref
-    if py is None:
-        return None
+    if py is None:  # without Mitsuba: the first chunk if it is there (its own floor is measured from its variance)
+        first = _chunk_file(cache, 0)
+        return first if first.exists() else None
     assets = _assets(py, kit, cache)
     for k in range(chunks):
         out = _chunk_file(cache, k)
