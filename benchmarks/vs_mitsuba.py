@@ -92,10 +92,6 @@ def _chunk_file(cache: Path, k: int) -> Path:
     return cache / ("ref8192mj.exr" if k == 0 else f"ref8192mj_{k}.exr")
 
 
-def _variance_file(image: Path) -> Path:
-    return image.with_name(image.stem + "_var.exr")
-
-
 def _reference(py: str | None, kit: Path, cache: Path, chunks: int = REFERENCE_CHUNKS) -> Path | None:
     """The peer reference: Mitsuba ``multijitter``, 4 emitter + 4 BSDF samples, ``chunks`` x 8192 spp (relMSE floor
     2.0e-7 at 3 chunks, a twentieth of lightprobe's error at 256 spp; one chunk's 6.0e-7 was a seventh: decision
@@ -104,13 +100,15 @@ def _reference(py: str | None, kit: Path, cache: Path, chunks: int = REFERENCE_C
     ref = cache / f"ref{8192 * chunks}mj.exr"
     if ref.exists():
         return ref
+    from lightprobe.peer import variance_file  # importable: _kit() put src on the path
+
     if py is None:  # without Mitsuba: the first chunk if it is there (its own floor is measured from its variance)
         first = _chunk_file(cache, 0)
         return first if first.exists() else None
     assets = _assets(py, kit, cache)
     for k in range(chunks):
         out = _chunk_file(cache, k)
-        if out.exists() and _variance_file(out).exists():
+        if out.exists() and variance_file(out).exists():
             continue
         print(
             f"making chunk {k + 1} of {chunks} of the {8192 * chunks}-spp Mitsuba reference in {out} (about 12 minutes"
@@ -120,7 +118,7 @@ def _reference(py: str | None, kit: Path, cache: Path, chunks: int = REFERENCE_C
         cmd = [py, str(kit / "mitsuba" / "render.py"), "--assets", str(assets), "--spp", str(CHUNK_PASS_SPP)]
         cmd += ["--passes", str(CHUNK_PASSES), "--sampler", "multijitter", "--emitter-samples", "4"]
         cmd += ["--bsdf-samples", "4", "--reps", "1", "--no-warmup", "--seed", str(100_000 + CHUNK_PASSES * k)]
-        cmd += ["--out", str(out), "--variance-out", str(_variance_file(out))]
+        cmd += ["--out", str(out), "--variance-out", str(variance_file(out))]
         subprocess.run(cmd, check=True, capture_output=True)
     _average_chunks([_chunk_file(cache, k) for k in range(chunks)], ref)
     return ref
@@ -130,10 +128,11 @@ def _average_chunks(chunks: list[Path], out: Path) -> None:
     """``out``: the mean of independent renders ``chunks`` (equal spp each), with ``out``'s ``_var`` file the
     variance of that mean (the mean of their variances / their number)."""
     from lightprobe.io.images import read_image, write_image  # importable: _kit() put src on the path
+    from lightprobe.peer import variance_file
 
     means = [read_image(str(c))[:, :, :3].astype(np.float64) for c in chunks]
-    variances = [read_image(str(_variance_file(c)))[:, :, :3].astype(np.float64) for c in chunks]
-    write_image(str(_variance_file(out)), (np.mean(variances, axis=0) / len(chunks)).astype(np.float32))
+    variances = [read_image(str(variance_file(c)))[:, :, :3].astype(np.float64) for c in chunks]
+    write_image(str(variance_file(out)), (np.mean(variances, axis=0) / len(chunks)).astype(np.float32))
     write_image(str(out), np.mean(means, axis=0).astype(np.float32))  # last: its presence means "complete"
 
 

@@ -22,7 +22,7 @@ from .geometry.mesh import TriangleMesh
 from .geometry.scene import Scene
 from .geometry.shapes import Rectangle, Sphere
 
-__all__ = ["find_peers", "peer_assets", "peer_scene", "reference_floor"]
+__all__ = ["find_peers", "peer_assets", "peer_scene", "reference_floor", "variance_file"]
 
 
 def find_peers() -> Path | None:
@@ -94,6 +94,13 @@ def peer_scene(peers: Path | None = None, *, resolution: tuple[int, int] | None 
     return scene
 
 
+def variance_file(reference: str | Path) -> Path:
+    """Where the variance of ``reference``'s mean lives: ``NAME_var.exr`` beside ``NAME.exr``, as the kit's
+    ``render.py --variance-out`` writes it."""
+    reference = Path(reference)
+    return reference.with_name(reference.stem + "_var.exr")
+
+
 def reference_noise(reference: str | Path) -> np.ndarray | None:
     """The reference's own noise in the relMSE, per pixel and channel, (H, W, 3): var / (ref^2 + 0.01), var the
     variance of its mean, from ``NAME_var.exr`` beside ``NAME.exr`` as the kit's ``render.py --variance-out`` writes
@@ -101,8 +108,7 @@ def reference_noise(reference: str | Path) -> np.ndarray | None:
     from .analysis.metrics import RELMSE_EPSILON
     from .io.images import read_image
 
-    reference = Path(reference)
-    variance = reference.with_name(reference.stem + "_var.exr")
+    variance = variance_file(reference)
     if not variance.exists():
         return None
     ref = read_image(str(reference))[:, :, :3]
