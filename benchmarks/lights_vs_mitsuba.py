@@ -5,6 +5,7 @@
     python benchmarks/lights_vs_mitsuba.py             # scenes area and many, 320x240, 64 spp, 8 seeds, 2 reps
     python benchmarks/lights_vs_mitsuba.py --scenes area --selectors bvh --reps 1
     python benchmarks/lights_vs_mitsuba.py --selectors bvh --adaptive   # each selector with --adaptive too
+    python benchmarks/lights_vs_mitsuba.py --selectors bvh --without-outlines   # and without the outline variate
 
 The scenes are :mod:`lightprobe.reference_scenes` ``area`` (a rectangle, a sphere and a 16-triangle ring light over a
 16 m ground under a dim sky) and ``many`` (``--many-lights`` small rectangle lights, 2,000 by default, over three
@@ -17,7 +18,8 @@ camera sample in hundreds hits, so one seed in four can read 3-4x the median; de
 seconds their median (the renderer's own timing, kernels compiled first). Mitsuba
 runs every sampler at 1 + 1 and 4 + 4 emitter + BSDF samples (its ``direct`` integrator), on ``many`` also with each
 emitter's ``sampling_weight`` set to its power ("power"); lightprobe every selector with its defaults (and, with
-``--adaptive``, with per-pixel adaptive sampling: "bvh adaptive").  Each row also
+``--adaptive``, with per-pixel adaptive sampling: "bvh adaptive"; with ``--without-outlines``, also without the
+outline control variate of decisions.md 96: "bvh, no outline variate").  Each row also
 gives ``relmse_emitter_edges``, the share of relMSE from the pixels next to a directly seen emitter (its outline: a
 pixel there is mostly the count of its camera samples that hit the emitter, so this part measures the camera
 samples' stratification, not the lights' sampling; decisions.md 91).
@@ -143,20 +145,23 @@ def _lightprobe_worker(args) -> None:
     edge_mask = _emitter_edges(args)
     lights = _lights(args, args.scene)
     render(build(args.scene, resolution=(32, 24), lights=lights), RenderSettings(spp=4))  # compile
-    configs = [(selector, False) for selector in args.selectors]
-    configs += [(selector, True) for selector in args.selectors if args.adaptive]
-    for selector, adaptive in configs:
+    outline_choices = (True, False) if args.without_outlines else (True,)
+    configs = [(selector, False, o) for selector in args.selectors for o in outline_choices]
+    configs += [(selector, True, o) for selector in args.selectors if args.adaptive for o in outline_choices]
+    for selector, adaptive, outline in configs:
         errors, seconds, edges = [], [], []
         for s in range(args.seeds):
             scene = build(args.scene, resolution=tuple(args.resolution), lights=lights)
-            settings = RenderSettings(spp=args.spp, seed=s + 20, light_sampler=selector, adaptive=adaptive)
+            settings = RenderSettings(
+                spp=args.spp, seed=s + 20, light_sampler=selector, adaptive=adaptive, outline_control_variate=outline
+            )
             r = render(scene, settings)
             image = r.image[..., :3].astype(np.float64)
             error, edge_error = _relmse(image, ref["mean"], edge_mask)
             errors.append(error)
             edges.append(edge_error)
             seconds.append(r.stats["seconds"])
-        config = selector + (" adaptive" if adaptive else "")
+        config = selector + (" adaptive" if adaptive else "") + ("" if outline else ", no outline variate")
         print(json.dumps(_row("lightprobe", args.scene, config, errors, seconds, floor, edges)), flush=True)
 
 
@@ -199,6 +204,7 @@ def _run(args, worker: str, scene: str, *extra: str) -> list[dict]:
         "--many-lights",
         str(args.many_lights),
         *(["--adaptive"] if args.adaptive else []),
+        *(["--without-outlines"] if args.without_outlines else []),
         *extra,
     ]
     out = subprocess.run(cmd, capture_output=True, text=True, env=os.environ.copy())
@@ -217,6 +223,9 @@ def main() -> int:
     parser.add_argument("--spp", type=int, default=64)
     parser.add_argument(
         "--adaptive", action="store_true", help="also each lightprobe selector with per-pixel adaptive sampling"
+    )
+    parser.add_argument(
+        "--without-outlines", action="store_true", help="also each lightprobe row without the outline control variate"
     )
     parser.add_argument("--seeds", type=int, default=8, help="images per configuration (relMSE: their mean) [8]")
     parser.add_argument("--reps", type=int, default=2, help="repetitions of the A B sequence")

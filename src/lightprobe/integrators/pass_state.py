@@ -52,6 +52,12 @@ class PassConstants(NamedTuple):
     pixels: np.ndarray  # the pass's pixels, in buffer order (schedule.pass_pixels)
     spp_pass: int  # samples per pixel in this pass
     sample_start: int  # sample index of the pass's first sample of each pixel
+    # directly seen emitters' outlines (integrators/outlines.py's OutlineTable; all empty: none)
+    outline_start: np.ndarray  # (pixels + 1,) int64: pixel p's entries start[p] .. start[p + 1] - 1
+    outline_shape: np.ndarray  # (entries,) int64
+    outline_cover: np.ndarray  # (entries,) float64
+    outline_geom: np.ndarray  # (shapes, 13) float64
+    outline_radiance: np.ndarray  # (shapes, 3) float64
 
 
 class CameraSamples(NamedTuple):

@@ -209,6 +209,14 @@ class RenderSettings:
         key="adaptive",
         flags=("--adaptive/--no-adaptive",),
     )
+    outline_control_variate: bool = option(
+        True,
+        "Where a directly seen emitter's outline crosses a pixel, estimate the pixel's share of it exactly and "
+        "let the camera samples estimate only the difference (integrators/outlines.py)",
+        "true or false",
+        key="outline_control_variate",
+        flags=("--outline-control-variate/--no-outline-control-variate",),
+    )
 
     def validate(self) -> None:
         """Raise :class:`ParameterError` naming the first setting of the wrong type or out of range, then the

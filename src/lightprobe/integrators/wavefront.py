@@ -42,7 +42,7 @@ from ..geometry.raytracer import RayTracer
 from ..geometry.scene import Scene
 from ..sampling.rng import SAMPLERS
 from ..simd import LANES
-from . import adaptive, pipeline
+from . import adaptive, outlines, pipeline
 from .accumulation import Accumulator, RenderResult, result_from
 from .pass_state import PassConstants, camera_buffers, slot_buffers, views
 from .schedule import pass_pixels
@@ -178,6 +178,7 @@ class _Pass:
             pixels=np.zeros(0, np.int64),
             spp_pass=1,
             sample_start=0,
+            **outlines.pass_fields(scene.camera, lights, settings.outline_control_variate),
         )
         self.m = m
         self.largest = largest_pass

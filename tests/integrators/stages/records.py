@@ -10,7 +10,7 @@ from lightprobe.emitters.selection import build_selector
 from lightprobe.geometry.camera import Camera
 from lightprobe.geometry.embree import PACKET, new_scratch
 from lightprobe.geometry.scene import Scene
-from lightprobe.integrators import pipeline
+from lightprobe.integrators import outlines, pipeline
 from lightprobe.integrators.accumulation import Accumulator
 from lightprobe.integrators.pass_state import CameraSamples, PassConstants, Slots, camera_buffers, slot_buffers
 from lightprobe.integrators.techniques import STRATEGIES
@@ -42,6 +42,7 @@ def constants(m: int, **given) -> PassConstants:
         "pixels": np.zeros(0, np.int64),
         "spp_pass": 1,
         "sample_start": 0,
+        **{f"outline_{name}": array for name, array in outlines.empty()._asdict().items()},
     }
     values.update(given)
     return PassConstants(**values)

@@ -17,6 +17,7 @@ from ...geometry.frame import to_world
 from ...geometry.intersect import MESH, MISS, RECT, SPHERE
 from ...sampling.rng import SOBOL, sample_state, uniform, uniform_2d
 from ...simd import LANES
+from ..outlines import outline_offset
 from ..techniques import (
     BRDF,
     ENV,
@@ -48,6 +49,22 @@ def emitter_of(s, kind, index, prim):
     return -1
 
 
+@jit_inline
+def _add_outlines(c, cams, k, dx, dy, dz):
+    """The outline control variate's G_p - g(x) (integrators/outlines.py), where camera sample k's pixel has one."""
+    if c.outline_start.shape[0] == 0:
+        return
+    pixel = c.pixels[k // c.spp_pass]
+    if c.outline_start[pixel] == c.outline_start[pixel + 1]:
+        return
+    r, g, b = outline_offset(
+        c.outline_start, c.outline_shape, c.outline_cover, c.outline_geom, c.outline_radiance, pixel, dx, dy, dz
+    )
+    cams.direct[k, 0] += r
+    cams.direct[k, 1] += g
+    cams.direct[k, 2] += b
+
+
 @jit
 def camera_samples(c, cams, slots):
     """The stage's items: camera samples."""
@@ -70,6 +87,7 @@ def shading_setup(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
             cams.direct[k, 0], cams.direct[k, 1], cams.direct[k, 2] = escaped_radiance(
                 lights, env, sel.n_bounded, dx, dy, dz
             )
+            _add_outlines(c, cams, k, dx, dy, dz)
             continue
         hit = (cams.kind[k], cams.index[k], cams.prim[k], cams.b1[k], cams.b2[k], cams.t[k])
         p, _, _, wo = store_shading_frame(
@@ -83,6 +101,7 @@ def shading_setup(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
             )
         else:
             cams.direct[k, 0] = cams.direct[k, 1] = cams.direct[k, 2] = 0.0
+        _add_outlines(c, cams, k, dx, dy, dz)
         if wo[2] <= 0.0:
             continue
         if s.material_textured[cams.material[k]] == 1:
