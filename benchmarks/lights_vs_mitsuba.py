@@ -10,7 +10,7 @@
 The scenes are :mod:`lightprobe.reference_scenes` ``area`` (a rectangle, a sphere and a 16-triangle ring light over a
 16 m ground under a dim sky) and ``many`` (``--many-lights`` small rectangle lights, 2,000 by default, over three
 decades of power, no sky), at ``--resolution``. The reference of each is Mitsuba's own (``direct``, ``multijitter``, 1
-+ 1, passes of 64 spp: 64 for ``area``, 128 for ``many``, whose error is larger; ``--ref-passes`` sets both), made
++ 1, passes of 64 spp: 256 for ``area``, 512 for ``many``, whose error is larger; ``--ref-passes`` sets both), made
 once and cached in ``--cache``; its relMSE floor, mean(var / (ref^2 + 0.01)), is printed and subtracted for
 ``true_efficiency`` (it is at most a tenth of every error measured). Each configuration renders ``--seeds`` images at
 ``--spp`` (8 by default: an image's relMSE is heavy-tailed, a few pixels on a bright emitter's outline that one
@@ -165,7 +165,9 @@ def _lightprobe_worker(args) -> None:
         print(json.dumps(_row("lightprobe", args.scene, config, errors, seconds, floor, edges)), flush=True)
 
 
-REFERENCE_PASSES = {"area": 64, "many": 128}
+# 16,384 and 32,768 spp: relMSE floors 8.9e-7 and 1.6e-4, under a twentieth of lightprobe's error with the outline
+# control variate (decisions.md 96; 4,096 and 8,192 spp before: 3.4e-6 and 6.6e-4, up to a seventh of it)
+REFERENCE_PASSES = {"area": 256, "many": 512}
 
 
 def _passes(args, scene: str) -> int:

@@ -527,3 +527,13 @@ def test_adaptive_from_the_scene_file_or_the_option(capsys, tmp_path):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "adaptive = true" in err[0] and "s.toml" in err[0] and "needs --spp >= 4" in err[0], err
     assert not (tmp_path / "r.html").exists()
+
+
+def test_every_render_option_with_flags_is_an_option_of_the_render_command():
+    """A RenderSettings field that declares command-line flags is on `lightprobe render` (its list is written out
+    for the help's order, so a new option could be left off it)."""
+    from lightprobe.cli import RENDER_COMMAND_OPTIONS
+    from lightprobe.integrators.settings import options
+
+    flagged = {name for name, option in options().items() if option.flags}
+    assert flagged == set(RENDER_COMMAND_OPTIONS)

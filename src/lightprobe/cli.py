@@ -128,6 +128,7 @@ RENDER_COMMAND_OPTIONS = (
     "light_strategy",
     "time_limit",
     "adaptive",
+    "outline_control_variate",
     "threads",
 )
 

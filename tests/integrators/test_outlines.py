@@ -118,14 +118,15 @@ def test_the_covers_of_every_pixel_add_up_to_the_projected_area(case):
     ellipse's pi / sqrt(det S), the polygon's shoelace area."""
     scene = _scene(*CASES[case])
     film = _Film(scene.camera)
-    ((_, _, _, polygon, ellipse),) = _shapes(film, scene.light_table())
-    if polygon is not None:
-        _, covers = _polygon_entries(
-            np.ascontiguousarray(polygon[:, 0]), np.ascontiguousarray(polygon[:, 1]), film.width, film.height
-        )
-        x, y = polygon[:, 0], polygon[:, 1]
+    shapes = _shapes(film, scene.light_table())
+    assert shapes.light.size == 1
+    n = int(shapes.poly_n[0])
+    if n:
+        x, y = shapes.poly_x[0, :n].copy(), shapes.poly_y[0, :n].copy()
+        _, covers = _polygon_entries(x, y, film.width, film.height)
         area = 0.5 * abs(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
     else:
+        ellipse = shapes.ellipses[0]
         _, covers = _ellipse_entries(*ellipse, film.width, film.height)
         area = math.pi / (ellipse[2] * ellipse[4])
     assert covers.sum() == pytest.approx(area, rel=1e-9)

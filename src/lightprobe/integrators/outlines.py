@@ -268,75 +268,6 @@ class _Film:
         return bool(np.all(q @ self.forward > 1e-6 * np.linalg.norm(q, axis=1)))
 
 
-def _polygon(film: _Film, corners: np.ndarray):
-    """(geometry row, film polygon counter-clockwise) of a planar convex emitter, or None."""
-    if not film.ahead(corners):
-        return None
-    f = film.project(corners)
-    twice = float(np.sum(f[:, 0] * np.roll(f[:, 1], -1) - np.roll(f[:, 0], -1) * f[:, 1]))
-    if not twice > 1e-12:  # counter-clockwise in (X, Y) as drawn: reverse; degenerate (seen edge-on): none
-        if not -twice > 1e-12:
-            return None
-        corners, f = corners[::-1], f[::-1]
-    q = corners - film.eye
-    row = np.zeros(ROW)
-    row[0] = POLYGON
-    normals = np.cross(q, np.roll(q, -1, axis=0))
-    centre = q.mean(axis=0)
-    normals *= np.sign(normals @ centre)[:, None]  # each edge's plane, the shape's side positive
-    row[1 : 1 + 3 * len(q)] = normals.reshape(-1)
-    return row, f
-
-
-def _sphere(film: _Film, centre: np.ndarray, radius: float):
-    """(geometry row, ellipse (cx, cy, L00, L10, L11, half_x, half_y)) of a sphere's projection, or None."""
-    q = centre - film.eye
-    dist = float(np.linalg.norm(q))
-    if not (dist > radius * (1.0 + 1e-9) and q @ film.forward > radius + 1e-6 * dist):
-        return None
-    w = q / dist
-    s2 = (radius / dist) ** 2
-    x0, y0 = film.project(centre[None, :])[0]
-    # d(x, y) = b0 + x aX + y aY, (x, y) film coordinates relative to the centre's projection (X0, Y0)
-    a_x = (2.0 * film.tan_x / film.width) * film.right
-    a_y = -(2.0 * film.tan_y / film.height) * film.up
-    b0 = film.forward + (2.0 * x0 / film.width - 1.0) * film.tan_x * film.right
-    b0 = b0 + (1.0 - 2.0 * y0 / film.height) * film.tan_y * film.up
-    # the direction meets the sphere where Q = s2 |d|^2 - |d x w|^2 >= 0 (with d . w > 0, which holds ahead)
-    u, v, z0 = np.cross(a_x, w), np.cross(a_y, w), np.cross(b0, w)
-    k2 = np.array([[s2 * (a_x @ a_x) - u @ u, s2 * (a_x @ a_y) - u @ v], [0.0, s2 * (a_y @ a_y) - v @ v]])
-    k2[1, 0] = k2[0, 1]
-    k = np.array([s2 * (b0 @ a_x) - u @ z0, s2 * (b0 @ a_y) - v @ z0])
-    q0 = s2 * (b0 @ b0) - z0 @ z0
-    if not (k2[0, 0] < 0.0 and np.linalg.det(k2) > 0.0):
-        return None
-    centre_film = -np.linalg.solve(k2, k)
-    c0 = q0 - k @ np.linalg.solve(k2, k)
-    if not c0 > 0.0:
-        return None
-    s = -k2 / c0  # the ellipse: (x - c)^T S (x - c) <= 1
-    lower = np.linalg.cholesky(s)
-    inverse = np.linalg.inv(s)
-    row = np.zeros(ROW)
-    row[0], row[1:4], row[4] = CONE, w, s2
-    ellipse = (
-        x0 + centre_film[0],
-        y0 + centre_film[1],
-        lower[0, 0],
-        lower[1, 0],
-        lower[1, 1],
-        math.sqrt(inverse[0, 0]),
-        math.sqrt(inverse[1, 1]),
-    )
-    return row, ellipse
-
-
-def _facing(film: _Film, lights, light: int, point: np.ndarray) -> bool:
-    """A planar light's emitting side faces the camera."""
-    toward = float(lights.geom[light, 9:12] @ (film.eye - point))
-    return toward > 0.0 or (toward < 0.0 and lights.two_sided[light] == 1)
-
-
 @jit_alloc
 def _overlap(a, b, x0, y0, poly_x, poly_y, poly_n, boxes):
     """Whether shapes a and b may both cover some of the unit square at (x0, y0): two polygons' regions are clipped
@@ -377,33 +308,155 @@ def _separate(start, shape, width, poly_x, poly_y, poly_n, boxes):
     return keep
 
 
-def _shapes(film: _Film, lights):
-    """Every area light the camera sees whole from its emitting side: (geometry row, light, distance to its
-    nearest point, film polygon (k, 2) or None, ellipse or None)."""
-    found = []
-    for light in range(lights.kind.shape[0]):
-        kind = int(lights.kind[light])
-        g = lights.geom[light]
-        if kind not in (LIGHT_RECT, LIGHT_SPHERE, LIGHT_TRIANGLE) or not np.any(lights.radiance[light] != 0.0):
-            continue
-        if kind == LIGHT_SPHERE:
-            made = _sphere(film, g[0:3].copy(), float(g[3]))
-            if made is not None:
-                depth = float(np.linalg.norm(g[0:3] - film.eye)) - float(g[3])
-                found.append((made[0], light, depth, None, made[1]))
-            continue
+class _Shapes(NamedTuple):
+    """The shapes of the lights the camera sees whole from their emitting side, one row each."""
+
+    rows: np.ndarray  # (S, ROW) how a direction is tested
+    light: np.ndarray  # (S,) int64 the light's row of the light table
+    depth: np.ndarray  # (S,) distance from the camera to the shape's nearest point (a corner's; a sphere's surface)
+    poly_x: np.ndarray  # (S, 4) film polygon, counter-clockwise (poly_n vertices; 0: an ellipse)
+    poly_y: np.ndarray
+    poly_n: np.ndarray  # (S,) int64
+    ellipses: np.ndarray  # (S, 7) an ellipse's centre (x, y), L^T's l00, l10, l11, and its half-width and height
+
+    def take(self, keep) -> _Shapes:
+        return _Shapes(*(a[keep] for a in self))
+
+
+def _polygons(film: _Film, lights, index: np.ndarray, corners: np.ndarray) -> _Shapes:
+    """The planar lights ``index`` with ``corners`` (S, n, 3), all at once: kept where the emitting side faces the
+    camera (one-sided: the side of the row's normal), every corner is well in front of the camera's plane and the
+    projection is not edge-on."""
+    count, n = corners.shape[0], corners.shape[1]
+    q = corners - film.eye
+    toward = -np.einsum("ij,ij->i", lights.geom[index, 9:12], q[:, 0])
+    keep = (toward > 0.0) | ((toward < 0.0) & (lights.two_sided[index] == 1))
+    qf = q @ film.forward
+    keep &= np.all(qf > 1e-6 * np.linalg.norm(q, axis=2), axis=1)
+    qf = np.where(keep[:, None], qf, 1.0)
+    fx = ((q @ film.right) / (qf * film.tan_x) + 1.0) * film.width / 2.0
+    fy = (1.0 - (q @ film.up) / (qf * film.tan_y)) * film.height / 2.0
+    twice = np.sum(fx * np.roll(fy, -1, axis=1) - np.roll(fx, -1, axis=1) * fy, axis=1)
+    keep &= np.abs(twice) > 1e-12  # not seen edge-on
+    clockwise = twice < 0.0  # as drawn in (X, Y): reversed, so every film polygon is counter-clockwise
+    fx[clockwise], fy[clockwise] = fx[clockwise, ::-1], fy[clockwise, ::-1]
+    normals = np.cross(q, np.roll(q, -1, axis=1))  # each edge's plane through the camera
+    normals *= np.sign(np.einsum("snk,sk->sn", normals, q.mean(axis=1)))[..., None]  # the shape's side positive
+    rows = np.zeros((count, ROW))
+    rows[:, 0] = POLYGON
+    rows[:, 1 : 1 + 3 * n] = normals.reshape(count, 3 * n)
+    poly_x, poly_y = np.zeros((count, 4)), np.zeros((count, 4))
+    poly_x[:, :n], poly_y[:, :n] = fx, fy
+    poly_x[:, n:], poly_y[:, n:] = fx[:, :1], fy[:, :1]  # a triangle's unused corner: its first (for its box)
+    depth = np.min(np.linalg.norm(q, axis=2), axis=1)
+    shapes = _Shapes(rows, index, depth, poly_x, poly_y, np.full(count, n, np.int64), np.zeros((count, 7)))
+    return shapes.take(keep)
+
+
+def _spheres(film: _Film, lights, index: np.ndarray) -> _Shapes:
+    """The sphere lights ``index``, all at once: kept where the whole sphere is in front of the camera's plane, so
+    that its projection is an ellipse.  A film point (x, y) relative to the centre's projection has the direction
+    d = b0 + x aX + y aY, which meets the sphere where Q = s2 |d|^2 - |d x w|^2 >= 0 (w toward the centre, s2 the
+    squared sine of the sphere's angular radius; d . w > 0 holds in front): Q = x^T K x + 2 k . x + q0, the ellipse
+    (x - c)^T S (x - c) <= 1 with c = -K^-1 k and S = -K / (q0 - k . K^-1 k)."""
+    count = index.shape[0]
+    centre, radius = lights.geom[index, 0:3], lights.geom[index, 3]
+    q = centre - film.eye
+    dist = np.linalg.norm(q, axis=1)
+    qf = q @ film.forward
+    keep = (dist > radius * (1.0 + 1e-9)) & (qf > radius + 1e-6 * dist)
+    qf = np.where(keep, qf, 1.0)
+    x0 = ((q @ film.right) / (qf * film.tan_x) + 1.0) * film.width / 2.0
+    y0 = (1.0 - (q @ film.up) / (qf * film.tan_y)) * film.height / 2.0
+    w = q / dist[:, None]
+    s2 = (radius / dist) ** 2
+    a_x = (2.0 * film.tan_x / film.width) * film.right
+    a_y = -(2.0 * film.tan_y / film.height) * film.up
+    b0 = film.forward + ((2.0 * x0 / film.width - 1.0) * film.tan_x)[:, None] * film.right
+    b0 = b0 + ((1.0 - 2.0 * y0 / film.height) * film.tan_y)[:, None] * film.up
+    u, v, z0 = np.cross(a_x, w), np.cross(a_y, w), np.cross(b0, w)
+
+    def dot(a, b):
+        return np.sum(a * b, axis=-1)
+
+    k00 = s2 * (a_x @ a_x) - dot(u, u)
+    k01 = s2 * (a_x @ a_y) - dot(u, v)
+    k11 = s2 * (a_y @ a_y) - dot(v, v)
+    k0 = s2 * (b0 @ a_x) - dot(u, z0)
+    k1 = s2 * (b0 @ a_y) - dot(v, z0)
+    q0 = s2 * dot(b0, b0) - dot(z0, z0)
+    det = k00 * k11 - k01 * k01
+    keep &= (k00 < 0.0) & (det > 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        solve0, solve1 = (k11 * k0 - k01 * k1) / det, (k00 * k1 - k01 * k0) / det  # K^-1 k
+        c0 = q0 - (k0 * solve0 + k1 * solve1)
+        keep &= c0 > 0.0
+        s00, s01, s11 = -k00 / c0, -k01 / c0, -k11 / c0
+        l00 = np.sqrt(s00)
+        l10 = s01 / l00
+        l11 = np.sqrt(s11 - l10 * l10)  # S = L L^T (Cholesky)
+        det_s = s00 * s11 - s01 * s01
+        ellipses = np.stack(
+            [x0 - solve0, y0 - solve1, l00, l10, l11, np.sqrt(s11 / det_s), np.sqrt(s00 / det_s)], axis=1
+        )
+    keep &= np.all(np.isfinite(ellipses), axis=1)
+    rows = np.zeros((count, ROW))
+    rows[:, 0], rows[:, 1:4], rows[:, 4] = CONE, w, s2
+    # an ellipse's "polygon" is only its box's corners (poly_n 0: the box is all _overlap reads of it)
+    poly_x = np.stack([ellipses[:, 0] - ellipses[:, 5], ellipses[:, 0] + ellipses[:, 5]] * 2, axis=1)
+    poly_y = np.stack([ellipses[:, 1] - ellipses[:, 6]] * 2 + [ellipses[:, 1] + ellipses[:, 6]] * 2, axis=1)
+    shapes = _Shapes(rows, index, dist - radius, poly_x, poly_y, np.zeros(count, np.int64), ellipses)
+    return shapes.take(keep)
+
+
+def _shapes(film: _Film, lights) -> _Shapes:
+    """Every area light the camera sees whole from its emitting side, nearest first."""
+    emitting = np.any(lights.radiance != 0.0, axis=1)
+    parts = []
+    for kind in (LIGHT_RECT, LIGHT_TRIANGLE, LIGHT_SPHERE):
+        index = np.flatnonzero((lights.kind == kind) & emitting)
+        g = lights.geom[index]
         if kind == LIGHT_RECT:
-            o, eu, ev = g[0:3], g[3:6], g[6:9]
-            corners = np.array([o, o + eu, o + eu + ev, o + ev])
+            o, eu, ev = g[:, 0:3], g[:, 3:6], g[:, 6:9]
+            parts.append(_polygons(film, lights, index, np.stack([o, o + eu, o + eu + ev, o + ev], axis=1)))
+        elif kind == LIGHT_TRIANGLE:
+            parts.append(_polygons(film, lights, index, np.stack([g[:, 0:3], g[:, 3:6], g[:, 6:9]], axis=1)))
         else:
-            corners = np.array([g[0:3], g[3:6], g[6:9]])
-        if not _facing(film, lights, light, corners[0]):
-            continue
-        made = _polygon(film, corners)
-        if made is not None:
-            depth = float(np.min(np.linalg.norm(corners - film.eye, axis=1)))
-            found.append((made[0], light, depth, made[1], None))
-    return found
+            parts.append(_spheres(film, lights, index))
+    shapes = _Shapes(*(np.concatenate(column) for column in zip(*parts, strict=True)))
+    return shapes.take(np.argsort(shapes.depth, kind="stable"))
+
+
+@jit_alloc
+def _entries(poly_x, poly_y, poly_n, ellipses, width, height, limit):
+    """(pixels, covers, shapes) of every shape in order: the pixels it covers in part or whole.  The shapes whose
+    entries would take the total past ``limit`` go without."""
+    size = 1024
+    pixels = np.empty(size, np.int64)
+    covers = np.empty(size)
+    shapes = np.empty(size, np.int64)
+    m = 0
+    for s in range(poly_n.shape[0]):
+        n = poly_n[s]
+        if n > 0:
+            pix, cov = _polygon_entries(poly_x[s, :n].copy(), poly_y[s, :n].copy(), width, height)
+        else:
+            e = ellipses[s]
+            pix, cov = _ellipse_entries(e[0], e[1], e[2], e[3], e[4], e[5], e[6], width, height)
+        k = pix.shape[0]
+        if m + k > limit:
+            break
+        if m + k > size:
+            while m + k > size:
+                size *= 2
+            grown_p, grown_c, grown_s = np.empty(size, np.int64), np.empty(size), np.empty(size, np.int64)
+            grown_p[:m], grown_c[:m], grown_s[:m] = pixels[:m], covers[:m], shapes[:m]
+            pixels, covers, shapes = grown_p, grown_c, grown_s
+        pixels[m : m + k] = pix
+        covers[m : m + k] = cov
+        shapes[m : m + k] = s
+        m += k
+    return pixels[:m], covers[:m], shapes[:m]
 
 
 def table(camera, lights) -> OutlineTable:
@@ -412,34 +465,13 @@ def table(camera, lights) -> OutlineTable:
     film = _Film(camera)
     width, height = film.width, film.height
     n_pixels = width * height
-    found = sorted(_shapes(film, lights), key=lambda f: f[2])
-    if not found:
+    found = _shapes(film, lights)
+    if found.light.size == 0:
         return empty()
-    count = len(found)
-    poly_x, poly_y = np.zeros((count, 4)), np.zeros((count, 4))
-    poly_n = np.zeros(count, np.int64)
-    boxes = np.zeros((count, 4))
-    pixels, covers, shapes = [], [], []
-    total = 0
-    for index, (_, _, _, polygon, ellipse) in enumerate(found):
-        if polygon is not None:
-            poly_n[index] = len(polygon)
-            poly_x[index, : len(polygon)], poly_y[index, : len(polygon)] = polygon[:, 0], polygon[:, 1]
-            boxes[index] = polygon[:, 0].min(), polygon[:, 0].max(), polygon[:, 1].min(), polygon[:, 1].max()
-            pix, cov = _polygon_entries(
-                np.ascontiguousarray(polygon[:, 0]), np.ascontiguousarray(polygon[:, 1]), width, height
-            )
-        else:
-            cx, cy, _, _, _, half_x, half_y = ellipse
-            boxes[index] = cx - half_x, cx + half_x, cy - half_y, cy + half_y
-            pix, cov = _ellipse_entries(*ellipse, width, height)
-        if total + pix.size > MAX_ENTRIES_PER_PIXEL * n_pixels:
-            break  # the nearer shapes' entries; the others go without (still an unbiased g)
-        pixels.append(pix)
-        covers.append(cov)
-        shapes.append(np.full(pix.size, index, np.int64))
-        total += pix.size
-    pixels, covers, shapes = np.concatenate(pixels), np.concatenate(covers), np.concatenate(shapes)
+    boxes = np.stack([found.poly_x.min(1), found.poly_x.max(1), found.poly_y.min(1), found.poly_y.max(1)], axis=1)
+    pixels, covers, shapes = _entries(
+        found.poly_x, found.poly_y, found.poly_n, found.ellipses, width, height, MAX_ENTRIES_PER_PIXEL * n_pixels
+    )
     if pixels.size == 0:
         return empty()
     order = np.argsort(pixels, kind="stable")  # each pixel's entries nearest shape first
@@ -447,22 +479,23 @@ def table(camera, lights) -> OutlineTable:
     start = np.zeros(n_pixels + 1, np.int64)
     np.cumsum(np.bincount(pixels, minlength=n_pixels), out=start[1:])
     # a pixel a shape covers whole has no outline of it (f = g there), but it hides what is behind it
-    keep = _separate(start, shapes, width, poly_x, poly_y, poly_n, boxes) & (covers < 1.0)
+    keep = _separate(start, shapes, width, found.poly_x, found.poly_y, found.poly_n, boxes) & (covers < 1.0)
     pixels, covers, shapes = pixels[keep], covers[keep], shapes[keep]
     # at most MAX_PER_PIXEL entries a pixel: its nearest shapes'
     first = np.searchsorted(pixels, pixels, side="left")
     keep = np.arange(pixels.size) - first < MAX_PER_PIXEL
     pixels, covers, shapes = pixels[keep], covers[keep], shapes[keep]
-    # rows of the shapes that kept an entry, in order
-    used, shapes = np.unique(shapes, return_inverse=True)
+    if pixels.size == 0:
+        return empty()
+    used, shapes = np.unique(shapes, return_inverse=True)  # the rows of the shapes that kept an entry, in order
     start[:] = 0
     np.cumsum(np.bincount(pixels, minlength=n_pixels), out=start[1:])
     return OutlineTable(
         start,
         np.ascontiguousarray(shapes.astype(np.int64)),
         np.ascontiguousarray(covers),
-        np.ascontiguousarray(np.array([found[i][0] for i in used])),
-        np.ascontiguousarray(np.array([lights.radiance[found[i][1]] for i in used], np.float64).reshape(-1, 3)),
+        np.ascontiguousarray(found.rows[used]),
+        np.ascontiguousarray(lights.radiance[found.light[used]].astype(np.float64).reshape(-1, 3)),
     )
 
 

@@ -211,8 +211,8 @@ class RenderSettings:
     )
     outline_control_variate: bool = option(
         True,
-        "Where a directly seen emitter's outline crosses a pixel, estimate the pixel's share of it exactly and "
-        "let the camera samples estimate only the difference (integrators/outlines.py)",
+        "Where an emitter seen directly has its outline in a pixel, take the emitter's exact share of the pixel "
+        "and let the camera samples estimate only the rest (a control variate: the mean is unchanged)",
         "true or false",
         key="outline_control_variate",
         flags=("--outline-control-variate/--no-outline-control-variate",),
