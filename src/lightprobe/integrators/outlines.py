@@ -2,7 +2,8 @@
 
 Where an emitter's outline crosses a pixel, the pixel's estimate is mostly the count of its camera samples that hit
 the emitter: a sphere light of radiance 60 covering a thousandth of a pixel is one hit in hundreds of samples, and
-on the benchmark's area-light scene such pixels (0.6 % of the image) held 73 % of the relMSE (decisions.md 91, 94).
+on the benchmark's area-light scene such pixels (0.6 % of the image) held two thirds of the relMSE (decisions.md 91,
+94, 96).
 Better light sampling cannot touch that error; only the camera samples' positions can.
 
 So each camera sample's value f(x) at film position x of pixel p becomes
@@ -22,9 +23,12 @@ whole shape lies in front of the camera's plane and its emitting side faces the 
 is exact geometry: a polygon clipped to the pixel's square (Sutherland-Hodgman) and its area; an ellipse mapped to
 the unit disk, where the square becomes a parallelogram whose intersection with the disk has a closed form (each
 edge's triangle with the centre: chord parts and circular sectors). A sample's membership is tested in 3D on its
-ray's direction (the cone of directions toward the shape), the same set as the film-space one. Only pixels the
-outline crosses (0 < a < 1) get an entry, at most :data:`MAX_PER_PIXEL` of them (the first shapes'): any subset of
-pixels and shapes is still an unbiased g.
+ray's direction (the cone of directions toward the shape), the same set as the film-space one.
+
+Only pixels an outline crosses (0 < a < 1) keep an entry. Shapes are taken nearest first, and in each pixel an entry
+whose shape may overlap a kept one's there is dropped (pixels a shape covers whole count as kept, then go): where a
+near emitter hides a far one, g would count both and f sees one, new noise instead of less. At most
+:data:`MAX_PER_PIXEL` entries a pixel: any subset of pixels and shapes is still an unbiased g.
 """
 
 from __future__ import annotations
