@@ -205,6 +205,7 @@ def test_the_outline_keeps_its_mean_and_loses_its_noise(occluder, wall):
         var = (result.variance[..., 0] + ref.variance[..., 0])[mask].astype(np.float64)
         assert abs(diff.sum()) / math.sqrt(var.sum()) < 4.0
         assert np.all(np.abs(diff) / np.sqrt(var + 1e-12) < 5.0)
+    assert with_cv.stats["outline_pixels"] == mask.sum() and without.stats["outline_pixels"] == 0
     noise_with, noise_without = with_cv.variance[..., 0][mask].sum(), without.variance[..., 0][mask].sum()
     if not occluder:
         assert noise_with * 20 < noise_without, (noise_with, noise_without)

@@ -259,6 +259,8 @@ def render(
         "spp_requested": settings.spp,
         **{k: v for k, v in settings_record(settings).items() if k not in ("spp", "time_limit", "pass_samples")},
         "mis_compensation": work.compensated,
+        # pixels where the outline control variate knows an emitter's share (integrators/outlines.py)
+        "outline_pixels": int(np.count_nonzero(np.diff(work.constants.outline_start))),
         "area_lights": int(np.count_nonzero(kinds < LIGHT_DIRECTIONAL)),
         "lights": int(kinds.shape[0]),
         "directional_lights": int(np.count_nonzero(kinds == LIGHT_DIRECTIONAL)),
