@@ -146,17 +146,27 @@ def test_the_shapes_it_leaves_out():
     assert outlines.table(behind.camera, behind.light_table()).cover.size == 0
 
 
-def test_a_hidden_emitter_gives_way_and_a_neighbour_does_not():
-    """Two panels, one in front of the other and overlapping it on screen: no pixel where both may cover something
-    keeps an entry of the far one.  Two triangles sharing an edge (one emissive mesh): the pixels along the edge
-    keep both (they do not overlap)."""
-    near = Rectangle([-0.5, -0.5, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
-    far = Rectangle([-0.2, -0.2, -1.0], [1.5, 0.0, 0.0], [0.0, 1.5, 0.0])
-    scene = _scene((near, 5.0, False), (far, 2.0, False))
+def test_no_entry_where_two_emitters_overlap_and_a_neighbour_keeps_its_own():
+    """Two panels overlapping on screen, one (long and slanted, its nearest corner closest to the camera) behind the
+    other where they overlap: no pixel both touch keeps an entry of either (an order by distance kept the wrong one
+    here); the long one keeps its outline elsewhere (the small one lies wholly over it).  Two triangles sharing an
+    edge (one emissive mesh): the pixels along the edge keep both (they do not overlap)."""
+    long = Rectangle([-0.4, -0.6, 3.0], [0.0, 0.5, -6.0], [0.8, 0.0, 0.0])  # from z = 3 to z = -3, tilted
+    front = Rectangle([-0.15, -0.3, 0.5], [0.3, 0.0, 0.0], [0.0, 0.3, 0.0])  # at z = 0.5, over long's far part
+    scene = _scene((long, 5.0, True), (front, 2.0, False))
     table = outlines.table(scene.camera, scene.light_table())
-    kinds_per_pixel = [set(table.shape[table.start[p] : table.start[p + 1]]) for p in range(table.start.size - 1)]
-    assert max(len(k) for k in kinds_per_pixel) == 1, "the far panel's entries give way where the near one is"
-    assert len(set(table.shape)) == 2, "each panel keeps its outline elsewhere"
+    film = _Film(scene.camera)
+    shapes = _shapes(film, scene.light_table())
+    assert shapes.light.size == 2 and shapes.light[0] == 0, "the long panel's nearest corner is the nearer"
+    touched = []
+    for i in range(2):
+        n = int(shapes.poly_n[i])
+        pixels, _ = _polygon_entries(shapes.poly_x[i, :n].copy(), shapes.poly_y[i, :n].copy(), film.width, film.height)
+        touched.append(set(pixels.tolist()))
+    both = touched[0] & touched[1]
+    assert len(both) > 10
+    assert all(table.start[p] == table.start[p + 1] for p in both), "no entry where the two may overlap"
+    assert table.cover.size > 0 and np.all(table.radiance == 5.0), "the long panel keeps its outline elsewhere"
     quad = TriangleMesh.from_arrays(
         np.array([[-0.6, -0.5, 0.0], [0.6, -0.5, 0.0], [0.6, 0.5, 0.0], [-0.6, 0.5, 0.0]]),
         np.array([[0, 1, 2], [0, 2, 3]]),

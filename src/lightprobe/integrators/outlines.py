@@ -25,10 +25,10 @@ the unit disk, where the square becomes a parallelogram whose intersection with 
 edge's triangle with the centre: chord parts and circular sectors). A sample's membership is tested in 3D on its
 ray's direction (the cone of directions toward the shape), the same set as the film-space one.
 
-Only pixels an outline crosses (0 < a < 1) keep an entry. Shapes are taken nearest first, and in each pixel an entry
-whose shape may overlap a kept one's there is dropped (pixels a shape covers whole count as kept, then go): where a
-near emitter hides a far one, g would count both and f sees one, new noise instead of less. At most
-:data:`MAX_PER_PIXEL` entries a pixel: any subset of pixels and shapes is still an unbiased g.
+Only pixels an outline crosses (0 < a < 1) keep an entry, and none where two emitters' shapes may overlap (one
+covering the pixel whole included): where a near emitter hides a far one, g would count both and f sees one, new
+noise instead of less. At most :data:`MAX_PER_PIXEL` entries a pixel (the nearest shapes'): any subset of pixels and
+shapes is still an unbiased g.
 """
 
 from __future__ import annotations
@@ -297,18 +297,18 @@ def _overlap(a, b, x0, y0, poly_x, poly_y, poly_n, boxes):
 
 @jit_alloc
 def _separate(start, shape, width, poly_x, poly_y, poly_n, boxes):
-    """Which entries to keep: in each pixel, its entries in order (nearer shapes first), an entry whose shape may
-    overlap a kept one's there is dropped.  Where one emitter hides another, g counted both and f sees one: the
-    difference would be new noise, not less."""
+    """Which entries to keep: in each pixel, none whose shape may overlap another shape's there (covered whole or in
+    part).  Where one emitter hides another, g would count both and f sees one: new noise instead of less; and which
+    one is in front is not asked (an order by distance, tried first, kept the wrong one of two panels that overlap)."""
     keep = np.ones(shape.shape[0], np.bool_)
     for p in range(start.shape[0] - 1):
         lo, hi = start[p], start[p + 1]
         x0, y0 = float(p % width), float(p // width)
         for e in range(lo + 1, hi):
             for f in range(lo, e):
-                if keep[f] and _overlap(shape[e], shape[f], x0, y0, poly_x, poly_y, poly_n, boxes):
+                if _overlap(shape[e], shape[f], x0, y0, poly_x, poly_y, poly_n, boxes):
                     keep[e] = False
-                    break
+                    keep[f] = False
     return keep
 
 
@@ -464,8 +464,8 @@ def _entries(poly_x, poly_y, poly_n, ellipses, width, height, limit):
 
 
 def table(camera, lights) -> OutlineTable:
-    """The outline entries of every area light the camera sees whole from its emitting side (nearer ones first where
-    two meet in a pixel)."""
+    """The outline entries of every area light the camera sees whole from its emitting side (none where two may
+    overlap in a pixel; the nearer shapes' first where a cap binds)."""
     film = _Film(camera)
     width, height = film.width, film.height
     n_pixels = width * height
@@ -482,7 +482,7 @@ def table(camera, lights) -> OutlineTable:
     pixels, covers, shapes = pixels[order], covers[order], shapes[order]
     start = np.zeros(n_pixels + 1, np.int64)
     np.cumsum(np.bincount(pixels, minlength=n_pixels), out=start[1:])
-    # a pixel a shape covers whole has no outline of it (f = g there), but it hides what is behind it
+    # a pixel a shape covers whole has no outline of it (f = g there), but it may hide another
     keep = _separate(start, shapes, width, found.poly_x, found.poly_y, found.poly_n, boxes) & (covers < 1.0)
     pixels, covers, shapes = pixels[keep], covers[keep], shapes[keep]
     # at most MAX_PER_PIXEL entries a pixel: its nearest shapes'
