@@ -258,18 +258,12 @@ class _Film:
         self.tan_x, self.tan_y = float(cam[12]), float(cam[13])
         self.width, self.height = camera.resolution
 
-    def project(self, points: np.ndarray) -> np.ndarray:
-        """(N, 2) film coordinates of world points (N, 3) in front of the camera."""
-        q = points - self.eye
-        qf = q @ self.forward
-        sx = (q @ self.right) / (qf * self.tan_x)
-        sy = (q @ self.up) / (qf * self.tan_y)
-        return np.stack([(sx + 1.0) * self.width / 2.0, (1.0 - sy) * self.height / 2.0], axis=1)
-
-    def ahead(self, points: np.ndarray) -> bool:
-        """Every point well in front of the camera's plane (so the shape's projection is bounded)."""
-        q = points - self.eye
-        return bool(np.all(q @ self.forward > 1e-6 * np.linalg.norm(q, axis=1)))
+    def coordinates(self, q: np.ndarray, qf: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Film coordinates (X, Y) of points q (..., 3) relative to the camera, qf (...) their distance along its
+        forward axis (> 0): camera_ray's map inverted."""
+        x = ((q @ self.right) / (qf * self.tan_x) + 1.0) * self.width / 2.0
+        y = (1.0 - (q @ self.up) / (qf * self.tan_y)) * self.height / 2.0
+        return x, y
 
 
 @jit_alloc
@@ -338,8 +332,7 @@ def _polygons(film: _Film, lights, index: np.ndarray, corners: np.ndarray) -> _S
     qf = q @ film.forward
     keep &= np.all(qf > 1e-6 * np.linalg.norm(q, axis=2), axis=1)
     qf = np.where(keep[:, None], qf, 1.0)
-    fx = ((q @ film.right) / (qf * film.tan_x) + 1.0) * film.width / 2.0
-    fy = (1.0 - (q @ film.up) / (qf * film.tan_y)) * film.height / 2.0
+    fx, fy = film.coordinates(q, qf)
     twice = np.sum(fx * np.roll(fy, -1, axis=1) - np.roll(fx, -1, axis=1) * fy, axis=1)
     keep &= np.abs(twice) > 1e-12  # not seen edge-on
     clockwise = twice < 0.0  # as drawn in (X, Y): reversed, so every film polygon is counter-clockwise
@@ -370,8 +363,7 @@ def _spheres(film: _Film, lights, index: np.ndarray) -> _Shapes:
     qf = q @ film.forward
     keep = (dist > radius * (1.0 + 1e-9)) & (qf > radius + 1e-6 * dist)
     qf = np.where(keep, qf, 1.0)
-    x0 = ((q @ film.right) / (qf * film.tan_x) + 1.0) * film.width / 2.0
-    y0 = (1.0 - (q @ film.up) / (qf * film.tan_y)) * film.height / 2.0
+    x0, y0 = film.coordinates(q, qf)
     w = q / dist[:, None]
     s2 = (radius / dist) ** 2
     a_x = (2.0 * film.tan_x / film.width) * film.right
