@@ -6,6 +6,7 @@
     python benchmarks/lights_vs_mitsuba.py --scenes area --selectors bvh --reps 1
     python benchmarks/lights_vs_mitsuba.py --selectors bvh --adaptive   # each selector with --adaptive too
     python benchmarks/lights_vs_mitsuba.py --selectors bvh --without-outlines   # and without the outline variate
+    python benchmarks/lights_vs_mitsuba.py --selectors bvh --lights-per-sample 1 2   # rows with K = 1 and K = 2
 
 The scenes are :mod:`lightprobe.reference_scenes` ``area`` (a rectangle, a sphere and a 16-triangle ring light over a
 16 m ground under a dim sky) and ``many`` (``--many-lights`` small rectangle lights, 2,000 by default, over three
@@ -19,7 +20,8 @@ seconds their median (the renderer's own timing, kernels compiled first). Mitsub
 runs every sampler at 1 + 1 and 4 + 4 emitter + BSDF samples (its ``direct`` integrator), on ``many`` also with each
 emitter's ``sampling_weight`` set to its power ("power"); lightprobe every selector with its defaults (and, with
 ``--adaptive``, with per-pixel adaptive sampling: "bvh adaptive"; with ``--without-outlines``, also without the
-outline control variate of decisions.md 96: "bvh, no outline variate").  Each row also
+outline control variate of decisions.md 96: "bvh, no outline variate"; with ``--lights-per-sample``, with each K
+given instead of the default, 2 here: "bvh K=1").  Each row also
 gives ``relmse_emitter_edges``, the share of relMSE from the pixels next to a directly seen emitter (its outline: a
 pixel there is mostly the count of its camera samples that hit the emitter, so this part measures the camera
 samples' stratification, not the lights' sampling; decisions.md 91).
@@ -146,14 +148,22 @@ def _lightprobe_worker(args) -> None:
     lights = _lights(args, args.scene)
     render(build(args.scene, resolution=(32, 24), lights=lights), RenderSettings(spp=4))  # compile
     outline_choices = (True, False) if args.without_outlines else (True,)
-    configs = [(selector, False, o) for selector in args.selectors for o in outline_choices]
-    configs += [(selector, True, o) for selector in args.selectors if args.adaptive for o in outline_choices]
-    for selector, adaptive, outline in configs:
+    picks = args.lights_per_sample or [None]
+    configs = [(selector, False, o, k) for selector in args.selectors for o in outline_choices for k in picks]
+    configs += [
+        (selector, True, o, k) for selector in args.selectors if args.adaptive for o in outline_choices for k in picks
+    ]
+    for selector, adaptive, outline, k in configs:
         errors, seconds, edges = [], [], []
         for s in range(args.seeds):
             scene = build(args.scene, resolution=tuple(args.resolution), lights=lights)
             settings = RenderSettings(
-                spp=args.spp, seed=s + 20, light_sampler=selector, adaptive=adaptive, outline_control_variate=outline
+                spp=args.spp,
+                seed=s + 20,
+                light_sampler=selector,
+                adaptive=adaptive,
+                outline_control_variate=outline,
+                lights_per_sample=k,
             )
             r = render(scene, settings)
             image = r.image[..., :3].astype(np.float64)
@@ -161,7 +171,8 @@ def _lightprobe_worker(args) -> None:
             errors.append(error)
             edges.append(edge_error)
             seconds.append(r.stats["seconds"])
-        config = selector + (" adaptive" if adaptive else "") + ("" if outline else ", no outline variate")
+        config = selector + ("" if k is None else f" K={k}") + (" adaptive" if adaptive else "")
+        config += "" if outline else ", no outline variate"
         print(json.dumps(_row("lightprobe", args.scene, config, errors, seconds, floor, edges)), flush=True)
 
 
@@ -207,6 +218,7 @@ def _run(args, worker: str, scene: str, *extra: str) -> list[dict]:
         str(args.many_lights),
         *(["--adaptive"] if args.adaptive else []),
         *(["--without-outlines"] if args.without_outlines else []),
+        *(["--lights-per-sample", *map(str, args.lights_per_sample)] if args.lights_per_sample else []),
         *extra,
     ]
     out = subprocess.run(cmd, capture_output=True, text=True, env=os.environ.copy())
@@ -229,11 +241,17 @@ def main() -> int:
     parser.add_argument(
         "--without-outlines", action="store_true", help="also each lightprobe row without the outline control variate"
     )
+    parser.add_argument(
+        "--lights-per-sample",
+        type=int,
+        nargs="*",
+        help="lightprobe's rows with each of these K (lights picked per camera sample) [the renderer's default]",
+    )
     parser.add_argument("--seeds", type=int, default=8, help="images per configuration (relMSE: their mean) [8]")
     parser.add_argument("--reps", type=int, default=2, help="repetitions of the A B sequence")
     parser.add_argument("--resolution", type=int, nargs=2, default=[320, 240])
     parser.add_argument("--many-lights", type=int, default=2000, help="the many-light scene's lights [2000]")
-    parser.add_argument("--ref-passes", type=int, help="the references' passes of 64 spp [area 64, many 128]")
+    parser.add_argument("--ref-passes", type=int, help="the references' passes of 64 spp [area 256, many 512]")
     parser.add_argument("--cache", default=str(Path.home() / ".cache" / "lightprobe" / "lights_vs_mitsuba"))
     parser.add_argument("--worker", choices=["mitsuba", "lightprobe"], help=argparse.SUPPRESS)
     parser.add_argument("--scene", help=argparse.SUPPRESS)

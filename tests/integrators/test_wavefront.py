@@ -134,10 +134,50 @@ def test_automatic_sample_allocation_and_heuristic():
     explicit = render(env_scene, RenderSettings(spp=4, seed=5, n_bsdf=8, n_env=8, heuristic="balance")).image
     np.testing.assert_array_equal(auto, explicit)
     assert not np.array_equal(auto, render(env_scene, RenderSettings(spp=4, seed=5, n_env=1)).image)
-    # the 64-slot limit applies to the counts actually used: 1 + 63 is fine with area lights, 8 + 63 is not
-    assert used(lit, n_env=63) == (1, 63, "power")
+    # the 64-slot limit applies to the counts actually used: 1 + 63 is fine with area lights (K = 1), 8 + 63 is not
+    assert used(lit, n_env=63, lights_per_sample=1) == (1, 63, "power")
+    with pytest.raises(ParameterError, match="lights_per_sample"):
+        render(lit, RenderSettings(spp=1, n_env=63))  # automatic K = 2: 1 + 2 x 63 slots
     with pytest.raises(ParameterError, match="got 8 and 63"):
         render(env_scene, RenderSettings(spp=1, n_env=63))
+
+
+def test_two_lights_are_picked_per_camera_sample_unless_one_light_is_all_there_is():
+    """lights_per_sample None (decisions.md 97): K = 2 where anything but an environment map alone lights the
+    scene, K = 1 with an environment map alone or a single delta light (a point, a spot, a directional light of
+    angle 0: every sample is the same direction); a given K is kept; the automatic render is the explicit one."""
+    from lightprobe.emitters.directional import DirectionalLight
+    from lightprobe.emitters.punctual import PointLight, SpotLight
+
+    def scene(*lights, environment=False, panel=False):
+        s = small_scene((6, 4)) if environment else Scene(Camera([0, 1, 4], [0, 0.5, 0], resolution=(6, 4)))
+        if not environment:
+            s.add(Rectangle([-3, 0, -3], [0, 0, 6], [6, 0, 0]), Lambert(0.5), name="ground")
+        if panel:
+            s.add(Rectangle([-0.5, 3, -0.5], [1, 0, 0], [0, 0, 1]), None, emission=5.0, name="panel")
+        for light in lights:
+            s.add_light(light)
+        return s
+
+    def k(s, **options):
+        return render(s, RenderSettings(spp=1, **options)).stats["lights_per_sample"]
+
+    point = PointLight([0, 2, 0], 3.0)
+    assert k(scene(environment=True)) == 1
+    assert k(scene(point)) == 1
+    assert k(scene(SpotLight([0, 2, 0], [0, 0, 0], 3.0))) == 1
+    assert k(scene(DirectionalLight([0, -1, 0], 2.0))) == 1
+    assert k(scene(DirectionalLight([0, -1, 0], 2.0, angle=1.0))) == 2  # a disc: its samples differ
+    assert k(scene(point, PointLight([1, 2, 0], 1.0))) == 2
+    assert k(scene(point, environment=True)) == 2
+    assert k(scene(panel=True)) == 2
+    assert k(scene(environment=True, panel=True)) == 2
+    assert k(scene(panel=True), lights_per_sample=1) == 1
+    assert k(scene(environment=True), lights_per_sample=3) == 3
+    lit = scene(panel=True, environment=True)
+    auto = render(lit, RenderSettings(spp=4, seed=5)).image
+    np.testing.assert_array_equal(auto, render(lit, RenderSettings(spp=4, seed=5, lights_per_sample=2)).image)
+    assert not np.array_equal(auto, render(lit, RenderSettings(spp=4, seed=5, lights_per_sample=1)).image)
 
 
 @pytest.fixture(scope="module")

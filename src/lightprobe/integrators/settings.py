@@ -124,7 +124,7 @@ class RenderSettings:
         minimum=0,
         key="bsdf_samples",
         flags=("--bsdf-samples",),
-        auto="4 if only an environment map lights the scene, else 1",
+        auto="8 if only an environment map lights the scene, else 1",
     )
     n_env: int | None = option(
         None,
@@ -133,7 +133,7 @@ class RenderSettings:
         minimum=0,
         key="env_samples",
         flags=("--env-samples", "--light-samples"),
-        auto="4 if only an environment map lights the scene, else 1",
+        auto="8 if only an environment map lights the scene, else 1",
     )
     seed: int = option(0, "Random seed", "integer", minimum=0, maximum=2**63 - 1, key="seed", flags=("--seed",))
     first_sample: int = option(0, "Index of the first sample (split and resumed renders)", "integer", minimum=0)
@@ -170,13 +170,14 @@ class RenderSettings:
         key="light_sampler",
         flags=("--light-sampler",),
     )
-    lights_per_sample: int = option(
-        1,
+    lights_per_sample: int | None = option(
+        None,
         "Lights picked per camera sample, K (each gets --env-samples samples)",
         "integer",
         minimum=1,  # at most 64 slots in all: validate()
         key="lights_per_sample",
         flags=("--lights-per-sample",),
+        auto="1 if an environment map or one delta light is the only light, else 2",
     )
     light_strategy: str = option(
         "solid-angle",
@@ -250,9 +251,9 @@ class RenderSettings:
 
     @property
     def light_samples(self) -> int:
-        """Light slots per camera sample: K lights, ``n_env`` samples each (the lecture's K N; an automatic ``n_env``
-        counted as its smallest, 1, until :meth:`resolved` makes it concrete)."""
-        return self.lights_per_sample * (1 if self.n_env is None else self.n_env)
+        """Light slots per camera sample: K lights, ``n_env`` samples each (the lecture's K N; an automatic K or
+        ``n_env`` counted as its smallest, 1, until :meth:`resolved` makes it concrete)."""
+        return (self.lights_per_sample or 1) * (1 if self.n_env is None else self.n_env)
 
     @property
     def shading_samples(self) -> int:
@@ -260,8 +261,9 @@ class RenderSettings:
         :meth:`resolved` makes it concrete)."""
         return (1 if self.n_bsdf is None else self.n_bsdf) + self.light_samples
 
-    def resolved(self, environment_only: bool) -> RenderSettings:
-        """These settings with the automatic choices made, for a scene lit by an environment map alone or not.
+    def resolved(self, environment_only: bool, one_delta_light: bool = False) -> RenderSettings:
+        """These settings with the automatic choices made, for a scene lit by an environment map alone or not
+        (``one_delta_light``: by one point, spot or delta directional light alone).
         Measured on the peer scene and on eight of the seeds' sphere scenes (decisions.md 33, 34, 93): where the
         environment is the only light, 8 BSDF + 8 environment samples per camera sample with the balance heuristic
         give the lowest error per second of the allocations measured on the peer scene at 16, 64 and 256 spp, and
@@ -269,11 +271,17 @@ class RenderSettings:
         stratified Sobol' set, whose error falls faster than 1/n; they cost no extra camera ray); with 4000 area
         lights a second BSDF sample loses, so 1 + 1 and power.  The single-technique strategies take the same
         counts, so that every strategy traces n_bsdf + n_env directions per camera sample and equal samples mean
-        equal rays."""
+        equal rays.  Where anything but an environment map alone lights the scene, K = 2 lights are picked per
+        camera sample: the light samples' variance is most of such a scene's error (each pick's own Sobol' pair
+        halves it), so a second pick lowers the error 1.7-1.9x for 1.4-1.5x the time (decisions.md 97); one delta
+        light alone keeps K = 1 (its sample is always the same direction)."""
+        k = self.lights_per_sample
+        if k is None:
+            k = 1 if environment_only or one_delta_light else 2
         n_bsdf = self.n_bsdf if self.n_bsdf is not None else (AUTO_BSDF_SAMPLES if environment_only else 1)
         n_env = self.n_env if self.n_env is not None else (AUTO_ENV_SAMPLES if environment_only else 1)
         heuristic = self.heuristic if self.heuristic is not None else ("balance" if environment_only else "power")
-        return replace(self, n_bsdf=n_bsdf, n_env=n_env, heuristic=heuristic)
+        return replace(self, n_bsdf=n_bsdf, n_env=n_env, heuristic=heuristic, lights_per_sample=k)
 
 
 def options() -> dict[str, Option]:

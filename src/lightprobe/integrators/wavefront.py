@@ -83,12 +83,24 @@ def default_pass_samples(shading_samples: int) -> int:
 
 def _environment_alone(scene: Scene, settings: RenderSettings) -> bool:
     """The environment map is the scene's only light (and one light is picked per sample)."""
-    return scene.environment is not None and not scene.emitters and not scene.lights and settings.lights_per_sample == 1
+    alone = scene.environment is not None and not scene.emitters and not scene.lights
+    return alone and settings.lights_per_sample in (None, 1)
+
+
+def _one_delta_light(scene: Scene) -> bool:
+    """The scene's only light is a point or spot light or a delta directional light: every sample of it is the
+    same direction, so a second pick adds nothing."""
+    if scene.environment is not None or scene.emitters or len(scene.lights) != 1:
+        return False
+    light = scene.lights[0]
+    return light.kind in ("point", "spot") or (light.kind == "directional" and light.angle == 0.0)
 
 
 def settings_for(scene: Scene, settings: RenderSettings) -> RenderSettings:
     """``settings`` with the automatic choices made as :func:`render` makes them for ``scene``."""
-    return settings.resolved(environment_only=_environment_alone(scene, settings))
+    return settings.resolved(
+        environment_only=_environment_alone(scene, settings), one_delta_light=_one_delta_light(scene)
+    )
 
 
 def plan_for(scene: Scene, settings: RenderSettings) -> pipeline.Plan:

@@ -116,13 +116,14 @@ Example (every key shown; optional ones have their default)::
     spp = 64
     strategy = "mis"
     heuristic = "balance"               # default: balance with an environment map alone, else power
-    bsdf_samples = 4                    # default: 4 with an environment map alone, else 1
-    env_samples = 4                     # per chosen light (N); default: 4 with an environment map alone, else 1
+    bsdf_samples = 8                    # default: 8 with an environment map alone, else 1
+    env_samples = 8                     # per chosen light (N); default: 8 with an environment map alone, else 1
     seed = 0
     sampler = "sobol"                   # sobol (Owen-scrambled Sobol') | independent
     env_candidates = 1                  # > 1: resampled environment samples (RIS) from this many candidates
     light_sampler = "bvh"               # uniform | power | bvh
-    lights_per_sample = 1               # lights chosen per camera sample (K)
+    lights_per_sample = 2               # lights chosen per camera sample (K); default: 1 with an environment map
+                                        # or one delta light alone, else 2
     light_strategy = "solid-angle"      # area | solid-angle | hemisphere | cosine
 
 Every mistake is a :class:`~lightprobe.errors.SceneError` naming the file and the table at fault.
