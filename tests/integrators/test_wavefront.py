@@ -110,13 +110,16 @@ def test_automatic_compensation_is_per_material():
 
 
 def test_automatic_sample_allocation_and_heuristic():
-    """n_bsdf, n_env and heuristic None (decisions.md 33, 34, 93): 8 BSDF + 8 environment samples and the balance
-    heuristic where an environment map is the only light, 1 + 1 and power with area lights; single techniques take
-    as many slots; given values are kept.  The stats report what was used, and an automatic render is the explicit
-    one, bit for bit."""
+    """n_bsdf, n_env and heuristic None (decisions.md 33, 34, 93, 97): 8 BSDF + 8 environment samples and the balance
+    heuristic where an environment map is the only light; with area lights 1 + 1 and power, 2 BSDF samples where an
+    environment map lights the scene beside them; single techniques take as many slots; given values are kept.  The
+    stats report what was used, and an automatic render is the explicit one, bit for bit."""
     env_scene = small_scene((6, 4))
     lit = small_scene((6, 4))
     lit.add(Rectangle([-0.5, 3, -0.5], [1, 0, 0], [0, 0, 1]), None, emission=5.0, name="panel")
+    dark = Scene(Camera([0, 1, 4], [0, 0.5, 0], resolution=(6, 4)))  # the panel alone: no environment map
+    dark.add(Rectangle.ground(size=30), Lambert(0.5))
+    dark.add(Rectangle([-0.5, 3, -0.5], [1, 0, 0], [0, 0, 1]), None, emission=5.0, name="panel")
 
     def used(scene, **options):
         stats = render(scene, RenderSettings(spp=1, **options)).stats
@@ -125,7 +128,8 @@ def test_automatic_sample_allocation_and_heuristic():
     auto_counts = (AUTO_BSDF_SAMPLES, AUTO_ENV_SAMPLES)
     assert auto_counts == (8, 8)
     assert used(env_scene) == (*auto_counts, "balance")
-    assert used(lit) == (1, 1, "power")
+    assert used(lit) == (2, 1, "power")
+    assert used(dark) == (1, 1, "power")
     # a single technique takes as many directions as MIS: equal samples are equal rays
     assert used(env_scene, strategy="brdf") == (*auto_counts, "balance")
     assert used(env_scene, n_bsdf=1, n_env=2, heuristic="power") == (1, 2, "power")
@@ -135,9 +139,11 @@ def test_automatic_sample_allocation_and_heuristic():
     np.testing.assert_array_equal(auto, explicit)
     assert not np.array_equal(auto, render(env_scene, RenderSettings(spp=4, seed=5, n_env=1)).image)
     # the 64-slot limit applies to the counts actually used: 1 + 63 is fine with area lights (K = 1), 8 + 63 is not
-    assert used(lit, n_env=63, lights_per_sample=1) == (1, 63, "power")
+    assert used(dark, n_env=63, lights_per_sample=1) == (1, 63, "power")
     with pytest.raises(ParameterError, match="lights_per_sample"):
-        render(lit, RenderSettings(spp=1, n_env=63))  # automatic K = 2: 1 + 2 x 63 slots
+        render(dark, RenderSettings(spp=1, n_env=63))  # automatic K = 2: 1 + 2 x 63 slots
+    with pytest.raises(ParameterError, match="got 2 and 63"):
+        render(lit, RenderSettings(spp=1, n_env=63, lights_per_sample=1))  # automatic n_bsdf = 2: 2 + 63 slots
     with pytest.raises(ParameterError, match="got 8 and 63"):
         render(env_scene, RenderSettings(spp=1, n_env=63))
 

@@ -99,7 +99,9 @@ def _one_delta_light(scene: Scene) -> bool:
 def settings_for(scene: Scene, settings: RenderSettings) -> RenderSettings:
     """``settings`` with the automatic choices made as :func:`render` makes them for ``scene``."""
     return settings.resolved(
-        environment_only=_environment_alone(scene, settings), one_delta_light=_one_delta_light(scene)
+        environment_only=_environment_alone(scene, settings),
+        one_delta_light=_one_delta_light(scene),
+        environment=scene.environment is not None,
     )
 
 

@@ -116,7 +116,8 @@ Example (every key shown; optional ones have their default)::
     spp = 64
     strategy = "mis"
     heuristic = "balance"               # default: balance with an environment map alone, else power
-    bsdf_samples = 8                    # default: 8 with an environment map alone, else 1
+    bsdf_samples = 8                    # default: 8 with an environment map alone, 2 with one beside other
+                                        # lights, else 1
     env_samples = 8                     # per chosen light (N); default: 8 with an environment map alone, else 1
     seed = 0
     sampler = "sobol"                   # sobol (Owen-scrambled Sobol') | independent
