@@ -272,7 +272,7 @@ class RenderSettings:
         give the lowest error per second of the allocations measured on the peer scene at 16, 64 and 256 spp, and
         beat 4 + 4 in seven of the eight sphere scenes (a camera sample's samples of one technique are one
         stratified Sobol' set, whose error falls faster than 1/n; they cost no extra camera ray); with 4000 area
-        lights a second BSDF sample loses, so 1 + 1 and power.  The single-technique strategies take the same
+        lights and no map a second BSDF sample loses, so one there, and the power heuristic.  The single-technique strategies take the same
         counts, so that every strategy traces n_bsdf + n_env directions per camera sample and equal samples mean
         equal rays.  Where anything but an environment map alone lights the scene, K = 2 lights are picked per
         camera sample: the light samples' variance is most of such a scene's error (each pick's own Sobol' pair
