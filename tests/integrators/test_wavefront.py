@@ -140,9 +140,11 @@ def test_automatic_sample_allocation_and_heuristic():
     assert not np.array_equal(auto, render(env_scene, RenderSettings(spp=4, seed=5, n_env=1)).image)
     # the 64-slot limit applies to the counts actually used: 1 + 63 is fine with area lights (K = 1), 8 + 63 is not
     assert used(dark, n_env=63, lights_per_sample=1) == (1, 63, "power")
-    with pytest.raises(ParameterError, match="lights_per_sample"):
+    # ... and the message says which counts were automatic and what they came to
+    automatic = r"\(automatic for this scene: n_bsdf = 1, lights_per_sample = 2\)$"
+    with pytest.raises(ParameterError, match=r"lights_per_sample.*" + automatic):
         render(dark, RenderSettings(spp=1, n_env=63))  # automatic K = 2: 1 + 2 x 63 slots
-    with pytest.raises(ParameterError, match="got 2 and 63"):
+    with pytest.raises(ParameterError, match=r"got 2 and 63 \(automatic for this scene: n_bsdf = 2\)$"):
         render(lit, RenderSettings(spp=1, n_env=63, lights_per_sample=1))  # automatic n_bsdf = 2: 2 + 63 slots
     with pytest.raises(ParameterError, match="got 8 and 63"):
         render(env_scene, RenderSettings(spp=1, n_env=63))

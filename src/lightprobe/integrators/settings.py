@@ -268,18 +268,18 @@ class RenderSettings:
         (``one_delta_light``: by one point, spot or delta directional light alone; ``environment``: the scene has an
         environment map, alone or beside other lights).
         Measured on the peer scene and on eight of the seeds' sphere scenes (decisions.md 33, 34, 93): where the
-        environment is the only light, 8 BSDF + 8 environment samples per camera sample with the balance heuristic
-        give the lowest error per second of the allocations measured on the peer scene at 16, 64 and 256 spp, and
-        beat 4 + 4 in seven of the eight sphere scenes (a camera sample's samples of one technique are one
-        stratified Sobol' set, whose error falls faster than 1/n; they cost no extra camera ray); with 4000 area
-        lights and no map a second BSDF sample loses, so one there, and the power heuristic.  The single-technique strategies take the same
-        counts, so that every strategy traces n_bsdf + n_env directions per camera sample and equal samples mean
-        equal rays.  Where anything but an environment map alone lights the scene, K = 2 lights are picked per
-        camera sample: the light samples' variance is most of such a scene's error (each pick's own Sobol' pair
-        halves it), so a second pick lowers the error 1.7-1.9x for 1.4-1.5x the time (decisions.md 97); one delta
-        light alone keeps K = 1 (its sample is always the same direction).  An environment map beside other lights
-        takes 2 BSDF samples, which are how MIS finds the map's broad light (1.2-1.3x the efficiency of 1 on three
-        such scenes; without a map a second one loses 9-18 %)."""
+        environment is the only light, 8 BSDF + 8 environment samples per camera sample with the balance heuristic give
+        the lowest error per second of the allocations measured on the peer scene at 16, 64 and 256 spp, and beat 4 + 4
+        in seven of the eight sphere scenes (a camera sample's samples of one technique are one stratified Sobol' set,
+        whose error falls faster than 1/n; they cost no extra camera ray); with 4000 area lights and no map a second
+        BSDF sample loses, so one there, and the power heuristic. The single-technique strategies take the same counts,
+        so that every strategy traces n_bsdf + n_env directions per camera sample and equal samples mean equal rays.
+        Where anything but an environment map alone lights the scene, K = 2 lights are picked per camera sample: the
+        light samples' variance is most of such a scene's error (each pick's own Sobol' pair halves it), so a second
+        pick lowers the error 1.7-1.9x for 1.4-1.5x the time (decisions.md 97); one delta light alone keeps K = 1 (its
+        sample is always the same direction). An environment map beside other lights takes 2 BSDF samples, which are how
+        MIS finds the map's broad light (1.2-1.3x the efficiency of 1 on three such scenes; without a map a second one
+        loses 9-18 %)."""
         k = self.lights_per_sample
         if k is None:
             k = 1 if environment_only or one_delta_light else 2

@@ -105,6 +105,21 @@ def settings_for(scene: Scene, settings: RenderSettings) -> RenderSettings:
     )
 
 
+def _resolved_and_checked(scene: Scene, settings: RenderSettings) -> RenderSettings:
+    """:func:`settings_for`, checked again: the automatic counts may take the slots past 64, and then the message
+    says which counts were automatic and what they came to (the user gave none of them)."""
+    resolved = settings_for(scene, settings)
+    try:
+        resolved.validate()
+    except ParameterError as exc:
+        auto = [name for name in ("n_bsdf", "n_env", "lights_per_sample") if getattr(settings, name) is None]
+        if not auto:
+            raise
+        chosen = ", ".join(f"{name} = {getattr(resolved, name)}" for name in auto)
+        raise ParameterError(f"{exc} (automatic for this scene: {chosen})") from None
+    return resolved
+
+
 def plan_for(scene: Scene, settings: RenderSettings) -> pipeline.Plan:
     """What a render of ``scene`` with ``settings`` needs, and so its stages."""
     alone = _environment_alone(scene, settings)
@@ -247,8 +262,7 @@ def render(
         numba.set_num_threads(min(settings.threads, numba.config.NUMBA_NUM_THREADS))
     threads = numba.get_num_threads()
     t_setup = time.perf_counter()
-    settings = settings_for(scene, settings)
-    settings.validate()  # the automatic choices may take the sample counts past 64
+    settings = _resolved_and_checked(scene, settings)
     arrays = scene.compile()
     own_tracer = tracer is None
     tracer = tracer or RayTracer(arrays, threads=threads)
