@@ -65,6 +65,40 @@ def test_a_checkpoint_of_another_render_is_refused(scene_file, tmp_path):
         render_reference(scene, RenderSettings(spp=4, seed=3), out, chunk=2, scene_id="s")
 
 
+def test_a_checkpoint_made_under_another_automatic_rule_is_refused(scene_file, tmp_path, monkeypatch):
+    """The checkpoint records the settings with the automatic choices made: a checkpoint whose automatic counts
+    came to other values (here: made while the rule gave one light pick and one BSDF sample, as before decision 97,
+    in a scene with a sky and a light) is another render, refused with the counts that differ, although both runs
+    left the counts automatic; the same rule resumes it."""
+    from lightprobe.emitters.punctual import PointLight
+    from lightprobe.integrators.settings import RenderSettings as Settings
+
+    scene, _ = load_scene(scene_file)
+    scene.add_light(PointLight([0, 3, 1], 5.0))
+    out = tmp_path / "ref.exr"
+    resolved = Settings.resolved
+
+    def old_rule(self, environment_only, one_delta_light=False, environment=False):
+        new = resolved(self, environment_only, one_delta_light, environment)
+        if environment_only:
+            return new
+        return dataclasses.replace(
+            new,
+            n_bsdf=self.n_bsdf if self.n_bsdf is not None else 1,
+            lights_per_sample=self.lights_per_sample or 1,
+        )
+
+    with monkeypatch.context() as patch:
+        patch.setattr(Settings, "resolved", old_rule)
+        render_reference(scene, RenderSettings(spp=2, seed=3), out, chunk=2, scene_id="s")
+    with pytest.raises(LightprobeError, match=r"\(lights_per_sample, n_bsdf differ\)"):
+        render_reference(scene, RenderSettings(spp=4, seed=3), out, chunk=2, scene_id="s")
+    with monkeypatch.context() as patch:
+        patch.setattr(Settings, "resolved", old_rule)
+        resumed = render_reference(scene, RenderSettings(spp=4, seed=3), out, chunk=2, scene_id="s")
+    assert resumed.stats["resumed_from_spp"] == 2
+
+
 def test_killed_mid_run_then_resumed_is_bit_identical(scene_file, tmp_path):
     """SIGKILL (no chance to clean up) after a checkpoint, then the same command again."""
     out = tmp_path / "ref.exr"

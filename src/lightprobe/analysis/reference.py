@@ -7,7 +7,8 @@ kill leaves either the old checkpoint or the new one.  Run again with the same s
 checkpoint's sample count; since every random number is a pure function of (seed, pixel, sample index,
 dimension) and the statistics continue in sample order, the result is bit for bit that of an uninterrupted run.
 A larger ``spp`` extends a finished reference the same way.  A checkpoint made with other settings (seed,
-sampler, strategy, scene, resolution) is an error naming the file and the difference, never silently mixed in.
+sampler, strategy, scene, resolution; the settings compared with their automatic choices made for the scene) is an
+error naming the file and the difference, never silently mixed in.
 A chunk in flight when Ctrl-C or the time limit stops the render is not checkpointed (its pixels have uneven
 sample counts); at most one chunk of work is redone on resume.
 """
@@ -26,7 +27,7 @@ import numpy as np
 
 from ..errors import LightprobeError
 from ..geometry.scene import Scene
-from ..integrators.wavefront import Accumulator, RenderResult, RenderSettings, render, result_from
+from ..integrators.wavefront import Accumulator, RenderResult, RenderSettings, render, result_from, settings_for
 
 __all__ = ["checkpoint_path", "render_reference"]
 
@@ -40,7 +41,10 @@ def checkpoint_path(out: str | os.PathLike) -> Path:
 
 
 def _identity(scene: Scene, settings: RenderSettings, scene_id: str) -> dict:
-    fixed = {k: v for k, v in dataclasses.asdict(settings).items() if k not in _FREE}
+    """What a checkpoint's samples depend on: the settings with the automatic choices made for this scene (an
+    automatic count whose rule changed between versions, as decision 97's K and BSDF samples did, is a different
+    render, not the same None), the resolution and the scene."""
+    fixed = {k: v for k, v in dataclasses.asdict(settings_for(scene, settings)).items() if k not in _FREE}
     width, height = scene.camera.resolution
     return {"settings": fixed, "resolution": [width, height], "scene": scene_id}
 
