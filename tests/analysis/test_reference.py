@@ -99,6 +99,35 @@ def test_a_checkpoint_made_under_another_automatic_rule_is_refused(scene_file, t
     assert resumed.stats["resumed_from_spp"] == 2
 
 
+def test_a_checkpoint_of_an_older_version_resumes_only_if_it_gave_every_count(scene_file, tmp_path):
+    """Checkpoints written before the settings were recorded as resolved (no "counts" entry; None for an automatic
+    count): one that gave every count resumes with the same counts given; one that left a count automatic is
+    refused, naming it (this version may choose it differently)."""
+    import json
+
+    scene, _ = load_scene(scene_file)
+    out = tmp_path / "ref.exr"
+    given = {"n_bsdf": 2, "n_env": 3, "heuristic": "power", "lights_per_sample": 1}
+    render_reference(scene, RenderSettings(spp=2, seed=3, **given), out, chunk=2, scene_id="s")
+    path = checkpoint_path(out)
+
+    def rewrite_as_older(**settings):
+        with np.load(path) as data:
+            arrays = {k: data[k] for k in data.files}
+        identity = json.loads(str(arrays.pop("identity")))
+        del identity["counts"]
+        identity["settings"].update(settings)
+        with open(path, "wb") as fh:
+            np.savez(fh, identity=np.array(json.dumps(identity)), **arrays)
+
+    rewrite_as_older()
+    resumed = render_reference(scene, RenderSettings(spp=4, seed=3, **given), out, chunk=2, scene_id="s")
+    assert resumed.stats["resumed_from_spp"] == 2
+    rewrite_as_older(n_bsdf=None, heuristic=None)
+    with pytest.raises(LightprobeError, match=r"older lightprobe that left heuristic, n_bsdf automatic"):
+        render_reference(scene, RenderSettings(spp=6, seed=3), out, chunk=2, scene_id="s")
+
+
 def test_killed_mid_run_then_resumed_is_bit_identical(scene_file, tmp_path):
     """SIGKILL (no chance to clean up) after a checkpoint, then the same command again."""
     out = tmp_path / "ref.exr"

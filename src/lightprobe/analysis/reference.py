@@ -46,7 +46,11 @@ def _identity(scene: Scene, settings: RenderSettings, scene_id: str) -> dict:
     render, not the same None), the resolution and the scene."""
     fixed = {k: v for k, v in dataclasses.asdict(settings_for(scene, settings)).items() if k not in _FREE}
     width, height = scene.camera.resolution
-    return {"settings": fixed, "resolution": [width, height], "scene": scene_id}
+    return {"settings": fixed, "resolution": [width, height], "scene": scene_id, "counts": "resolved"}
+
+
+# the settings whose None the renderer resolves per scene (RenderSettings.resolved)
+_AUTOMATIC = ("n_bsdf", "n_env", "heuristic", "lights_per_sample")
 
 
 def _load(path: Path, identity: dict, n_pixels: int) -> Accumulator | None:
@@ -58,6 +62,14 @@ def _load(path: Path, identity: dict, n_pixels: int) -> Accumulator | None:
             acc = Accumulator.from_arrays(data)
     except (OSError, ValueError, KeyError) as exc:
         raise LightprobeError(f"{path}: not a readable checkpoint ({exc}); move it away to start afresh") from None
+    if "counts" not in meta:  # written before checkpoints recorded their settings as resolved
+        left = sorted(k for k in _AUTOMATIC if meta.get("settings", {}).get(k, 0) is None)
+        if left:
+            raise LightprobeError(
+                f"{path}: checkpoint of an older lightprobe that left {', '.join(left)} automatic, which this version "
+                "may choose differently; finish it with that version, or move it away to start afresh"
+            )
+        meta = {**meta, "counts": "resolved"}  # every count was given: what it recorded is what it rendered
     if meta != identity:
         diff = sorted(
             k
