@@ -107,7 +107,7 @@ def settings_for(scene: Scene, settings: RenderSettings) -> RenderSettings:
 
 def _resolved_and_checked(scene: Scene, settings: RenderSettings) -> RenderSettings:
     """:func:`settings_for`, checked again: the automatic counts may take the slots past 64, and then the message
-    says which counts were automatic and what they came to (the user gave none of them)."""
+    says which counts were left automatic and what they came to (numbers the user never typed)."""
     resolved = settings_for(scene, settings)
     try:
         resolved.validate()
