@@ -35,6 +35,7 @@ from ..bsdfs.phong import PHONG
 from ..emitters.area import STRATEGIES as LIGHT_STRATEGIES
 from ..emitters.envmap import BILINEAR, placeholder_environment
 from ..emitters.kinds import LIGHT_DIRECTIONAL, LIGHT_ENVIRONMENT
+from ..emitters.lights import is_delta, light_arrays
 from ..emitters.selection import build_selector
 from ..errors import ParameterError
 from ..geometry.embree import PACKET, packets_native
@@ -92,8 +93,8 @@ def _one_delta_light(scene: Scene) -> bool:
     same direction, so a second pick adds nothing."""
     if scene.environment is not None or scene.emitters or len(scene.lights) != 1:
         return False
-    light = scene.lights[0]
-    return light.kind in ("point", "spot") or (light.kind == "directional" and light.angle == 0.0)
+    # the light contract's own test on the light's row, run as Python (no kernel to load for a yes or no)
+    return bool(is_delta.py_func(light_arrays(scene.lights), 0))
 
 
 def settings_for(scene: Scene, settings: RenderSettings) -> RenderSettings:
