@@ -18,7 +18,7 @@ from lightprobe.geometry.camera import Camera
 from lightprobe.geometry.scene import Scene
 from lightprobe.geometry.shapes import Rectangle, Sphere
 from lightprobe.integrators import wavefront
-from lightprobe.integrators.settings import AUTO_BSDF_SAMPLES, AUTO_ENV_SAMPLES
+from lightprobe.integrators.settings import AUTO_BSDF_SAMPLES, AUTO_ENV_SAMPLES, RESOLVED_PER_SCENE
 from lightprobe.integrators.wavefront import RenderSettings, render, result_from
 from lightprobe.peer import find_peers, peer_scene
 
@@ -125,6 +125,10 @@ def test_automatic_sample_allocation_and_heuristic():
         stats = render(scene, RenderSettings(spp=1, **options)).stats
         return stats["n_bsdf"], stats["n_env"], stats["heuristic"]
 
+    # RESOLVED_PER_SCENE names what resolved() fills in (reference checkpoints compare those as resolved)
+    filled = RenderSettings().resolved(environment_only=False)
+    assert {f for f in RESOLVED_PER_SCENE if getattr(filled, f) is not None} == set(RESOLVED_PER_SCENE)
+    assert all(getattr(RenderSettings(), f) is None for f in RESOLVED_PER_SCENE)
     auto_counts = (AUTO_BSDF_SAMPLES, AUTO_ENV_SAMPLES)
     assert auto_counts == (8, 8)
     assert used(env_scene) == (*auto_counts, "balance")

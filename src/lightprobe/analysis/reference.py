@@ -27,6 +27,7 @@ import numpy as np
 
 from ..errors import LightprobeError
 from ..geometry.scene import Scene
+from ..integrators.settings import RESOLVED_PER_SCENE
 from ..integrators.wavefront import Accumulator, RenderResult, RenderSettings, render, result_from, settings_for
 
 __all__ = ["checkpoint_path", "render_reference"]
@@ -49,10 +50,6 @@ def _identity(scene: Scene, settings: RenderSettings, scene_id: str) -> dict:
     return {"settings": fixed, "resolution": [width, height], "scene": scene_id, "counts": "resolved"}
 
 
-# the settings whose None the renderer resolves per scene (RenderSettings.resolved)
-_AUTOMATIC = ("n_bsdf", "n_env", "heuristic", "lights_per_sample")
-
-
 def _load(path: Path, identity: dict, n_pixels: int) -> Accumulator | None:
     if not path.exists():
         return None
@@ -63,7 +60,7 @@ def _load(path: Path, identity: dict, n_pixels: int) -> Accumulator | None:
     except (OSError, ValueError, KeyError) as exc:
         raise LightprobeError(f"{path}: not a readable checkpoint ({exc}); move it away to start afresh") from None
     if "counts" not in meta:  # written before checkpoints recorded their settings as resolved
-        left = sorted(k for k in _AUTOMATIC if meta.get("settings", {}).get(k, 0) is None)
+        left = sorted(k for k in RESOLVED_PER_SCENE if meta.get("settings", {}).get(k, 0) is None)
         if left:
             raise LightprobeError(
                 f"{path}: checkpoint of an older lightprobe that left {', '.join(left)} automatic, which this version "

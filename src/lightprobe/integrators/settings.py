@@ -26,6 +26,7 @@ from .techniques import STRATEGIES
 __all__ = [
     "DIFFUSE",
     "HEURISTICS",
+    "RESOLVED_PER_SCENE",
     "Option",
     "RenderSettings",
     "options",
@@ -40,6 +41,8 @@ DIFFUSE = "diffuse"  # mis_compensation's automatic choice: the compensated PDF 
 # n_bsdf=None and n_env=None in scenes lit by an environment map alone (decisions.md 33, 34, 93); else 1 each
 AUTO_BSDF_SAMPLES = 8
 AUTO_ENV_SAMPLES = 8
+# the fields whose None RenderSettings.resolved turns into a value chosen for the scene
+RESOLVED_PER_SCENE = ("n_bsdf", "n_env", "heuristic", "lights_per_sample")
 LAST_SAMPLE = 2**56  # a sample index times 64 shading slots stays below 2^63 (sampling.rng.group_slot)
 
 _KINDS = {"integer": numbers.Integral, "number": numbers.Real, "string": str, "true or false": bool}

@@ -42,7 +42,7 @@ def constants(m: int, **given) -> PassConstants:
         "pixels": np.zeros(0, np.int64),
         "spp_pass": 1,
         "sample_start": 0,
-        **{f"outline_{name}": array for name, array in outlines.empty()._asdict().items()},
+        **outlines.pass_fields(None, None, enabled=False),
     }
     values.update(given)
     return PassConstants(**values)
