@@ -608,10 +608,21 @@ class EnvironmentMap:
         world normal n.  With L(w) ~ c0 + c1 . w (c0 the mean, c1 = 3 / (4 pi) int L w dw), the cosine-weighted
         hemisphere integral gives a = pi c0 and b = 2 pi / 3 c1.  The light selectors weigh the environment
         against the area lights with it (emitters/selection.py).  Texel centres, nearest-texel quadrature."""
-        h, w = self.luminance.shape
+        return self._first_order_irradiance(self.luminance.astype(np.float64))
+
+    @cached_property
+    def compensated_irradiance_terms(self) -> np.ndarray:
+        """:attr:`irradiance_terms` of the compensated luminance max(L - mean, 0) (Karlik et al. 2019; the mean per
+        unit solid angle, as the compensated density subtracts): what a light selector weighs the environment by
+        at a receiver that samples the compensated density (emitters/selection.py).  Zero for a constant map."""
+        lum = self.luminance.astype(np.float64)
+        return self._first_order_irradiance(np.maximum(lum - self.mean_luminance, 0.0))
+
+    def _first_order_irradiance(self, lum: np.ndarray) -> np.ndarray:
+        h, w = lum.shape
         theta = np.pi * (np.arange(h) + 0.5) / h
         phi = TWO_PI * (np.arange(w) + 0.5) / w
-        weighted = self.luminance.astype(np.float64) * self.texel_solid_angle[:, None]  # L dw per texel
+        weighted = lum * self.texel_solid_angle[:, None]  # L dw per texel
         rows = weighted.sum(axis=1)
         sin_phi, cos_phi = weighted @ np.sin(phi), weighted @ np.cos(phi)
         # local directions (sin phi sin theta, cos theta, -cos phi sin theta), as pdf_image's

@@ -40,6 +40,11 @@ scene's bounding sphere x the map's integral, pbrt-v4's ``ImageInfiniteLight::Ph
 picks in a scene with a 16 m ground, where uniform selection was more efficient (issue 32; decisions.md 71).  The
 bounded lights' ``power`` CDF and the BVH are then over the bounded lights alone.  ``uniform`` keeps the infinite
 lights among its L equally likely lights.
+
+A receiver whose material samples the MIS-compensated environment (Karlik et al. 2019: the density of max(L - mean,
+0), on Lambertian materials by default) weighs the environment by that luminance's irradiance instead
+(``env_irradiance_compensated``): the part of the map's light that its BSDF samples find poorly.  A constant sky
+then gets no light samples there; its BSDF samples find it alone, with no variance from the sky (decisions.md 98).
 """
 
 from __future__ import annotations
@@ -106,9 +111,12 @@ class LightSelector(NamedTuple):
     n_lights: int  # rows of the light table
     n_bounded: int  # its bounded lights, rows 0 .. n_bounded - 1; the infinite ones follow
     env_index: int  # the environment's row; -1: no environment
-    inf_a: np.ndarray  # (infinite lights,) each one's irradiance on a receiver with normal n: max(a + b . n, floor)
-    inf_b: np.ndarray  # (infinite lights, 3)
-    inf_floor: np.ndarray  # (infinite lights,)
+    # each infinite light's irradiance on a receiver with normal n, max(a + b . n, floor); row 0 for every
+    # receiver, row 1 for a receiver whose material takes the MIS-compensated environment (the environment's terms
+    # those of its compensated luminance: see infinite_probability)
+    inf_a: np.ndarray  # (2, infinite lights)
+    inf_b: np.ndarray  # (2, infinite lights, 3)
+    inf_floor: np.ndarray  # (2, infinite lights)
     cdf: np.ndarray  # (bounded lights + 1,) power CDF over the bounded lights (POWER), empty otherwise
     # (1, 12) the bounds of every bounded light together (the environment's share: infinite_probability), columns
     # B_* (light_tree_lanes.py; a sphere's power a quarter of it: _light_bounds); (0, 12) without bounded lights
@@ -550,23 +558,28 @@ def _no_bounds(sel):
 
 
 @jit_inline
-def _infinite_importance(sel, i, nx, ny, nz):
-    """pi x infinite light i's irradiance on a receiver with normal n, floored (never 0 where the light exists)."""
-    e = sel.inf_a[i] + sel.inf_b[i, 0] * nx + sel.inf_b[i, 1] * ny + sel.inf_b[i, 2] * nz
-    return math.pi * max(e, sel.inf_floor[i])
+def _infinite_importance(sel, i, nx, ny, nz, compensated):
+    """pi x infinite light i's irradiance on a receiver with normal n, floored (never 0 where the light exists,
+    unless ``compensated`` and the light's compensated luminance is 0 everywhere: a constant map)."""
+    c = 1 if compensated else 0
+    e = sel.inf_a[c, i] + sel.inf_b[c, i, 0] * nx + sel.inf_b[c, i, 1] * ny + sel.inf_b[c, i, 2] * nz
+    return math.pi * max(e, sel.inf_floor[c, i])
 
 
 @jit_inline
-def infinite_probability(sel, px, py, pz, nx, ny, nz):
+def infinite_probability(sel, px, py, pz, nx, ny, nz, compensated):
     """(probability of choosing an infinite light for a receiver at p with normal n, the infinite lights' summed
     importance) for ``power`` and ``bvh`` (see the module docstring): I_inf / (I_inf + I_area); 0 without infinite
-    lights, 1 without bounded ones."""
+    lights, 1 without bounded ones.  ``compensated``: the receiver's material samples the MIS-compensated
+    environment (Karlik et al. 2019), so the environment weighs what its compensated luminance max(L - mean, 0)
+    gives, the part of its light that BSDF samples find poorly; a constant sky then gets no picks at all and its
+    light comes from the BSDF samples, which find it with no variance from the sky (decisions.md 98)."""
     n_inf = sel.n_lights - sel.n_bounded
     if n_inf == 0:
         return 0.0, 0.0
     i_inf = 0.0
     for i in range(n_inf):
-        i_inf += _infinite_importance(sel, i, nx, ny, nz)
+        i_inf += _infinite_importance(sel, i, nx, ny, nz, compensated)
     if _no_bounds(sel):
         return 1.0, i_inf
     i_area = node_importance(sel.node_bounds, 0, px, py, pz, nx, ny, nz)
@@ -586,12 +599,13 @@ def _rescaled(u, lo, width):
 
 
 @jit_inline
-def select_light(sel, px, py, pz, nx, ny, nz, u):
-    """(light index, probability, u rescaled) for a receiver at p with normal n; (-1, 0, u) when no light can be
-    picked.  The third value is u's position inside the sub-interval of [0, 1) that chose the light, a fresh
-    uniform number: the renderer picks with the first number of the light sample's 2D pair and gives the pair back
-    to the light with this number in its place, so each light's samples keep the pair's stratification (a separate
-    pick number leaves each light a scattered subset of the pair's net)."""
+def select_light(sel, px, py, pz, nx, ny, nz, u, compensated):
+    """(light index, probability, u rescaled) for a receiver at p with normal n (``compensated``: its material
+    samples the MIS-compensated environment, ``infinite_probability``); (-1, 0, u) when no light can be picked.
+    The third value is u's position inside the sub-interval of [0, 1) that chose the light, a fresh uniform number:
+    the renderer picks with the first number of the light sample's 2D pair and gives the pair back to the light
+    with this number in its place, so each light's samples keep the pair's stratification (a separate pick number
+    leaves each light a scattered subset of the pair's net)."""
     if sel.n_lights == 0:
         return -1, 0.0, u
     if sel.mode == UNIFORM:
@@ -600,7 +614,7 @@ def select_light(sel, px, py, pz, nx, ny, nz, u):
         return light, 1.0 / sel.n_lights, _rescaled(x, float(light), 1.0)
     pmf = 1.0
     if sel.n_lights > sel.n_bounded:
-        p_inf, i_inf = infinite_probability(sel, px, py, pz, nx, ny, nz)
+        p_inf, i_inf = infinite_probability(sel, px, py, pz, nx, ny, nz, compensated)
         if u < p_inf:
             u = _rescaled(u, 0.0, p_inf)
             n_inf = sel.n_lights - sel.n_bounded
@@ -608,7 +622,7 @@ def select_light(sel, px, py, pz, nx, ny, nz, u):
                 return sel.n_bounded, p_inf, u
             lo = 0.0
             for i in range(n_inf):  # a few lights: a linear search of their importances
-                width = _infinite_importance(sel, i, nx, ny, nz) / i_inf if i_inf > 0.0 else 1.0 / n_inf
+                width = _infinite_importance(sel, i, nx, ny, nz, compensated) / i_inf if i_inf > 0.0 else 1.0 / n_inf
                 if u < lo + width or i == n_inf - 1:
                     return sel.n_bounded + i, p_inf * width, _rescaled(u, lo, width)
                 lo += width
@@ -653,7 +667,7 @@ def select_light(sel, px, py, pz, nx, ny, nz, u):
 
 
 @jit_inline
-def selector_pmf(sel, px, py, pz, nx, ny, nz, light):
+def selector_pmf(sel, px, py, pz, nx, ny, nz, light, compensated):
     """Probability that :func:`select_light` picks ``light`` for this receiver."""
     if light < 0 or light >= sel.n_lights:
         return 0.0
@@ -661,14 +675,14 @@ def selector_pmf(sel, px, py, pz, nx, ny, nz, light):
         return 1.0 / sel.n_lights
     pmf = 1.0
     if sel.n_lights > sel.n_bounded:
-        p_inf, i_inf = infinite_probability(sel, px, py, pz, nx, ny, nz)
+        p_inf, i_inf = infinite_probability(sel, px, py, pz, nx, ny, nz, compensated)
         if light >= sel.n_bounded:
             n_inf = sel.n_lights - sel.n_bounded
             if n_inf == 1:
                 return p_inf
             if i_inf <= 0.0:
                 return p_inf / n_inf
-            return p_inf * (_infinite_importance(sel, light - sel.n_bounded, nx, ny, nz) / i_inf)
+            return p_inf * (_infinite_importance(sel, light - sel.n_bounded, nx, ny, nz, compensated) / i_inf)
         pmf = 1.0 - p_inf
     if sel.mode == POWER:
         return pmf * (sel.cdf[light + 1] - sel.cdf[light])
@@ -690,37 +704,45 @@ def selector_pmf(sel, px, py, pz, nx, ny, nz, light):
 
 
 @jit_parallel
-def _select_batch(sel, points, normals, u):
+def _select_batch(sel, points, normals, u, compensated):
     n = u.shape[0]
     light = np.empty(n, np.int64)
     pmf = np.empty(n)
     rest = np.empty(n)
     for i in prange(n):
         light[i], pmf[i], rest[i] = select_light(
-            sel, points[i, 0], points[i, 1], points[i, 2], normals[i, 0], normals[i, 1], normals[i, 2], u[i]
-        )
+            sel, points[i, 0], points[i, 1], points[i, 2], normals[i, 0], normals[i, 1], normals[i, 2], u[i],
+            compensated,
+        )  # fmt: skip
     return light, pmf, rest
 
 
 @jit_parallel
-def _pmf_all(sel, p, n):
+def _pmf_all(sel, p, n, compensated):
     out = np.empty(sel.n_lights)
     for light in prange(sel.n_lights):
-        out[light] = selector_pmf(sel, p[0], p[1], p[2], n[0], n[1], n[2], light)
+        out[light] = selector_pmf(sel, p[0], p[1], p[2], n[0], n[1], n[2], light, compensated)
     return out
 
 
 # --- construction ----------------------------------------------------------------------------------------------------
-def build_selector(mode: str, lights: LightArrays, *, env_irradiance=None) -> LightSelector:
+def build_selector(
+    mode: str, lights: LightArrays, *, env_irradiance=None, env_irradiance_compensated=None
+) -> LightSelector:
     """A selector over the light table ``lights`` (bounded rows first, then the infinite ones: kinds.py).
     ``env_irradiance`` = (a, bx, by, bz), the environment's irradiance to first order, E(n) = a + b . n
     (:meth:`EnvironmentMap.irradiance_terms`), is required when the table has an environment row; given for a table
-    without one, a row is added for it (the last)."""
+    without one, a row is added for it (the last).  ``env_irradiance_compensated``: the same of the map's
+    compensated luminance (:meth:`EnvironmentMap.compensated_irradiance_terms`), what receivers whose material
+    samples the compensated environment weigh it by (``infinite_probability``); ``env_irradiance`` if not given."""
     if mode not in SELECTORS:
         raise ParameterError(f"light sampler must be one of {list(SELECTORS)}, got {mode!r}")
-    env = np.zeros(4) if env_irradiance is None else np.asarray(env_irradiance, dtype=np.float64).reshape(4)
-    if not np.all(np.isfinite(env)) or env[0] < 0:
-        raise ParameterError(f"env_irradiance must be 4 finite numbers with a >= 0, got {env_irradiance!r}")
+    env = _irradiance_terms(env_irradiance, "env_irradiance")
+    env_compensated = (
+        env
+        if env_irradiance_compensated is None
+        else _irradiance_terms(env_irradiance_compensated, "env_irradiance_compensated")
+    )
     kinds = lights.kind
     if env_irradiance is not None and not np.any(kinds == LIGHT_ENVIRONMENT):
         lights = concatenate([lights, _environment_row()])
@@ -733,7 +755,13 @@ def build_selector(mode: str, lights: LightArrays, *, env_irradiance=None) -> Li
     if np.any(kinds == LIGHT_ENVIRONMENT) and (kinds[-1] != LIGHT_ENVIRONMENT or env_irradiance is None):
         raise ParameterError("an environment row must be the table's last, with env_irradiance given")
     bounded = LightArrays(*(a[:n_bounded] for a in lights))
-    inf_a, inf_b, inf_floor = _infinite_terms(LightArrays(*(a[n_bounded:] for a in lights)), env)
+    infinite_rows = LightArrays(*(a[n_bounded:] for a in lights))
+    inf_a, inf_b, inf_floor = (
+        np.ascontiguousarray(np.stack(pair))
+        for pair in zip(
+            _infinite_terms(infinite_rows, env), _infinite_terms(infinite_rows, env_compensated), strict=True
+        )
+    )
     trail = np.zeros(0, np.int64)
     wide_bounds, wide_child = np.zeros((0, BOUNDS_WIDTH * WIDTH)), np.zeros((0, WIDTH), np.int64)
     cdf = np.zeros(0)
@@ -789,6 +817,14 @@ def _environment_row() -> LightArrays:
         np.array([LIGHT_ENVIRONMENT], np.int64), np.zeros((1, ROW_WIDTH)), np.zeros((1, 3)), np.zeros(1, np.int64),
         np.zeros(1),
     )  # fmt: skip
+
+
+def _irradiance_terms(terms, name: str) -> np.ndarray:
+    """(a, bx, by, bz) as float64, checked: 4 finite numbers with a >= 0 (zeros for None)."""
+    env = np.zeros(4) if terms is None else np.asarray(terms, dtype=np.float64).reshape(4)
+    if not np.all(np.isfinite(env)) or env[0] < 0:
+        raise ParameterError(f"{name} must be 4 finite numbers with a >= 0, got {terms!r}")
+    return env
 
 
 def _infinite_terms(infinite: LightArrays, env: np.ndarray):
@@ -857,16 +893,20 @@ class LightSampler:
     each u rescaled to [0, 1) within the interval that chose its light), ``pmf(point, normal)`` (the probability of
     every light for one receiver)."""
 
-    def __init__(self, mode: str, lights: LightArrays, *, env_irradiance=None):
+    def __init__(self, mode: str, lights: LightArrays, *, env_irradiance=None, env_irradiance_compensated=None):
         self.mode = mode
-        self.arrays = build_selector(mode, lights, env_irradiance=env_irradiance)
+        self.arrays = build_selector(
+            mode, lights, env_irradiance=env_irradiance, env_irradiance_compensated=env_irradiance_compensated
+        )
 
-    def select(self, points, normals, u, *, rescaled: bool = False):
+    def select(self, points, normals, u, *, rescaled: bool = False, compensated: bool = False):
         u = np.ascontiguousarray(np.asarray(u, dtype=np.float64).reshape(-1))
         points = np.ascontiguousarray(np.broadcast_to(np.asarray(points, dtype=np.float64), (u.size, 3)))
         normals = np.ascontiguousarray(np.broadcast_to(np.asarray(normals, dtype=np.float64), (u.size, 3)))
-        light, pmf, rest = _select_batch(self.arrays, points, normals, u)
+        light, pmf, rest = _select_batch(self.arrays, points, normals, u, bool(compensated))
         return (light, pmf, rest) if rescaled else (light, pmf)
 
-    def pmf(self, point, normal) -> np.ndarray:
-        return _pmf_all(self.arrays, np.asarray(point, dtype=np.float64), np.asarray(normal, dtype=np.float64))
+    def pmf(self, point, normal, *, compensated: bool = False) -> np.ndarray:
+        return _pmf_all(
+            self.arrays, np.asarray(point, dtype=np.float64), np.asarray(normal, dtype=np.float64), bool(compensated)
+        )

@@ -178,6 +178,7 @@ class _Pass:
             settings.light_sampler,
             lights,
             env_irradiance=environment.irradiance_terms if environment is not None else None,
+            env_irradiance_compensated=environment.compensated_irradiance_terms if environment is not None else None,
         )
         self.ray_counts = np.zeros((threads_max, 8), np.int64)  # per worker (a row = a cache line)
         self.launcher = pipeline.Launcher(threads)

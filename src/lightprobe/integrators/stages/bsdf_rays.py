@@ -113,7 +113,7 @@ def _weigh_escaping(env, lights, sel, c, cams, slots, r, k):
             continue
         share = 1.0 / c.m
         if c.strategy == MIS:
-            p_light = selector_pmf(sel, px, py, pz, nx, ny, nz, light) * light_pdf_of(
+            p_light = selector_pmf(sel, px, py, pz, nx, ny, nz, light, compensated) * light_pdf_of(
                 lights, env, light, c.light_strategy, compensated, px, py, pz, nx, ny, nz, wx, wy, wz
             )
             share = bsdf_share(c, slots.tpdf[r], p_light)
@@ -207,7 +207,8 @@ def what_bsdf_rays_see(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi)
             nx, ny, nz = cams.gnormal[k, 0], cams.gnormal[k, 1], cams.gnormal[k, 2]
             # the emitter's density at the point this ray hit (Mitsuba 3's direct: pdf_emitter_direction(si, ds)
             # with ds from the BSDF ray's own hit)
-            p_light = selector_pmf(sel, px, py, pz, nx, ny, nz, light) * area_pdf_at(
+            compensated = c.compensate[cams.material[k]]
+            p_light = selector_pmf(sel, px, py, pz, nx, ny, nz, light, compensated) * area_pdf_at(
                 lights, light, c.light_strategy, px, py, pz, nx, ny, nz, x[0], x[1], x[2]
             )
             share = bsdf_share(c, slots.tpdf[r], p_light)

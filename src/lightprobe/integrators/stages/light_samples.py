@@ -71,15 +71,14 @@ def light_samples(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
         else:
             rs = sample_state(c.sampler, c.seed, c.pixels[k // c.spp_pass], c.sample_start + k % c.spp_pass)
             u_pick = pick_number(rs, c.n_bsdf, c.n_per_light, m, c.strategy, r % m, u0)
-        light, pmf, u_rest = select_light(sel, px, py, pz, nx, ny, nz, u_pick)
+        compensated = c.compensate[cams.material[k]]
+        light, pmf, u_rest = select_light(sel, px, py, pz, nx, ny, nz, u_pick, compensated)
         if light < 0 or pmf <= 0.0:
             slots.state[r] = SLOT_NONE
             continue
         if c.n_per_light == 1:
             u0 = u_rest
-        ls = light_sample_of(
-            lights, env, light, c.light_strategy, c.compensate[cams.material[k]], px, py, pz, nx, ny, nz, u0, u1
-        )
+        ls = light_sample_of(lights, env, light, c.light_strategy, compensated, px, py, pz, nx, ny, nz, u0, u1)
         if ls.pdf <= 0.0 or (ls.r == 0.0 and ls.g == 0.0 and ls.b == 0.0):
             slots.state[r] = SLOT_NONE
             continue
