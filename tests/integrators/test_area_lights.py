@@ -4,6 +4,7 @@ bit-identical."""
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import math
 
@@ -170,8 +171,18 @@ def test_mis_compensation_needs_an_environment():
 
 
 def test_compensation_is_on_by_default_for_environment_maps_alone_and_off_with_area_lights():
+    """Automatic compensation (decisions.md 29): on diffuse materials under MIS where a map is the only light; off
+    for a single technique and without BSDF samples, where the compensated density's dim texels would be found by
+    nothing (the demo lost 16 % of its light that way); asked for without BSDF samples, a one-line error."""
     from .test_wavefront import small_scene
 
     assert render(small_scene((4, 4)), RenderSettings(spp=1)).stats["mis_compensation"] == "diffuse"
     assert render(small_scene((4, 4)), RenderSettings(spp=1, strategy="env")).stats["mis_compensation"] is False
     assert render(mixed_scene((4, 4), n_panels=3), RenderSettings(spp=1)).stats["mis_compensation"] is False
+    without_bsdf = RenderSettings(spp=4, seed=2, n_bsdf=0, n_env=4)
+    result = render(small_scene((6, 4)), without_bsdf)
+    assert result.stats["mis_compensation"] is False
+    plain = render(small_scene((6, 4)), dataclasses.replace(without_bsdf, mis_compensation=False))
+    np.testing.assert_array_equal(result.image, plain.image)
+    with pytest.raises(ParameterError, match=r"mis_compensation needs BSDF samples \(n_bsdf >= 1\)"):
+        render(small_scene((4, 4)), dataclasses.replace(without_bsdf, mis_compensation=True))
