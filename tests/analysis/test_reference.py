@@ -128,6 +128,44 @@ def test_a_checkpoint_of_an_older_version_resumes_only_if_it_gave_every_count(sc
         render_reference(scene, RenderSettings(spp=6, seed=3), out, chunk=2, scene_id="s")
 
 
+def _drop_from_identity(path, key):
+    """Rewrite checkpoint ``path`` as a version that did not record ``key`` wrote it."""
+    import json
+
+    with np.load(path) as data:
+        arrays = {k: data[k] for k in data.files}
+    identity = json.loads(str(arrays.pop("identity")))
+    del identity[key]
+    with open(path, "wb") as fh:
+        np.savez(fh, identity=np.array(json.dumps(identity)), **arrays)
+
+
+def test_a_checkpoint_from_before_maps_beside_lights_were_compensated(scene_file, tmp_path):
+    """Checkpoints written before they recorded the MIS compensation: the automatic choice was then the Lambertian
+    materials with a map alone and none with a map beside other lights (decisions.md 98 compensates both).  A map
+    alone resumes; a map beside a light with the compensation left automatic is refused, naming it; given
+    explicitly, it resumes."""
+    from lightprobe.emitters.punctual import PointLight
+
+    alone, _ = load_scene(scene_file)
+    beside, _ = load_scene(scene_file)
+    beside.add_light(PointLight([0, 3, 1], 5.0))
+    for scene, settings, resumes in (
+        (alone, {}, True),
+        (beside, {}, False),
+        (beside, {"mis_compensation": False}, True),
+    ):
+        out = tmp_path / f"ref{len(scene.lights)}{settings}.exr"
+        render_reference(scene, RenderSettings(spp=2, seed=3, **settings), out, chunk=2, scene_id="s")
+        _drop_from_identity(checkpoint_path(out), "compensation")
+        if resumes:
+            again = render_reference(scene, RenderSettings(spp=4, seed=3, **settings), out, chunk=2, scene_id="s")
+            assert again.stats["resumed_from_spp"] == 2
+        else:
+            with pytest.raises(LightprobeError, match=r"checkpoint of a different render \(mis_compensation differ"):
+                render_reference(scene, RenderSettings(spp=4, seed=3, **settings), out, chunk=2, scene_id="s")
+
+
 def test_killed_mid_run_then_resumed_is_bit_identical(scene_file, tmp_path):
     """SIGKILL (no chance to clean up) after a checkpoint, then the same command again."""
     out = tmp_path / "ref.exr"

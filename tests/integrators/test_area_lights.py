@@ -170,15 +170,19 @@ def test_mis_compensation_needs_an_environment():
         render(scene, RenderSettings(spp=1, mis_compensation=True))
 
 
-def test_compensation_is_on_by_default_for_environment_maps_alone_and_off_with_area_lights():
-    """Automatic compensation (decisions.md 29): on diffuse materials under MIS where a map is the only light; off
-    for a single technique and without BSDF samples, where the compensated density's dim texels would be found by
-    nothing (the demo lost 16 % of its light that way); asked for without BSDF samples, a one-line error."""
+def test_compensation_is_on_by_default_wherever_a_map_meets_bsdf_samples():
+    """Automatic compensation (decisions.md 29, 98): on diffuse materials under MIS wherever the scene has an
+    environment map, alone or beside area lights; off for a single technique and without BSDF samples, where the
+    compensated density's dim texels would be found by nothing (the demo lost 16 % of its light that way); asked
+    for without BSDF samples, a one-line error."""
     from .test_wavefront import small_scene
 
     assert render(small_scene((4, 4)), RenderSettings(spp=1)).stats["mis_compensation"] == "diffuse"
     assert render(small_scene((4, 4)), RenderSettings(spp=1, strategy="env")).stats["mis_compensation"] is False
-    assert render(mixed_scene((4, 4), n_panels=3), RenderSettings(spp=1)).stats["mis_compensation"] is False
+    assert render(mixed_scene((4, 4), n_panels=3), RenderSettings(spp=1)).stats["mis_compensation"] == "diffuse"
+    no_map = mixed_scene((4, 4), n_panels=3)
+    no_map.environment = None
+    assert render(no_map, RenderSettings(spp=1)).stats["mis_compensation"] is False
     without_bsdf = RenderSettings(spp=4, seed=2, n_bsdf=0, n_env=4)
     result = render(small_scene((6, 4)), without_bsdf)
     assert result.stats["mis_compensation"] is False

@@ -216,6 +216,26 @@ def test_a_point_light_takes_mis_weight_one_beside_the_sky(options):
     assert abs(mean - expected) < 4 * se + 1e-6, (mean, expected, se)
 
 
+def test_a_constant_sky_beside_a_light_is_left_to_the_bsdf_samples_on_a_diffuse_surface():
+    """A Lambert point under a constant sky with a delta sun: its material samples the compensated environment, whose
+    compensated luminance max(L - mean, 0) is 0, so the selector never picks the sky there and the cosine-sampled
+    BSDF samples find it alone, each with MIS weight 1 and the exact rho L (decisions.md 98): the pixel is
+    rho / pi (pi L + E cos) with no variance at all.  Without compensation the sky is also light-sampled (unbiased,
+    with variance).  A selector that weighed the sky one way to pick and another in the BSDF samples' weights
+    would miss the closed form."""
+    from lightprobe.emitters.directional import DirectionalLight
+
+    scene = _lamp_scene(DirectionalLight(SUN_DIRECTION, 3.0), sky=0.5)
+    expected = 0.6 / math.pi * (math.pi * 0.5 + 3.0 * -SUN_DIRECTION[1])
+    result = render(scene, RenderSettings(spp=64, seed=2))
+    assert result.stats["mis_compensation"] == "diffuse"
+    np.testing.assert_allclose(result.image[0, 0], expected, rtol=1e-6)
+    assert np.all(result.variance < 1e-16 * expected**2), result.variance
+    plain = render(scene, RenderSettings(spp=64, seed=2, mis_compensation=False))
+    assert np.all(plain.variance[0, 0] > 1e-8), plain.variance
+    assert np.all(np.abs(plain.image[0, 0] - expected) < 4 * np.sqrt(plain.variance[0, 0]))
+
+
 # --- directional lights: E cos theta at a Lambert point, as a delta light or as a disc ----------------------------
 SUN_DIRECTION = np.array([-0.4, -1.0, 0.3]) / np.linalg.norm([-0.4, -1.0, 0.3])  # the way its light travels
 

@@ -27,8 +27,16 @@ import numpy as np
 
 from ..errors import LightprobeError
 from ..geometry.scene import Scene
-from ..integrators.settings import RESOLVED_PER_SCENE
-from ..integrators.wavefront import Accumulator, RenderResult, RenderSettings, render, result_from, settings_for
+from ..integrators.settings import DIFFUSE, RESOLVED_PER_SCENE
+from ..integrators.wavefront import (
+    Accumulator,
+    RenderResult,
+    RenderSettings,
+    compensation_for,
+    render,
+    result_from,
+    settings_for,
+)
 
 __all__ = ["checkpoint_path", "render_reference"]
 
@@ -45,12 +53,31 @@ def _identity(scene: Scene, settings: RenderSettings, scene_id: str) -> dict:
     """What a checkpoint's samples depend on: the settings with the automatic choices made for this scene (an
     automatic count whose rule changed between versions, as decision 97's K and BSDF samples did, is a different
     render, not the same None), the resolution and the scene."""
-    fixed = {k: v for k, v in dataclasses.asdict(settings_for(scene, settings)).items() if k not in _FREE}
+    resolved = settings_for(scene, settings)
+    fixed = {k: v for k, v in dataclasses.asdict(resolved).items() if k not in _FREE}
     width, height = scene.camera.resolution
-    return {"settings": fixed, "resolution": [width, height], "scene": scene_id, "counts": "resolved"}
+    return {
+        "settings": fixed,
+        "resolution": [width, height],
+        "scene": scene_id,
+        "counts": "resolved",
+        "compensation": compensation_for(scene, resolved),
+    }
 
 
-def _load(path: Path, identity: dict, n_pixels: int) -> Accumulator | None:
+def _older_compensation(meta: dict, scene: Scene) -> bool | str:
+    """The MIS compensation a checkpoint written before checkpoints recorded it rendered with: the automatic choice
+    was the Lambertian materials under MIS with an environment map as the only light, and none otherwise (a map
+    beside other lights has been compensated since decisions.md 98)."""
+    settings = meta.get("settings", {})
+    if settings.get("mis_compensation") is not None:
+        return settings["mis_compensation"]
+    alone = scene.environment is not None and not scene.emitters and not scene.lights
+    one_pick = settings.get("lights_per_sample") in (None, 1)
+    return DIFFUSE if settings.get("strategy") == "mis" and alone and one_pick else False
+
+
+def _load(path: Path, identity: dict, n_pixels: int, scene: Scene) -> Accumulator | None:
     if not path.exists():
         return None
     try:
@@ -67,6 +94,8 @@ def _load(path: Path, identity: dict, n_pixels: int) -> Accumulator | None:
                 "may choose differently; finish it with that version, or move it away to start afresh"
             )
         meta = {**meta, "counts": "resolved"}  # every count was given: what it recorded is what it rendered
+    if "compensation" not in meta:  # written before checkpoints recorded the compensation
+        meta = {**meta, "compensation": _older_compensation(meta, scene)}
     if meta != identity:
         diff = sorted(
             k
@@ -77,6 +106,8 @@ def _load(path: Path, identity: dict, n_pixels: int) -> Accumulator | None:
             diff.append("resolution")
         if meta.get("scene") != identity["scene"]:
             diff.append("scene")
+        if meta.get("compensation") != identity["compensation"]:  # automatic, its rule changed (decisions.md 98)
+            diff.append("mis_compensation")
         raise LightprobeError(
             f"{path}: checkpoint of a different render ({', '.join(diff) or 'settings'} differ); "
             "use the same settings, or move it away to start afresh"
@@ -127,7 +158,7 @@ def render_reference(
     width, height = scene.camera.resolution
     identity = _identity(scene, settings, scene_id)
     ckpt = checkpoint_path(out)
-    acc = _load(ckpt, identity, width * height)
+    acc = _load(ckpt, identity, width * height, scene)
     done = int(acc.count[0]) if acc is not None else 0
     resumed_from = done
     start = time.perf_counter()

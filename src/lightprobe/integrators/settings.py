@@ -163,7 +163,7 @@ class RenderSettings:
         "true or false",
         key="mis_compensation",
         flags=("--mis-compensation/--no-mis-compensation",),
-        auto="mis with an environment map alone and BSDF samples: on diffuse materials",
+        auto="mis with an environment map and BSDF samples: on diffuse materials",
     )
     light_sampler: str = option(
         "bvh",

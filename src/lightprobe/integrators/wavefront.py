@@ -108,12 +108,12 @@ def settings_for(scene: Scene, settings: RenderSettings) -> RenderSettings:
 
 def compensation_for(scene: Scene, settings: RenderSettings) -> bool | str:
     """Which materials sample the MIS-compensated environment (True: all, False: none, ``DIFFUSE``: Lambertian ones),
-    for resolved ``settings``: automatically the Lambertian ones under MIS where the map is the only light
-    (decisions.md 21 and 29), if there are BSDF samples to find the dim texels the compensated density leaves out
-    (without them the demo lost 16 % of its light)."""
+    for resolved ``settings``: automatically the Lambertian ones under MIS wherever the scene has a map (decisions.md
+    21, 29 and 98), if there are BSDF samples to find the dim texels the compensated density leaves out (without
+    them the demo lost 16 % of its light)."""
     if settings.mis_compensation is not None:
         return settings.mis_compensation
-    automatic = settings.strategy == "mis" and settings.n_bsdf > 0 and _environment_alone(scene, settings)
+    automatic = settings.strategy == "mis" and settings.n_bsdf > 0 and scene.environment is not None
     return DIFFUSE if automatic else False
 
 
