@@ -668,7 +668,7 @@ def select_light(sel, px, py, pz, nx, ny, nz, u, compensated):
 
 @jit_inline
 def selector_pmf(sel, px, py, pz, nx, ny, nz, light, compensated):
-    """Probability that :func:`select_light` picks ``light`` for this receiver."""
+    """Probability that :func:`select_light` picks ``light`` for this receiver (``compensated`` as there)."""
     if light < 0 or light >= sel.n_lights:
         return 0.0
     if sel.mode == UNIFORM:
@@ -891,7 +891,8 @@ def _root_only(lights: LightArrays) -> dict:
 class LightSampler:
     """A selector usable from Python: ``select(points, normals, u) -> (lights, pmf)`` (with ``rescaled=True`` also
     each u rescaled to [0, 1) within the interval that chose its light), ``pmf(point, normal)`` (the probability of
-    every light for one receiver)."""
+    every light for one receiver); ``compensated=True`` for a receiver whose material samples the MIS-compensated
+    environment (weighed by ``env_irradiance_compensated``)."""
 
     def __init__(self, mode: str, lights: LightArrays, *, env_irradiance=None, env_irradiance_compensated=None):
         self.mode = mode
