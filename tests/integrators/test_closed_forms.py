@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -22,6 +23,7 @@ import pytest
 from lightprobe.bsdfs import Lambert
 from lightprobe.emitters.envmap import EnvironmentMap
 from lightprobe.emitters.procedural import constant
+from lightprobe.errors import LightprobeWarning
 from lightprobe.geometry.camera import Camera
 from lightprobe.geometry.mesh import TriangleMesh
 from lightprobe.geometry.scene import Scene
@@ -247,10 +249,16 @@ def test_a_delta_directional_light_gives_e_cos_exactly(options):
     from lightprobe.emitters.directional import DirectionalLight
 
     sun = DirectionalLight(SUN_DIRECTION, 3.0)
-    result = render(_lamp_scene(sun), RenderSettings(spp=16, seed=1, **options))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", LightprobeWarning)  # light samples reach it: no warning
+        result = render(_lamp_scene(sun), RenderSettings(spp=16, seed=1, **options))
     expected = 0.6 / math.pi * 3.0 * -SUN_DIRECTION[1]
     np.testing.assert_allclose(result.image[0, 0], expected, rtol=1e-4)
-    assert np.all(render(_lamp_scene(sun), RenderSettings(spp=16, seed=1, strategy="brdf")).image == 0.0)
+    # BSDF sampling alone never meets it, and the render says so (a warning: the laboratory does it on purpose)
+    with pytest.warns(LightprobeWarning, match=r"1 delta light \(point, spot .* strategy 'brdf' takes none"):
+        assert np.all(render(_lamp_scene(sun), RenderSettings(spp=16, seed=1, strategy="brdf")).image == 0.0)
+    with pytest.warns(LightprobeWarning, match=r"lights nothing .* reach it, and env_samples = 0 takes none"):
+        render(_lamp_scene(sun), RenderSettings(spp=1, n_env=0, n_bsdf=1))
     scene = _lamp_scene(sun)
     scene.add(Sphere(-1.5 * SUN_DIRECTION, 0.2), Lambert(0.5))
     assert np.all(render(scene, RenderSettings(spp=16, seed=1, **options)).image == 0.0)

@@ -25,6 +25,7 @@ after a pilot), launches the stages of each pass, and keeps what has been accumu
 from __future__ import annotations
 
 import time
+import warnings
 from collections.abc import Callable
 
 import numba
@@ -37,7 +38,7 @@ from ..emitters.envmap import BILINEAR, placeholder_environment
 from ..emitters.kinds import LIGHT_DIRECTIONAL, LIGHT_ENVIRONMENT
 from ..emitters.lights import is_delta, light_arrays
 from ..emitters.selection import build_selector
-from ..errors import ParameterError
+from ..errors import LightprobeWarning, ParameterError
 from ..geometry.embree import PACKET, packets_native
 from ..geometry.raytracer import RayTracer
 from ..geometry.scene import Scene
@@ -167,6 +168,30 @@ def _check(scene: Scene, settings: RenderSettings, alone: bool) -> None:
         )
 
 
+def _warn_of_unreached_delta_lights(scene: Scene, settings: RenderSettings) -> None:
+    """A point, spot or delta directional light is reached by light samples only (no direction of another technique
+    is ever exactly its one): a render that takes none -- BSDF, cosine or uniform sampling, or MIS with no light
+    samples -- leaves such lights out of the image, as the estimator defines, but a user may not expect it.  Said
+    once per render, as a warning (the laboratory compares such strategies on purpose)."""
+    takes_none = settings.strategy in ("brdf", "cosine", "uniform") or (
+        settings.strategy == "mis" and settings.n_env == 0
+    )
+    if not takes_none or not scene.lights:
+        return
+    table = light_arrays(scene.lights)
+    delta = sum(bool(is_delta.py_func(table, i)) for i in range(table.kind.shape[0]))
+    if delta:
+        why = f"strategy {settings.strategy!r}" if settings.strategy != "mis" else "env_samples = 0"
+        one = delta == 1
+        warnings.warn(
+            f"{delta} delta light{'' if one else 's'} (point, spot or directional of angle 0) "
+            f"light{'s' if one else ''} nothing in this render: only light samples reach "
+            f"{'it' if one else 'them'}, and {why} takes none",
+            LightprobeWarning,
+            stacklevel=3,
+        )
+
+
 def _compensated_materials(kinds: np.ndarray, compensated) -> np.ndarray:
     """Per material, whether its environment samples (and the MIS weights of its BSDF samples) use the compensated
     PDF: every material for True, none for False, Lambertian ones for ``DIFFUSE``.  Both techniques at a shading
@@ -279,6 +304,7 @@ def render(
     threads = numba.get_num_threads()
     t_setup = time.perf_counter()
     settings = _resolved_and_checked(scene, settings)
+    _warn_of_unreached_delta_lights(scene, settings)
     arrays = scene.compile()
     own_tracer = tracer is None
     tracer = tracer or RayTracer(arrays, threads=threads)
