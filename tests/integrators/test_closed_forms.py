@@ -175,8 +175,9 @@ def test_a_point_light_gives_the_inverse_square_law_exactly(options):
     result = render(_lamp_scene(PointLight(LAMP, 5.0)), RenderSettings(spp=16, seed=1, **options))
     expected = 0.6 / math.pi * _lamp_irradiance(5.0)
     np.testing.assert_allclose(result.image[0, 0], expected, rtol=1e-4)  # float32, and the pixel is ~1 mm wide
-    # BSDF sampling alone never meets a delta light
-    dark = render(_lamp_scene(PointLight(LAMP, 5.0)), RenderSettings(spp=16, seed=1, strategy="brdf"))
+    # BSDF sampling alone never meets a delta light, and the render says so
+    with pytest.warns(LightprobeWarning, match=r"1 delta light .* strategy 'brdf' takes none"):
+        dark = render(_lamp_scene(PointLight(LAMP, 5.0)), RenderSettings(spp=16, seed=1, strategy="brdf"))
     assert np.all(dark.image == 0.0)
     blocked = render(_lamp_scene(PointLight(LAMP, 5.0), blocker=True), RenderSettings(spp=16, seed=1, **options))
     assert np.all(blocked.image == 0.0)
