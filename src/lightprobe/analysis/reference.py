@@ -33,6 +33,7 @@ from ..integrators.wavefront import (
     RenderResult,
     RenderSettings,
     compensation_for,
+    lit_by_the_map_alone,
     render,
     result_from,
     settings_for,
@@ -72,9 +73,8 @@ def _older_compensation(meta: dict, scene: Scene) -> bool | str:
     settings = meta.get("settings", {})
     if settings.get("mis_compensation") is not None:
         return settings["mis_compensation"]
-    alone = scene.environment is not None and not scene.emitters and not scene.lights
     one_pick = settings.get("lights_per_sample") in (None, 1)
-    return DIFFUSE if settings.get("strategy") == "mis" and alone and one_pick else False
+    return DIFFUSE if settings.get("strategy") == "mis" and lit_by_the_map_alone(scene) and one_pick else False
 
 
 def _load(path: Path, identity: dict, n_pixels: int, scene: Scene) -> Accumulator | None:

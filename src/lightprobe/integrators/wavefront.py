@@ -83,10 +83,23 @@ def default_pass_samples(shading_samples: int) -> int:
     return max(1, min(PASS_CAMERA_SAMPLES, PASS_SLOTS // max(1, shading_samples)))
 
 
+def lit_by_the_map_alone(scene: Scene) -> bool:
+    """The environment map is the scene's only light."""
+    return scene.environment is not None and not scene.emitters and not scene.lights
+
+
 def _environment_alone(scene: Scene, settings: RenderSettings) -> bool:
     """The environment map is the scene's only light (and one light is picked per sample)."""
-    alone = scene.environment is not None and not scene.emitters and not scene.lights
-    return alone and settings.lights_per_sample in (None, 1)
+    return lit_by_the_map_alone(scene) and settings.lights_per_sample in (None, 1)
+
+
+def _delta_lights(scene: Scene) -> int:
+    """How many of the scene's lights are point or spot lights or delta directional lights, by the light contract's
+    own test on their rows, run as Python (no kernel to load for a count)."""
+    if not scene.lights:
+        return 0
+    table = light_arrays(scene.lights)
+    return sum(bool(is_delta.py_func(table, i)) for i in range(table.kind.shape[0]))
 
 
 def _one_delta_light(scene: Scene) -> bool:
@@ -94,8 +107,7 @@ def _one_delta_light(scene: Scene) -> bool:
     same direction, so a second pick adds nothing."""
     if scene.environment is not None or scene.emitters or len(scene.lights) != 1:
         return False
-    # the light contract's own test on the light's row, run as Python (no kernel to load for a yes or no)
-    return bool(is_delta.py_func(light_arrays(scene.lights), 0))
+    return _delta_lights(scene) == 1
 
 
 def settings_for(scene: Scene, settings: RenderSettings) -> RenderSettings:
@@ -176,10 +188,7 @@ def _warn_of_unreached_delta_lights(scene: Scene, settings: RenderSettings) -> N
     takes_none = settings.strategy in ("brdf", "cosine", "uniform") or (
         settings.strategy == "mis" and settings.n_env == 0
     )
-    if not takes_none or not scene.lights:
-        return
-    table = light_arrays(scene.lights)
-    delta = sum(bool(is_delta.py_func(table, i)) for i in range(table.kind.shape[0]))
+    delta = _delta_lights(scene) if takes_none else 0
     if delta:
         why = f"strategy {settings.strategy!r}" if settings.strategy != "mis" else "env_samples = 0"
         one = delta == 1
