@@ -149,9 +149,13 @@ def _lightprobe_worker(args) -> None:
     render(build(args.scene, resolution=(32, 24), lights=lights), RenderSettings(spp=4))  # compile
     outline_choices = (True, False) if args.without_outlines else (True,)
     picks = args.lights_per_sample or [None]
-    configs = [(selector, False, o, k) for selector in args.selectors for o in outline_choices for k in picks]
-    configs += [
-        (selector, True, o, k) for selector in args.selectors if args.adaptive for o in outline_choices for k in picks
+    counts = (False, True) if args.adaptive else (False,)  # uniform rows first, then the adaptive ones
+    configs = [
+        (selector, adaptive, o, k)
+        for adaptive in counts
+        for selector in args.selectors
+        for o in outline_choices
+        for k in picks
     ]
     for selector, adaptive, outline, k in configs:
         errors, seconds, edges = [], [], []
