@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -10,6 +12,13 @@ pytest.importorskip("distributed", reason="Dask distributed is not installed (pi
 from lightprobe.analysis.distributed import render_on_dask, sample_ranges
 from lightprobe.errors import LightprobeError
 from lightprobe.integrators.wavefront import RenderSettings, render
+
+
+def test_adaptive_counts_are_refused_for_sample_ranges():
+    from ..integrators.test_wavefront import small_scene
+
+    with pytest.raises(LightprobeError, match="cannot take adaptive counts"):
+        render_on_dask(small_scene((4, 3)), RenderSettings(spp=16, adaptive=True), chunk=4)
 
 
 def test_sample_ranges_cover_exactly():
@@ -23,9 +32,10 @@ def test_a_local_cluster_reference_equals_the_single_process_render():
     from ..integrators.test_wavefront import small_scene
 
     scene = small_scene((16, 12))
-    settings = RenderSettings(spp=10, seed=2)
-    whole = render(scene, settings)
-    merged = render_on_dask(scene, settings, chunk=3, workers=2)  # 4 ranges on 2 worker processes
+    # 16 spp, adaptive left automatic: a plain render would take adaptive counts, the ranges take uniform ones
+    settings = RenderSettings(spp=16, seed=2)
+    whole = render(scene, dataclasses.replace(settings, adaptive=False))
+    merged = render_on_dask(scene, settings, chunk=5, workers=2)  # 4 ranges on 2 worker processes
     assert merged.stats["ranges"] == 4
     np.testing.assert_array_equal(merged.counts, whole.counts)
     np.testing.assert_allclose(merged.accumulator.mean, whole.accumulator.mean, rtol=1e-12, atol=1e-15)
@@ -55,7 +65,7 @@ def test_reference_command_on_a_local_cluster_resumes_a_checkpoint(tmp_path):
     assert main([*args, "--spp", "4"]) == 0
     assert main([*args, "--spp", "10", "--dask", "--workers", "2"]) == 0
     scene, _ = load_scene(scene_file)
-    whole = render(scene, RenderSettings(spp=10, seed=4))
+    whole = render(scene, RenderSettings(spp=10, seed=4, adaptive=False))
     image = read_image(out)
     np.testing.assert_allclose(image[:, :, :3], whole.image, rtol=1e-6, atol=1e-9)
     np.testing.assert_allclose(image[:, :, 3:6], whole.variance, rtol=1e-4, atol=1e-12)
@@ -76,7 +86,7 @@ def test_a_lost_worker_loses_only_its_task():
 
     scene = small_scene((32, 24))
     settings = RenderSettings(spp=48, seed=6, threads=1)
-    whole = render(scene, settings)
+    whole = render(scene, dataclasses.replace(settings, adaptive=False))
     with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
         with Client(cluster) as client:
             pids = client.run(os.getpid)

@@ -38,18 +38,26 @@ def scene_file(tmp_path):
 
 def test_stopped_and_resumed_equals_uninterrupted(scene_file, tmp_path):
     scene, _ = load_scene(scene_file)
-    settings = RenderSettings(spp=12, seed=3)
-    whole = render(scene, settings)
+    # 16 spp, adaptive left automatic: a plain render would take adaptive counts, a reference takes uniform ones
+    settings = RenderSettings(spp=16, seed=3)
+    whole = render(scene, dataclasses.replace(settings, adaptive=False))
     out = tmp_path / "ref.exr"
     first = render_reference(scene, dataclasses.replace(settings, spp=4), out, chunk=3, scene_id="s")
     assert int(first.counts.min()) == 4 and checkpoint_path(out).exists()
-    resumed = render_reference(scene, settings, out, chunk=5, scene_id="s")  # extends 4 -> 12 in other chunks
+    resumed = render_reference(scene, settings, out, chunk=5, scene_id="s")  # extends 4 -> 16 in other chunks
     assert resumed.stats["resumed_from_spp"] == 4
     np.testing.assert_array_equal(resumed.image, whole.image)
     np.testing.assert_array_equal(resumed.variance, whole.variance)
     # a finished reference resumes to itself without rendering
     again = render_reference(scene, settings, out, chunk=5, scene_id="s")
     np.testing.assert_array_equal(again.image, whole.image)
+
+
+def test_a_reference_refuses_adaptive_counts(scene_file, tmp_path):
+    scene, _ = load_scene(scene_file)
+    with pytest.raises(LightprobeError, match="checkpointed sample ranges, which adaptive counts cannot be"):
+        render_reference(scene, RenderSettings(spp=16, adaptive=True), tmp_path / "ref.exr", scene_id="s")
+    assert not checkpoint_path(tmp_path / "ref.exr").exists()
 
 
 def test_a_checkpoint_of_another_render_is_refused(scene_file, tmp_path):
@@ -78,8 +86,8 @@ def test_a_checkpoint_made_under_another_automatic_rule_is_refused(scene_file, t
     out = tmp_path / "ref.exr"
     resolved = Settings.resolved
 
-    def old_rule(self, environment_only, one_delta_light=False, environment=False):
-        new = resolved(self, environment_only, one_delta_light, environment)
+    def old_rule(self, environment_only, one_delta_light=False, environment=False, resumed=False):
+        new = resolved(self, environment_only, one_delta_light, environment, resumed)
         if environment_only:
             return new
         return dataclasses.replace(
@@ -187,7 +195,7 @@ def test_killed_mid_run_then_resumed_is_bit_identical(scene_file, tmp_path):
     total = done + 6
     assert main(["reference", str(scene_file), "-o", str(out), "--spp", str(total), "--chunk", "4", "--seed", "5"]) == 0
     scene, _ = load_scene(scene_file)
-    whole = render(scene, RenderSettings(spp=total, seed=5))
+    whole = render(scene, RenderSettings(spp=total, seed=5, adaptive=False))
     image = read_image(out)
     np.testing.assert_array_equal(image[:, :, :3], whole.image)
     np.testing.assert_array_equal(image[:, :, 3:6], whole.variance)

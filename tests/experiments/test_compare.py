@@ -107,6 +107,7 @@ def test_an_adaptive_strategy_renders_each_round_afresh(scene_and_reference):
     scene, ref = scene_and_reference
     uniform, adaptive = compare(scene, ["mis", "mis/adaptive=true"], ref.image, ref.variance, equal="spp", spp=16)
     assert [round(row["spp"]) for row in uniform.rounds] == [1, 2, 4, 8, 16]
+    assert uniform.settings.adaptive is False  # the renderer's automatic adaptive counts: not in continued rounds
     assert len(adaptive.rounds) == 3
     for row, n in zip(adaptive.rounds, (4, 8, 16), strict=True):
         assert n / 2 < row["spp"] <= n

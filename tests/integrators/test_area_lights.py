@@ -147,7 +147,14 @@ def test_an_environment_only_scene_is_bit_identical_to_before():
     from .test_wavefront import small_scene
 
     settings = RenderSettings(
-        spp=8, seed=21, sampler="independent", mis_compensation=False, n_bsdf=1, n_env=1, heuristic="power"
+        spp=8,
+        seed=21,
+        sampler="independent",
+        mis_compensation=False,
+        n_bsdf=1,
+        n_env=1,
+        heuristic="power",
+        adaptive=False,
     )
     result = render(small_scene((20, 12), pdf="exact"), settings)
     assert hashlib.sha256(result.image.tobytes()).hexdigest() == ENV_ONLY_SHA256

@@ -135,7 +135,10 @@ def test_white_furnace_with_the_environment_among_area_lights(options):
     """rho L on every pixel fully on the sphere (per pixel within 5 sigma, and their mean within 4 standard
     errors): the environment's samples and densities on the area-light path are as right as the lights'."""
     radiance, albedo = 1.5, 0.7
-    result = render(_furnace_scene(radiance), RenderSettings(spp=2048, seed=3, **options))
+    # uniform counts: adaptive ones leave the sphere's quiet pixels at the 512-spp pilot, where this furnace's rare
+    # large samples make a per-pixel z of 5 common (4.9 % of pixels over 40 seeds, the pooled mean unbiased to 1.5e-5;
+    # decisions.md 99)
+    result = render(_furnace_scene(radiance), RenderSettings(spp=2048, seed=3, adaptive=False, **options))
     img, var = result.image[..., 0], result.variance[..., 0]
     on = np.zeros((16, 16), bool)
     on[5:11, 5:11] = True

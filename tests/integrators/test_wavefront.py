@@ -35,7 +35,8 @@ def test_white_furnace(strategy, heuristic):
         Camera([0, 0, 4], [0, 0, 0], fov=40, resolution=(24, 24)), EnvironmentMap.from_array(constant(radiance))
     )
     scene.add(Sphere([0, 0, 0], 1.0), Lambert(albedo))
-    result = render(scene, RenderSettings(spp=64, strategy=strategy, heuristic=heuristic, env_candidates=candidates))
+    settings = RenderSettings(spp=64, strategy=strategy, heuristic=heuristic, env_candidates=candidates, adaptive=False)
+    result = render(scene, settings)
     img, var, n = result.image, result.variance, result.counts
     assert np.all(n == 64)
     on = np.zeros((24, 24), bool)
@@ -283,7 +284,7 @@ def test_an_adaptive_render_is_unbiased_and_spends_its_samples_where_the_noise_i
     assert np.abs(z).max() < 8
     assert abs(np.mean(z)) < 0.1
     # equal samples on average, lower error than spending them evenly
-    uniform = render(small_scene(), RenderSettings(spp=1024, seed=7))
+    uniform = render(small_scene(), RenderSettings(spp=1024, seed=7, adaptive=False))
     adaptive_err, uniform_err = relmse(result.image, reference.image), relmse(uniform.image, reference.image)
     assert adaptive_err < uniform_err, (adaptive_err, uniform_err)
 
@@ -328,12 +329,46 @@ def test_adaptive_settings_are_checked():
     first = render(scene, RenderSettings(spp=4))
     with pytest.raises(ParameterError, match="cannot be resumed"):
         render(scene, RenderSettings(spp=8, adaptive=True), resume=first.accumulator)
+    # the automatic choice near 2^56: a render that would be adaptive is checked as one
+    with pytest.raises(ParameterError, match=r"8 x spp \(adaptive\) must be at most 2\^56"):
+        render(scene, RenderSettings(spp=2**53 + 1))
+
+
+def test_adaptive_counts_are_the_default_from_16_spp_and_uniform_for_sample_ranges():
+    """adaptive=None (decisions.md 99): adaptive counts at spp >= 16 from sample 0; uniform below, for a sample range
+    (first_sample > 0), for a render that continues another, and wherever adaptive is given as False."""
+    auto = RenderSettings()
+    assert auto.adaptive is None and auto.spp == 16 and auto.adaptive_counts()
+    assert not RenderSettings(spp=15).adaptive_counts()
+    assert not RenderSettings(spp=64, first_sample=16).adaptive_counts()
+    assert not RenderSettings(spp=64).adaptive_counts(resumed=True)
+    assert not RenderSettings(spp=64, adaptive=False).adaptive_counts()
+    assert RenderSettings(spp=4, adaptive=True).adaptive_counts()
+    assert RenderSettings(spp=64).uniform_unless_adaptive().adaptive is False
+    assert RenderSettings(spp=64, adaptive=True).uniform_unless_adaptive().adaptive is True
+    scene = small_scene((20, 12))
+    default = render(scene, RenderSettings(spp=16, seed=2))
+    assert default.stats["adaptive"] and default.stats["adaptive_pilot_spp"] == 4
+    assert default.counts.min() < default.counts.max() and default.counts.mean() <= 16
+    explicit = render(scene, RenderSettings(spp=16, seed=2, adaptive=True))
+    np.testing.assert_array_equal(explicit.image, default.image)
+    low = render(scene, RenderSettings(spp=15, seed=2))
+    assert not low.stats["adaptive"] and np.all(low.counts == 15)
+    first = render(scene, RenderSettings(spp=16, seed=2, adaptive=False))
+    more = render(scene, RenderSettings(spp=16, seed=2, first_sample=16), resume=first.accumulator)
+    assert not more.stats["adaptive"] and np.all(more.counts == 32)
+    # a render continues only an accumulator whose every pixel holds first_sample samples: not an adaptive render's
+    # counts, and not samples it would take again
+    uneven = f"4..{default.counts.max()}"
+    for accumulator, first_sample, held in ((default.accumulator, 16, uneven), (first.accumulator, 0, "16..16")):
+        with pytest.raises(ParameterError, match=f"resume: the accumulator holds {held} samples per pixel"):
+            render(scene, RenderSettings(spp=16, first_sample=first_sample), resume=accumulator)
 
 
 @pytest.mark.parametrize("sampler", ["sobol", "independent"])
 def test_split_sample_ranges_resume_bit_for_bit_and_merge_exactly(sampler):
     scene = small_scene((20, 12))
-    whole = render(scene, RenderSettings(spp=12, sampler=sampler, pass_samples=500))
+    whole = render(scene, RenderSettings(spp=12, sampler=sampler, pass_samples=500, adaptive=False))
     first = render(scene, RenderSettings(spp=5, sampler=sampler))
     second = render(scene, RenderSettings(spp=7, first_sample=5, sampler=sampler, threads=1))
     # resuming the first range with the second: the same operations in the same order as one render
@@ -358,25 +393,29 @@ def test_scenes_with_lights_render_the_same_bits_on_any_threads_and_pass_size_an
     two BSDF samples beside the sky; the outline control variate on, with entries in this image): the same image and
     variance for 1 or 2 threads and any pass size, and a render resumed from a sample range is the whole render, bit
     for bit.  (The determinism tests above use an environment-lit scene, whose one light is picked without a
-    selector.)"""
+    selector.)  At 16 spp the defaults take adaptive counts (decisions.md 99): the same bits too; a sample range and a
+    resumed render are uniform, so the resume is checked against the uniform render."""
     from lightprobe.reference_scenes import build
 
     scene = build(name, resolution=(20, 12), lights=200 if name == "many" else None)
-    base = render(scene, RenderSettings(spp=8, threads=2))
-    assert base.stats["lights_per_sample"] == 2 and base.stats["outline_pixels"] > 0
-    for settings in (
-        RenderSettings(spp=8, threads=1),
-        RenderSettings(spp=8, pass_samples=100),
-        RenderSettings(spp=8, pass_samples=7, threads=1),
-    ):
-        other = render(scene, settings)
-        np.testing.assert_array_equal(other.image, base.image)
-        np.testing.assert_array_equal(other.variance, base.variance)
-    first = render(scene, RenderSettings(spp=3))
-    resumed = render(scene, RenderSettings(spp=5, first_sample=3, pass_samples=50), resume=first.accumulator)
+    for adaptive in (None, False):
+        base = render(scene, RenderSettings(spp=16, threads=2, adaptive=adaptive))
+        assert base.stats["lights_per_sample"] == 2 and base.stats["outline_pixels"] > 0
+        assert base.stats["adaptive"] == (adaptive is None)
+        for settings in (
+            RenderSettings(spp=16, threads=1, adaptive=adaptive),
+            RenderSettings(spp=16, pass_samples=100, adaptive=adaptive),
+            RenderSettings(spp=16, pass_samples=7, threads=1, adaptive=adaptive),
+        ):
+            other = render(scene, settings)
+            np.testing.assert_array_equal(other.counts, base.counts)
+            np.testing.assert_array_equal(other.image, base.image)
+            np.testing.assert_array_equal(other.variance, base.variance)
+    first = render(scene, RenderSettings(spp=7))
+    resumed = render(scene, RenderSettings(spp=9, first_sample=7, pass_samples=50), resume=first.accumulator)
     np.testing.assert_array_equal(resumed.image, base.image)
     np.testing.assert_array_equal(resumed.variance, base.variance)
-    assert render(scene, RenderSettings(spp=8, seed=1)).image.tobytes() != base.image.tobytes()
+    assert render(scene, RenderSettings(spp=16, seed=1, adaptive=False)).image.tobytes() != base.image.tobytes()
 
 
 def test_sobol_has_lower_error_than_independent_at_equal_samples(reference):
@@ -391,7 +430,7 @@ def test_sobol_has_lower_error_than_independent_at_equal_samples(reference):
 
 def test_time_limit_keeps_the_result():
     scene = small_scene((64, 48))
-    result = render(scene, RenderSettings(spp=100_000, time_limit=0.3, pass_samples=4000))
+    result = render(scene, RenderSettings(spp=100_000, time_limit=0.3, pass_samples=4000, adaptive=False))
     stats = result.stats
     assert stats["stopped_by_time_limit"] and 1 <= stats["spp_done"] < 100_000
     assert stats["spp_max"] - stats["spp_done"] <= 1  # an unfinished pass leaves some pixels one pass behind
@@ -413,12 +452,12 @@ def test_a_time_limit_sizes_the_last_round_to_end_at_it(monkeypatch):
 
     monkeypatch.setattr(wavefront._Pass, "run", timed_run)
     monkeypatch.setattr(wavefront, "_clock", lambda: now[0])
-    limited = render(scene, RenderSettings(spp=4096, time_limit=0.5))
+    limited = render(scene, RenderSettings(spp=4096, time_limit=0.5, adaptive=False))
     assert limited.stats["stopped_by_time_limit"]
     np.testing.assert_array_equal(limited.counts, 10)
     assert limited.stats["seconds"] == pytest.approx(0.48)
     monkeypatch.setattr(wavefront, "_clock", wavefront.time.perf_counter)
-    free = render(scene, RenderSettings(spp=10))
+    free = render(scene, RenderSettings(spp=10, adaptive=False))
     for name in ("counts", "image", "variance"):
         np.testing.assert_array_equal(getattr(limited, name), getattr(free, name))
 

@@ -28,7 +28,8 @@ def sample_ranges(spp: int, chunk: int, first: int = 0) -> list[tuple[int, int]]
 
 
 def _render_range(scene: Scene, settings: RenderSettings, first: int, count: int) -> tuple[dict, float]:
-    result = render(scene, dataclasses.replace(settings, spp=count, first_sample=first, time_limit=None))
+    part = dataclasses.replace(settings.uniform_unless_adaptive(), spp=count, first_sample=first, time_limit=None)
+    result = render(scene, part)
     return result.accumulator.to_arrays(), result.stats["seconds"]
 
 
@@ -73,7 +74,11 @@ def render_on_dask(
     """Render ``settings.spp`` samples per pixel (from ``settings.first_sample``) as ranges of ``chunk`` on Dask:
     the scheduler at ``scheduler`` (e.g. ``tcp://10.0.0.5:8786``), or a ``LocalCluster`` of ``workers`` processes
     with ``threads_per_worker`` threads each.  ``resume`` is merged in front (its samples must come before).
-    ``connect_timeout``: seconds to wait for a remote scheduler."""
+    ``connect_timeout``: seconds to wait for a remote scheduler.  The ranges are uniform (spp samples in every
+    pixel): adaptive counts need the whole pilot first, so they are refused."""
+    settings = settings.uniform_unless_adaptive()
+    if settings.adaptive:
+        raise LightprobeError("a render split into sample ranges cannot take adaptive counts: leave adaptive off")
     settings.validate()
     ranges = sample_ranges(settings.spp, chunk, settings.first_sample)
     with dask_client(scheduler, workers, threads_per_worker, connect_timeout) as client:

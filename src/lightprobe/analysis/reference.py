@@ -154,6 +154,12 @@ def render_reference(
     the single-process result up to float64 rounding, and checkpointed once all have finished."""
     if chunk < 1:
         raise LightprobeError(f"chunk must be >= 1 sample per pixel, got {chunk}")
+    settings = settings.uniform_unless_adaptive()  # checkpointed sample ranges: spp in every pixel
+    if settings.adaptive:
+        raise LightprobeError(
+            "a reference is rendered in checkpointed sample ranges, which adaptive counts cannot be (they need the "
+            "whole pilot first): leave adaptive off"
+        )
     settings.validate()
     width, height = scene.camera.resolution
     identity = _identity(scene, settings, scene_id)

@@ -16,7 +16,8 @@ A strategy may also be a user's sampling technique (``lightprobe.lab``): ``FILE.
 user's; it renders with the laboratory's estimator (``lab/render.py``), in rounds like any other, and may take
 ``/key=value`` overrides (seed, sampler, bsdf_samples, env_samples, heuristic).
 
-An adaptive strategy (``/adaptive=true``, integrators/adaptive.py) cannot continue a render: its counts need the
+A strategy's counts are uniform, whatever the renderer's automatic choice: its rounds continue each other (decisions.md
+99).  An adaptive strategy (``/adaptive=true``, integrators/adaptive.py) cannot continue a render: its counts need the
 whole pilot.  Its rounds are separate renders, each timed on its own, so its curve costs about twice its final
 image: 4, 8, ... spp, then spp on average in ``spp`` mode; an eighth, a quarter, half and all of the budget in
 ``time`` mode, where each render plans its pilot and mean count to fit its time limit.
@@ -172,7 +173,9 @@ def run_strategy(
     done = 0
     spent = 0.0
     target = 1
-    settings = settings_for(scene, settings)  # the report states the allocation and heuristic actually used
+    # the report states the allocation and heuristic actually used; a strategy's rounds continue each other, so its
+    # counts are uniform unless it asks for adaptive ones (adaptive=true: separate renders, _adaptive_rounds)
+    settings = settings_for(scene, settings.uniform_unless_adaptive())
     run = StrategyRun(label, settings, np.zeros((height, width, 3), np.float32), np.zeros((height, width, 3)))
     # short passes in time mode, so that the budget is met within a pass of a few milliseconds: a pass holds about
     # 2^17 shading samples (RIS candidates counted), whatever the strategy's samples per camera sample

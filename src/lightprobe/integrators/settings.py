@@ -42,7 +42,11 @@ DIFFUSE = "diffuse"  # mis_compensation's automatic choice: the compensated PDF 
 AUTO_BSDF_SAMPLES = 8
 AUTO_ENV_SAMPLES = 8
 # the fields whose None RenderSettings.resolved turns into a value chosen for the scene
-RESOLVED_PER_SCENE = ("n_bsdf", "n_env", "heuristic", "lights_per_sample")
+RESOLVED_PER_SCENE = ("n_bsdf", "n_env", "heuristic", "lights_per_sample", "adaptive")
+# adaptive=None: adaptive counts at spp >= 16, a pilot of 4 spp or more (at 8 spp, a 2-spp pilot, they cut the
+# error 1.4-1.8x for 1.3-2.4x the time on the demo scenes: no clear win; at 4-7 spp a 1-spp pilot shows no noise;
+# decisions.md 99)
+AUTO_ADAPTIVE_MIN_SPP = 16
 LAST_SAMPLE = 2**56  # a sample index times 64 shading slots stays below 2^63 (sampling.rng.group_slot)
 
 _KINDS = {"integer": numbers.Integral, "number": numbers.Real, "string": str, "true or false": bool}
@@ -205,13 +209,14 @@ class RenderSettings:
     pass_samples: int | None = option(
         None, "Camera samples per pass", "integer", minimum=1, auto="wavefront.PASS_CAMERA_SAMPLES"
     )
-    adaptive: bool = option(
-        False,
+    adaptive: bool | None = option(
+        None,
         "A pilot of about spp / 4 samples in every pixel, then --spp on average where the noise is (with "
-        "--time-limit: as much of both as the limit affords)",
+        "--time-limit: as much of both as the limit affords); off: spp samples in every pixel",
         "true or false",
         key="adaptive",
         flags=("--adaptive/--no-adaptive",),
+        auto=f"on at spp >= {AUTO_ADAPTIVE_MIN_SPP} from sample 0; off for a sample range or a resumed render",
     )
     outline_control_variate: bool = option(
         True,
@@ -242,15 +247,30 @@ class RenderSettings:
         if self.mis_compensation and self.strategy != "mis":
             raise ParameterError("mis_compensation needs strategy 'mis' (the compensated PDF is zero on dim texels)")
         # a group's member j of sample k takes index k n + j (n <= 64 slots, sampling.rng.group_slot), in int64
-        last = self.first_sample + self.spp * (adaptive.MAX_FACTOR if self.adaptive else 1)
+        adaptive_counts = self.adaptive_counts()
+        last = self.first_sample + self.spp * (adaptive.MAX_FACTOR if adaptive_counts else 1)
         if last > LAST_SAMPLE:
-            what = "8 x spp (adaptive)" if self.adaptive else "first_sample + spp"
+            what = "8 x spp (adaptive)" if adaptive_counts else "first_sample + spp"
             raise ParameterError(f"{what} must be at most 2^56 (sample indices x 64 slots in 64 bits), got {last}")
         if self.adaptive:
             if (problem := adaptive.check_spp(self.spp)) is not None:
                 raise ParameterError(problem)
             if self.first_sample != 0:
                 raise ParameterError("adaptive sampling renders samples from 0 (first_sample must be 0)")
+
+    def adaptive_counts(self, resumed: bool = False) -> bool:
+        """Whether the render takes adaptive per-pixel counts: ``adaptive`` if given, else (automatic) at spp >= 16
+        from sample 0, unless it continues an earlier render (``resumed``).  A sample range or a continued render
+        is uniform: adaptive counts need the whole pilot, so they cannot be split or resumed (decisions.md 36, 99)."""
+        if self.adaptive is not None:
+            return self.adaptive
+        return self.spp >= AUTO_ADAPTIVE_MIN_SPP and self.first_sample == 0 and not resumed
+
+    def uniform_unless_adaptive(self) -> RenderSettings:
+        """These settings for a render made of sample ranges (a reference, a distributed render, compare's rounds):
+        the automatic choice of adaptive counts made (uniform); an explicit ``adaptive=True`` is kept, for the
+        caller to refuse."""
+        return self if self.adaptive is not None else replace(self, adaptive=False)
 
     @property
     def light_samples(self) -> int:
@@ -265,7 +285,7 @@ class RenderSettings:
         return (1 if self.n_bsdf is None else self.n_bsdf) + self.light_samples
 
     def resolved(
-        self, environment_only: bool, one_delta_light: bool = False, environment: bool = False
+        self, environment_only: bool, one_delta_light: bool = False, environment: bool = False, resumed: bool = False
     ) -> RenderSettings:
         """These settings with the automatic choices made, for a scene lit by an environment map alone or not
         (``one_delta_light``: by one point, spot or delta directional light alone; ``environment``: the scene has an
@@ -282,7 +302,8 @@ class RenderSettings:
         pick lowers the error 1.7-1.9x for 1.4-1.5x the time (decisions.md 97); one delta light alone keeps K = 1 (its
         sample is always the same direction). An environment map beside other lights takes 2 BSDF samples, which are how
         MIS finds the map's broad light (1.2-1.3x the efficiency of 1 on three such scenes; without a map a second one
-        loses 9-18 %)."""
+        loses 9-18 %).  Adaptive counts as :meth:`adaptive_counts` decides (``resumed``: the render continues
+        another)."""
         k = self.lights_per_sample
         if k is None:
             k = 1 if environment_only or one_delta_light else 2
@@ -291,7 +312,14 @@ class RenderSettings:
             n_bsdf = AUTO_BSDF_SAMPLES if environment_only else 2 if environment else 1
         n_env = self.n_env if self.n_env is not None else (AUTO_ENV_SAMPLES if environment_only else 1)
         heuristic = self.heuristic if self.heuristic is not None else ("balance" if environment_only else "power")
-        return replace(self, n_bsdf=n_bsdf, n_env=n_env, heuristic=heuristic, lights_per_sample=k)
+        return replace(
+            self,
+            n_bsdf=n_bsdf,
+            n_env=n_env,
+            heuristic=heuristic,
+            lights_per_sample=k,
+            adaptive=self.adaptive_counts(resumed),
+        )
 
 
 def options() -> dict[str, Option]:

@@ -110,12 +110,14 @@ def _one_delta_light(scene: Scene) -> bool:
     return _delta_lights(scene) == 1
 
 
-def settings_for(scene: Scene, settings: RenderSettings) -> RenderSettings:
-    """``settings`` with the automatic choices made as :func:`render` makes them for ``scene``."""
+def settings_for(scene: Scene, settings: RenderSettings, resumed: bool = False) -> RenderSettings:
+    """``settings`` with the automatic choices made as :func:`render` makes them for ``scene`` (``resumed``: a
+    render that continues another)."""
     return settings.resolved(
         environment_only=_environment_alone(scene, settings),
         one_delta_light=_one_delta_light(scene),
         environment=scene.environment is not None,
+        resumed=resumed,
     )
 
 
@@ -130,10 +132,10 @@ def compensation_for(scene: Scene, settings: RenderSettings) -> bool | str:
     return DIFFUSE if automatic else False
 
 
-def _resolved_and_checked(scene: Scene, settings: RenderSettings) -> RenderSettings:
+def _resolved_and_checked(scene: Scene, settings: RenderSettings, resumed: bool = False) -> RenderSettings:
     """:func:`settings_for`, checked again: the automatic counts may take the slots past 64, and then the message
     says which counts were left automatic and what they came to (numbers the user never typed)."""
-    resolved = settings_for(scene, settings)
+    resolved = settings_for(scene, settings, resumed)
     try:
         resolved.validate()
     except ParameterError as exc:
@@ -312,7 +314,7 @@ def render(
         numba.set_num_threads(min(settings.threads, numba.config.NUMBA_NUM_THREADS))
     threads = numba.get_num_threads()
     t_setup = time.perf_counter()
-    settings = _resolved_and_checked(scene, settings)
+    settings = _resolved_and_checked(scene, settings, resumed=resume is not None)
     _warn_of_unreached_delta_lights(scene, settings)
     arrays = scene.compile()
     own_tracer = tracer is None
@@ -327,6 +329,12 @@ def render(
         raise ParameterError("an adaptive render cannot be resumed: its sample counts need the whole pilot first")
     if resume is not None and resume.count.size != n_pixels:
         raise ParameterError(f"cannot resume a render of {resume.count.size} pixels at {width}x{height}")
+    if resume is not None and not np.all(resume.count == settings.first_sample):
+        # an adaptive render's counts, a pass cut short, or a first_sample that would take samples again
+        raise ParameterError(
+            f"resume: the accumulator holds {resume.count.min()}..{resume.count.max()} samples per pixel, the "
+            f"render starts at sample {settings.first_sample} (first_sample must be the count every pixel holds)"
+        )
     acc = resume.copy() if resume is not None else Accumulator(n_pixels)
     plan = plan_for(scene, settings)
     largest_pass = max(1, band * spp_pass)

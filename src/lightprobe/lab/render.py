@@ -484,7 +484,8 @@ def render_lab(
     from ..integrators.wavefront import settings_for
 
     _check_scene(scene)
-    settings = settings_for(scene, settings or RenderSettings())
+    # the laboratory's estimator takes spp samples in every pixel: no adaptive counts
+    settings = settings_for(scene, (settings or RenderSettings()).uniform_unless_adaptive())
     settings.validate()
     width, height = scene.camera.resolution
     acc = resume.copy() if resume is not None else Accumulator(width * height)
