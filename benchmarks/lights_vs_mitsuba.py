@@ -4,7 +4,7 @@
     pip install -e '.[peers]'                          # Mitsuba 3.9.1 (Debian: apt-get install libllvm19)
     python benchmarks/lights_vs_mitsuba.py             # scenes area and many, 320x240, 64 spp, 8 seeds, 2 reps
     python benchmarks/lights_vs_mitsuba.py --scenes area --selectors bvh --reps 1
-    python benchmarks/lights_vs_mitsuba.py --selectors bvh --adaptive   # each selector with --adaptive too
+    python benchmarks/lights_vs_mitsuba.py --selectors bvh --uniform   # each selector with uniform counts too
     python benchmarks/lights_vs_mitsuba.py --selectors bvh --without-outlines   # and without the outline variate
     python benchmarks/lights_vs_mitsuba.py --selectors bvh --lights-per-sample 1 2   # rows with K = 1 and K = 2
 
@@ -18,10 +18,10 @@ once and cached in ``--cache``; its relMSE floor, mean(var / (ref^2 + 0.01)), is
 camera sample in hundreds hits, so one seed in four can read 3-4x the median; decisions.md 94); relMSE is their mean,
 seconds their median (the renderer's own timing, kernels compiled first). Mitsuba
 runs every sampler at 1 + 1 and 4 + 4 emitter + BSDF samples (its ``direct`` integrator), on ``many`` also with each
-emitter's ``sampling_weight`` set to its power ("power"); lightprobe every selector with its defaults (and, with
-``--adaptive``, with per-pixel adaptive sampling: "bvh adaptive"; with ``--without-outlines``, also without the
-outline control variate of decisions.md 96: "bvh, no outline variate"; with ``--lights-per-sample``, with each K
-given instead of the default, 2 here: "bvh K=1").  Each row also
+emitter's ``sampling_weight`` set to its power ("power"); lightprobe every selector with its defaults (adaptive
+counts since decisions.md 99; with ``--uniform``, also with uniform counts: "bvh uniform"; with
+``--without-outlines``, also without the outline control variate of decisions.md 96: "bvh, no outline variate";
+with ``--lights-per-sample``, with each K given instead of the default, 2 here: "bvh K=1").  Each row also
 gives ``relmse_emitter_edges``, the share of relMSE from the pixels next to a directly seen emitter (its outline: a
 pixel there is mostly the count of its camera samples that hit the emitter, so this part measures the camera
 samples' stratification, not the lights' sampling; decisions.md 91).
@@ -149,7 +149,7 @@ def _lightprobe_worker(args) -> None:
     render(build(args.scene, resolution=(32, 24), lights=lights), RenderSettings(spp=4))  # compile
     outline_choices = (True, False) if args.without_outlines else (True,)
     picks = args.lights_per_sample or [None]
-    counts = (False, True) if args.adaptive else (False,)  # uniform rows first, then the adaptive ones
+    counts = (None, False) if args.uniform else (None,)  # the defaults' rows first, then uniform counts
     configs = [
         (selector, adaptive, o, k)
         for adaptive in counts
@@ -175,7 +175,7 @@ def _lightprobe_worker(args) -> None:
             errors.append(error)
             edges.append(edge_error)
             seconds.append(r.stats["seconds"])
-        config = selector + ("" if k is None else f" K={k}") + (" adaptive" if adaptive else "")
+        config = selector + ("" if k is None else f" K={k}") + (" uniform" if adaptive is False else "")
         config += "" if outline else ", no outline variate"
         print(json.dumps(_row("lightprobe", args.scene, config, errors, seconds, floor, edges)), flush=True)
 
@@ -220,7 +220,7 @@ def _run(args, worker: str, scene: str, *extra: str) -> list[dict]:
         *args.selectors,
         "--many-lights",
         str(args.many_lights),
-        *(["--adaptive"] if args.adaptive else []),
+        *(["--uniform"] if args.uniform else []),
         *(["--without-outlines"] if args.without_outlines else []),
         *(["--lights-per-sample", *map(str, args.lights_per_sample)] if args.lights_per_sample else []),
         *extra,
@@ -240,7 +240,7 @@ def main() -> int:
     parser.add_argument("--selectors", nargs="*", default=["power", "bvh"])
     parser.add_argument("--spp", type=int, default=64)
     parser.add_argument(
-        "--adaptive", action="store_true", help="also each lightprobe selector with per-pixel adaptive sampling"
+        "--uniform", action="store_true", help="also each lightprobe selector with uniform counts (no adaptive)"
     )
     parser.add_argument(
         "--without-outlines", action="store_true", help="also each lightprobe row without the outline control variate"

@@ -98,7 +98,7 @@ def run_one(args) -> dict:
         "bsdf_samples": stats["n_bsdf"],
         "env_samples": stats["n_env"],
         "env_candidates": args.env_candidates,
-        "adaptive": args.adaptive,
+        "adaptive": stats["adaptive"],
         "time_limit": args.time_limit,
         "spp_mean": round(float(result.counts.mean()), 3),
         **{k: stats[k] for k in _PLAN_KEYS if k in stats},
@@ -179,8 +179,12 @@ def main(argv=None) -> int:
     )
     parser.add_argument("--env-candidates", type=int, default=1, help="RIS candidates per environment sample")
     parser.add_argument("--threads", type=int)
-    parser.add_argument("--adaptive", action="store_true", help="per-pixel adaptive sampling (spp on average)")
-    parser.add_argument("--time-limit", type=float, help="stop (or, with --adaptive, plan the counts) at these seconds")
+    parser.add_argument(
+        "--adaptive",
+        action=argparse.BooleanOptionalAction,
+        help="per-pixel adaptive sampling (spp on average), or uniform counts [the renderer's default: adaptive]",
+    )
+    parser.add_argument("--time-limit", type=float, help="stop (or, adaptive, plan the counts) at these seconds")
     parser.add_argument("--pass-samples", type=int, help="camera samples per wavefront pass [the renderer's default]")
     parser.add_argument("--reference", help="EXR to compute relMSE against")
     parser.add_argument("--out", help="write the render here")
@@ -231,8 +235,8 @@ def main(argv=None) -> int:
             cmd += ["--env-samples", str(args.env_samples)]
         if args.threads:
             cmd += ["--threads", str(args.threads)]
-        if args.adaptive:
-            cmd += ["--adaptive"]
+        if args.adaptive is not None:
+            cmd += ["--adaptive" if args.adaptive else "--no-adaptive"]
         if args.time_limit is not None:
             cmd += ["--time-limit", str(args.time_limit)]
         if args.reference:

@@ -5,7 +5,7 @@
     python benchmarks/vs_mitsuba.py --spp 16 64 256 --reps 2 --plot vs_mitsuba.png
     python benchmarks/vs_mitsuba.py --scenes peer            # the peer scene alone (area, many: lights_vs_mitsuba.py)
     python benchmarks/vs_mitsuba.py --mitsuba-python /path/to/venv/bin/python
-    python benchmarks/vs_mitsuba.py --adaptive               # lightprobe with --adaptive too ("sobol, adaptive")
+    python benchmarks/vs_mitsuba.py --uniform                # lightprobe with uniform counts too ("sobol, uniform")
 
 The area-light scene (a rectangle, a sphere and a ring of triangle lights under a dim sky) and the many-light scene
 (2,000 small rectangles over three decades of power, by default) run through ``benchmarks/lights_vs_mitsuba.py``
@@ -147,7 +147,9 @@ def main() -> int:
     parser.add_argument("--mitsuba-python", help="a Python that imports mitsuba (default: this one, if it does)")
     parser.add_argument("--cache", default=str(Path.home() / ".cache" / "lightprobe" / "peer"))
     parser.add_argument("--plot", help="write a log-log PNG of relMSE against seconds")
-    parser.add_argument("--adaptive", action="store_true", help="also lightprobe sobol with --adaptive")
+    parser.add_argument(
+        "--uniform", action="store_true", help="also lightprobe sobol with uniform counts (--no-adaptive)"
+    )
     parser.add_argument("--scenes", nargs="*", default=["peer", "area", "many"], choices=["peer", "area", "many"])
     args = parser.parse_args()
     lights = [s for s in args.scenes if s != "peer"]
@@ -176,8 +178,8 @@ def _peer(args) -> None:
     floor = reference_floor(reference) if reference is not None else None
     here = Path(__file__).resolve().parent
     configs = [(sampler, []) for sampler in args.lightprobe_samplers]
-    if args.adaptive:
-        configs.append(("sobol, adaptive", ["--adaptive"]))
+    if args.uniform:
+        configs.append(("sobol, uniform", ["--no-adaptive"]))
     rows = []
     for rep in range(args.reps):
         for spp in args.spp:
