@@ -350,6 +350,7 @@ def test_adaptive_counts_are_the_default_from_16_spp_and_uniform_for_sample_rang
     default = render(scene, RenderSettings(spp=16, seed=2))
     assert default.stats["adaptive"] and default.stats["adaptive_pilot_spp"] == 4
     assert default.counts.min() < default.counts.max() and default.counts.mean() <= 16
+    assert default.stats["spp_mean"] == default.counts.mean()
     explicit = render(scene, RenderSettings(spp=16, seed=2, adaptive=True))
     np.testing.assert_array_equal(explicit.image, default.image)
     low = render(scene, RenderSettings(spp=15, seed=2))

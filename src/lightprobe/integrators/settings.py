@@ -216,7 +216,7 @@ class RenderSettings:
         "true or false",
         key="adaptive",
         flags=("--adaptive/--no-adaptive",),
-        auto=f"on at spp >= {AUTO_ADAPTIVE_MIN_SPP} from sample 0; off for a sample range or a resumed render",
+        auto=f"on at spp >= {AUTO_ADAPTIVE_MIN_SPP}; off below, and for references, sample ranges and resumed renders",
     )
     outline_control_variate: bool = option(
         True,

@@ -541,6 +541,7 @@ def _finish(acc: Accumulator, stats: dict, width: int, height: int) -> RenderRes
     stats.update(
         spp_done=int(counts.min()),
         spp_max=int(counts.max()),
+        spp_mean=samples / max(counts.size, 1),  # adaptive counts: spp on average
         camera_samples=samples,
         samples_per_s=samples / seconds,
         rays=rays,
