@@ -10,23 +10,23 @@
 
 The scenes are :mod:`lightprobe.reference_scenes` ``area`` (a rectangle, a sphere and a 16-triangle ring light over a
 16 m ground under a dim sky) and ``many`` (``--many-lights`` small rectangle lights, 2,000 by default, over three
-decades of power, no sky), at ``--resolution``. The reference of each is Mitsuba's own (``direct``, ``multijitter``, 1
-+ 1, passes of 64 spp: 256 for ``area``, 512 for ``many``, whose error is larger; ``--ref-passes`` sets both), made
-once and cached in ``--cache``; its relMSE floor, mean(var / (ref^2 + 0.01)), is printed and subtracted for
-``true_efficiency`` (it is at most a tenth of every error measured). Each configuration renders ``--seeds`` images at
-``--spp`` (8 by default: an image's relMSE is heavy-tailed, a few pixels on a bright emitter's outline that one
-camera sample in hundreds hits, so one seed in four can read 3-4x the median; decisions.md 94); relMSE is their mean,
-seconds their median (the renderer's own timing, kernels compiled first). Mitsuba
-runs every sampler at 1 + 1 and 4 + 4 emitter + BSDF samples (its ``direct`` integrator), on ``many`` also with each
-emitter's ``sampling_weight`` set to its power ("power"); lightprobe every selector with its defaults (adaptive
-counts since decisions.md 99; with ``--uniform``, also with uniform counts: "bvh uniform"; with
-``--without-outlines``, also without the outline control variate of decisions.md 96: "bvh, no outline variate";
-with ``--lights-per-sample``, with each K given instead of the default, 2 here: "bvh K=1").  Each row also
-gives ``relmse_emitter_edges``, the share of relMSE from the pixels next to a directly seen emitter (its outline: a
-pixel there is mostly the count of its camera samples that hit the emitter, so this part measures the camera
-samples' stratification, not the lights' sampling; decisions.md 91).
-Renderers run in alternating subprocesses (A B A B) so that drifting machine load hits both alike.  One JSON line
-per configuration, then the best of each renderer per scene and their ratio.
+decades of power, no sky), at ``--resolution``. The reference of each is Mitsuba's own (``direct``, ``multijitter``,
+1 + 1, passes of 64 spp: 1,024 for ``area`` (about 4 minutes on 2 cores), 512 for ``many``, whose error is larger;
+``--ref-passes`` sets both), made once and cached in ``--cache``; its relMSE floor, mean(var / (ref^2 + 0.01)), is
+printed and subtracted for ``true_efficiency`` (at most a ninth of every error measured; a thirty-fourth on ``area``).
+Each configuration renders ``--seeds`` images at ``--spp`` (8 by default: an image's relMSE is heavy-tailed, a few
+pixels on a bright emitter's outline that one camera sample in hundreds hits, so one seed in four can read 3-4x the
+median; decisions.md 94); relMSE is their mean, seconds their median (the renderer's own timing, kernels compiled
+first). Mitsuba runs every sampler at 1 + 1 and 4 + 4 emitter + BSDF samples (its ``direct`` integrator), on ``many``
+also with each emitter's ``sampling_weight`` set to its power ("power"); lightprobe every selector with its defaults
+(adaptive counts since decisions.md 99; with ``--uniform``, also with uniform counts: "bvh uniform"; with
+``--without-outlines``, also without the outline control variate of decisions.md 96: "bvh, no outline variate"; with
+``--lights-per-sample``, with each K given instead of the default, 2 here: "bvh K=1").  Each row also gives
+``relmse_emitter_edges``, the share of relMSE from the pixels next to a directly seen emitter (its outline: a pixel
+there is mostly the count of its camera samples that hit the emitter, so this part measures the camera samples'
+stratification, not the lights' sampling; decisions.md 91). Renderers run in alternating subprocesses (A B A B) so that
+drifting machine load hits both alike.  One JSON line per configuration, then the best of each renderer per scene and
+their ratio.
 """
 
 from __future__ import annotations
@@ -180,9 +180,11 @@ def _lightprobe_worker(args) -> None:
         print(json.dumps(_row("lightprobe", args.scene, config, errors, seconds, floor, edges)), flush=True)
 
 
-# 16,384 and 32,768 spp: relMSE floors 8.9e-7 and 1.6e-4, under a twentieth of lightprobe's error with the outline
-# control variate (decisions.md 96; 4,096 and 8,192 spp before: 3.4e-6 and 6.6e-4, up to a seventh of it)
-REFERENCE_PASSES = {"area": 256, "many": 512}
+# 65,536 and 32,768 spp: relMSE floors 2.2e-7 and 1.6e-4, a thirty-fourth and a ninth of lightprobe's error with its
+# default adaptive counts.  The area scene's 16,384-spp reference (floor 8.9e-7) was a tenth of it, and its noise sat
+# on the emitters' outline pixels, where lightprobe's image is exact (the outline control variate): there it was most
+# of lightprobe's measured error (decisions.md 99; 4,096 and 8,192 spp before decision 96).
+REFERENCE_PASSES = {"area": 1024, "many": 512}
 
 
 def _passes(args, scene: str) -> int:
