@@ -360,6 +360,13 @@ def test_adaptive_counts_are_the_default_from_16_spp_and_uniform_for_sample_rang
     assert not more.stats["adaptive"] and np.all(more.counts == 32)
     # a render continues only an accumulator whose every pixel holds first_sample samples: not an adaptive render's
     # counts, and not samples it would take again
+    # nor can its statistics be merged with a sample range's: they would hold some samples twice
+    later = render(scene, RenderSettings(spp=16, seed=2, first_sample=16))
+    with pytest.raises(ParameterError, match="cannot merge an adaptive render's statistics"):
+        default.accumulator.merged(later.accumulator)
+    with pytest.raises(ParameterError, match="cannot merge an adaptive render's statistics"):
+        later.accumulator.merged(default.accumulator.copy())
+    assert np.all(first.accumulator.merged(later.accumulator).count == 32)
     uneven = f"4..{default.counts.max()}"
     for accumulator, first_sample, held in ((default.accumulator, 16, uneven), (first.accumulator, 0, "16..16")):
         with pytest.raises(ParameterError, match=f"resume: the accumulator holds {held} samples per pixel"):

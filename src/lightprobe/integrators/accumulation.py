@@ -70,6 +70,8 @@ class Accumulator:
         self.m2 = np.zeros((n_pixels, 3))
         self.count = np.zeros(n_pixels, dtype=np.int64)
         self.nonfinite = np.zeros(n_pixels, dtype=np.int64)
+        #: written by an adaptive render (per-pixel counts from its pilot): it cannot be merged with a sample range
+        self.adaptive = False
 
     def arrays(self) -> AccumulatorArrays:
         """The record the accumulation stage writes."""
@@ -92,6 +94,7 @@ class Accumulator:
         other = Accumulator(0)
         other.mean, other.m2 = self.mean.copy(), self.m2.copy()
         other.count, other.nonfinite = self.count.copy(), self.nonfinite.copy()
+        other.adaptive = self.adaptive
         return other
 
     def merged(self, other: Accumulator) -> Accumulator:
@@ -99,6 +102,12 @@ class Accumulator:
         n_b / n and M2_ab = M2_a + M2_b + delta^2 n_a n_b / n.  Equal to a single run up to float64 rounding."""
         if self.mean.shape != other.mean.shape:
             raise ParameterError(f"cannot merge renders of {self.count.size} and {other.count.size} pixels")
+        if self.adaptive or other.adaptive:
+            # its pixels hold samples 0 .. count - 1, which another range's samples may repeat (decisions.md 99)
+            raise ParameterError(
+                "cannot merge an adaptive render's statistics with another's (its per-pixel counts came from its "
+                "pilot): render the sample ranges with adaptive=False"
+            )
         out = Accumulator(0)
         na, nb = self.count[:, None].astype(float), other.count[:, None].astype(float)
         n = na + nb

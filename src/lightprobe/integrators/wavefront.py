@@ -336,6 +336,7 @@ def render(
             f"render starts at sample {settings.first_sample} (first_sample must be the count every pixel holds)"
         )
     acc = resume.copy() if resume is not None else Accumulator(n_pixels)
+    acc.adaptive = settings.adaptive  # resolved: a continued render is uniform (or refused above)
     plan = plan_for(scene, settings)
     largest_pass = max(1, band * spp_pass)
     work = _Pass(scene, settings, plan, arrays, tracer, largest_pass, threads)
