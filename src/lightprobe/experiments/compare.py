@@ -1,8 +1,9 @@
 """Which strategy wins on a scene: each rendered at equal samples or equal time, measured against a reference.
 
-A strategy is a name with optional setting overrides: ``env``, ``brdf``, ``mis`` (the renderer's defaults),
-``mis-power``, ``mis-balance``, ``mis-compensated`` (the compensated environment PDF on every material; the defaults
-take it on Lambertian ones), ``uniform``, ``cosine``, then ``/key=value`` with any ``[render]`` key of a scene file,
+A strategy is a name with optional setting overrides: ``env``, ``brdf``, ``mis`` (the renderer's defaults, counts
+uniform as below), ``mis-power``, ``mis-balance``, ``mis-compensated`` (the compensated environment PDF on every
+material; the defaults take it on Lambertian ones), ``uniform``, ``cosine``, then ``/key=value`` with any
+``[render]`` key of a scene file,
 e.g. ``mis-power/sampler=independent`` or ``env/light_sampler=bvh/lights_per_sample=4``.
 
 Each strategy renders in doubling rounds (1, 2, 4, ... samples per pixel), each round continuing the previous one
