@@ -18,6 +18,7 @@ from lightprobe.geometry.camera import Camera
 from lightprobe.geometry.scene import Scene
 from lightprobe.geometry.shapes import Rectangle, Sphere
 from lightprobe.integrators import wavefront
+from lightprobe.integrators.accumulation import Accumulator
 from lightprobe.integrators.settings import AUTO_BSDF_SAMPLES, AUTO_ENV_SAMPLES, RESOLVED_PER_SCENE
 from lightprobe.integrators.wavefront import RenderSettings, render, result_from
 from lightprobe.peer import find_peers, peer_scene
@@ -334,7 +335,13 @@ def test_adaptive_settings_are_checked():
         render(scene, RenderSettings(spp=2**53 + 1))
 
 
-def test_adaptive_counts_are_the_default_from_16_spp_and_uniform_for_sample_ranges():
+def _saved(accumulator, directory):
+    path = directory / "accumulator.npz"
+    np.savez(path, **accumulator.to_arrays())
+    return path
+
+
+def test_adaptive_counts_are_the_default_from_16_spp_and_uniform_for_sample_ranges(tmp_path):
     """adaptive=None (decisions.md 99): adaptive counts at spp >= 16 from sample 0; uniform below, for a sample range
     (first_sample > 0), for a render that continues another, and wherever adaptive is given as False."""
     auto = RenderSettings()
@@ -366,6 +373,11 @@ def test_adaptive_counts_are_the_default_from_16_spp_and_uniform_for_sample_rang
         default.accumulator.merged(later.accumulator)
     with pytest.raises(ParameterError, match="cannot merge an adaptive render's statistics"):
         later.accumulator.merged(default.accumulator.copy())
+    saved = Accumulator.from_arrays(dict(np.load(_saved(default.accumulator, tmp_path))))  # through a file too
+    with pytest.raises(ParameterError, match="cannot merge an adaptive render's statistics"):
+        saved.merged(later.accumulator)
+    older = {k: v for k, v in later.accumulator.to_arrays().items() if k != "adaptive"}  # written before the flag
+    assert not Accumulator.from_arrays(older).adaptive
     assert np.all(first.accumulator.merged(later.accumulator).count == 32)
     uneven = f"4..{default.counts.max()}"
     for accumulator, first_sample, held in ((default.accumulator, 16, uneven), (first.accumulator, 0, "16..16")):

@@ -121,7 +121,13 @@ class Accumulator:
         return out
 
     def to_arrays(self) -> dict[str, np.ndarray]:
-        return {"mean": self.mean, "m2": self.m2, "count": self.count, "nonfinite": self.nonfinite}
+        return {
+            "mean": self.mean,
+            "m2": self.m2,
+            "count": self.count,
+            "nonfinite": self.nonfinite,
+            "adaptive": np.array(self.adaptive),
+        }
 
     @classmethod
     def from_arrays(cls, arrays) -> Accumulator:
@@ -130,6 +136,7 @@ class Accumulator:
         acc.m2 = np.array(arrays["m2"], np.float64)
         acc.count = np.array(arrays["count"], np.int64)
         acc.nonfinite = np.array(arrays["nonfinite"], np.int64)
+        acc.adaptive = bool(arrays["adaptive"]) if "adaptive" in arrays else False  # older files: uniform renders
         return acc
 
 
