@@ -90,6 +90,17 @@ class Accumulator:
         self.mean += delta / n
         self.m2 += delta * (values - self.mean)
 
+    def resume_problem(self, first_sample: int) -> str | None:
+        """Why a render from sample ``first_sample`` cannot continue these statistics (None if it can): every pixel
+        must hold exactly ``first_sample`` samples -- not an adaptive render's counts, not a pass cut short, and no
+        sample taken again."""
+        if np.all(self.count == first_sample):
+            return None
+        return (
+            f"resume: the accumulator holds {self.count.min()}..{self.count.max()} samples per pixel, the render "
+            f"starts at sample {first_sample} (first_sample must be the count every pixel holds)"
+        )
+
     def copy(self) -> Accumulator:
         other = Accumulator(0)
         other.mean, other.m2 = self.mean.copy(), self.m2.copy()

@@ -329,12 +329,8 @@ def render(
         raise ParameterError("an adaptive render cannot be resumed: its sample counts need the whole pilot first")
     if resume is not None and resume.count.size != n_pixels:
         raise ParameterError(f"cannot resume a render of {resume.count.size} pixels at {width}x{height}")
-    if resume is not None and not np.all(resume.count == settings.first_sample):
-        # an adaptive render's counts, a pass cut short, or a first_sample that would take samples again
-        raise ParameterError(
-            f"resume: the accumulator holds {resume.count.min()}..{resume.count.max()} samples per pixel, the "
-            f"render starts at sample {settings.first_sample} (first_sample must be the count every pixel holds)"
-        )
+    if resume is not None and (problem := resume.resume_problem(settings.first_sample)) is not None:
+        raise ParameterError(problem)
     acc = resume.copy() if resume is not None else Accumulator(n_pixels)
     acc.adaptive = settings.adaptive  # resolved: a continued render is uniform (or refused above)
     plan = plan_for(scene, settings)

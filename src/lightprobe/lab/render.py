@@ -490,9 +490,8 @@ def render_lab(
     width, height = scene.camera.resolution
     acc = resume.copy() if resume is not None else Accumulator(width * height)
     first = settings.first_sample
-    if resume is not None and not np.all(resume.count == first):
-        raise TechniqueError(f"resume: the accumulator holds {resume.count.min()}..{resume.count.max()} samples per "
-                             f"pixel, the render starts at sample {first}")  # fmt: skip
+    if resume is not None and (problem := resume.resume_problem(first)) is not None:
+        raise TechniqueError(problem)
     shader = _Shader(scene, strategy, settings)
     start = time.perf_counter()
     stopped = interrupted = False
