@@ -241,6 +241,24 @@ def test_rotation_and_scale():
     np.testing.assert_allclose(matrix.eval(dirs), rotated.eval(dirs) / 2.5, rtol=1e-5)
 
 
+@pytest.mark.parametrize("lookup", ["bilinear", "nearest"])
+def test_a_constant_map_is_looked_up_without_coordinates_and_sees_the_same(lookup):
+    """A map whose every texel is the same radiance (a scene file's ``constant``) returns it, scaled, for every
+    direction without its lat-long coordinates; one texel apart makes it an ordinary map, looked up as before."""
+    dirs = np.random.default_rng(6).normal(size=(2000, 3))
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    value = np.array([0.04, 0.05, 0.07], np.float32)
+    flat = EnvironmentMap.from_array(np.broadcast_to(value, (4, 8, 3)).copy(), scale=2.5, lookup=lookup)
+    assert flat.kernel.uniform
+    np.testing.assert_array_equal(flat.eval(dirs), np.broadcast_to(value * np.float32(2.5), (2000, 3)))
+    spot = np.broadcast_to(value, (4, 8, 3)).copy()
+    spot[1, 2] = 1.0
+    uneven = EnvironmentMap.from_array(spot, scale=2.5, lookup=lookup)
+    assert not uneven.kernel.uniform
+    seen = uneven.eval(dirs)
+    assert seen.max() > 1.0 and seen.min() == pytest.approx(2.5 * 0.04, rel=1e-6)
+
+
 # --- angular (Debevec) mapping -----------------------------------------------------------------------------------
 def test_angular_mapping_follows_the_seed():
     from lightprobe.emitters.mappings import angular_to_direction, direction_to_angular

@@ -136,6 +136,10 @@ def test_a_compensated_receiver_weighs_the_environment_by_its_compensated_irradi
     assert constant.pmf(*far)[1] > 0.9
     light_ids, _ = constant.select(*far, np.linspace(0.0, 1.0, 1001, endpoint=False), compensated=True)
     assert np.all(light_ids == 0)
+    # nor where the light cannot reach the receiver either (above it, behind its emitting side): the light is
+    # picked as the descent does where every bound is zero, and the sky still never
+    behind = ([0.0, 2.0, 0.0], [0.0, 1.0, 0.0])
+    np.testing.assert_array_equal(constant.pmf(*behind, compensated=True), [1.0, 0.0])
     # half the plain terms: the sky's importance halves, I / (I + I_area) as infinite_probability weighs it
     half = LightSampler(mode, light, env_irradiance=sky, env_irradiance_compensated=np.array(sky) / 2)
     plain, compensated = half.pmf(*far)[1], half.pmf(*far, compensated=True)[1]

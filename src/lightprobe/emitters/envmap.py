@@ -13,7 +13,9 @@ rotation : None, float or (3, 3) array
 lookup : {"bilinear", "nearest"}
     Radiance reconstruction.  ``bilinear`` follows Mitsuba 3 exactly (columns at u = (i + 0.5)/W, rows at
     v = j/(H - 1)); ``nearest`` returns the texel that contains the direction, the piecewise-constant function that
-    the sampling PDF is exactly proportional to.
+    the sampling PDF is exactly proportional to.  A map whose texels are all the same (a scene file's
+    ``constant``) returns that radiance either way without computing the direction's coordinates, as pbrt-v4's
+    ``UniformInfiniteLight`` (decisions.md 100).
 pdf : {"bilinear", "exact", "pbrt"}
     ``bilinear`` (default with bilinear lookups, unless ``pdf_weights`` or ``pdf_resolution`` is given): the
     density is the lookup's own bilinear luminance, weighted by sin(theta) at the nodes, as Mitsuba 3 samples its
@@ -109,6 +111,7 @@ class EnvKernel(NamedTuple):
     row_guide: np.ndarray  # (NY, G + 1)
     comp_marginal_guide: np.ndarray
     comp_row_guide: np.ndarray
+    uniform: bool  # every texel the same radiance (a scene file's ``constant``): lookups need no coordinates
 
 
 # --- kernels ------------------------------------------------------------------------------------------------------
@@ -122,7 +125,14 @@ def _mat_vec(m, x, y, z):
 
 
 @jit_inline
+def _uniform_radiance(k):
+    return float(k.image[0, 0, 0]), float(k.image[0, 0, 1]), float(k.image[0, 0, 2])
+
+
+@jit_inline
 def _lookup(k, u, v):
+    if k.uniform:
+        return _uniform_radiance(k)
     if k.lookup == BILINEAR:
         return bilinear_latlong(k.image, u, v)
     return nearest_latlong(k.image, u, v)
@@ -131,6 +141,8 @@ def _lookup(k, u, v):
 @jit_inline
 def env_eval(k, x, y, z):
     """Radiance (r, g, b) arriving from world direction (x, y, z)."""
+    if k.uniform:  # a constant map sees the same every way: no lat-long coordinates (an atan2 and an acos)
+        return _uniform_radiance(k)
     ex, ey, ez = _mat_vec(k.to_env, x, y, z)
     u, v = direction_to_latlong(ex, ey, ez)
     return _lookup(k, u, v)
@@ -488,6 +500,7 @@ class EnvironmentMap:
             row_angles,
             column_angles,
             *guides,
+            bool(np.all(image == image[:1, :1])),
         )
 
     def _build_piecewise_constant(self, lum, pdf_weights, pdf_resolution):

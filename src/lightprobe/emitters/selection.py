@@ -570,16 +570,19 @@ def _infinite_importance(sel, i, nx, ny, nz, compensated):
 def infinite_probability(sel, px, py, pz, nx, ny, nz, compensated):
     """(probability of choosing an infinite light for a receiver at p with normal n, the infinite lights' summed
     importance) for ``power`` and ``bvh`` (see the module docstring): I_inf / (I_inf + I_area); 0 without infinite
-    lights, 1 without bounded ones.  ``compensated``: the receiver's material samples the MIS-compensated
-    environment (Karlik et al. 2019), so the environment weighs what its compensated luminance max(L - mean, 0)
-    gives, the part of its light that BSDF samples find poorly; a constant sky then gets no picks at all and its
-    light comes from the BSDF samples, which find it with no variance from the sky (decisions.md 98)."""
+    lights or where their importance is 0 (the bounded lights' is then not weighed), 1 without bounded ones.
+    ``compensated``: the receiver's material samples the MIS-compensated environment (Karlik et al. 2019), so the
+    environment weighs what its compensated luminance max(L - mean, 0) gives, the part of its light that BSDF samples
+    find poorly; a constant sky then gets no picks at all and its light comes from the BSDF samples, which find it
+    with no variance from the sky (decisions.md 98)."""
     n_inf = sel.n_lights - sel.n_bounded
     if n_inf == 0:
         return 0.0, 0.0
     i_inf = 0.0
     for i in range(n_inf):
         i_inf += _infinite_importance(sel, i, nx, ny, nz, compensated)
+    if i_inf <= 0.0:  # a constant map for a compensated receiver: never picked, whatever the bounded lights weigh
+        return 0.0, 0.0
     if _no_bounds(sel):
         return 1.0, i_inf
     i_area = node_importance(sel.node_bounds, 0, px, py, pz, nx, ny, nz)

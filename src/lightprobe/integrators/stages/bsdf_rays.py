@@ -113,9 +113,13 @@ def _weigh_escaping(env, lights, sel, c, cams, slots, r, k):
             continue
         share = 1.0 / c.m
         if c.strategy == MIS:
-            p_light = selector_pmf(sel, px, py, pz, nx, ny, nz, light, compensated) * light_pdf_of(
-                lights, env, light, c.light_strategy, compensated, px, py, pz, nx, ny, nz, wx, wy, wz
-            )
+            # a light the selector never picks here (a constant sky for a compensated receiver: decisions.md 98)
+            # has no light-sample density to weigh against, and its own density is not looked up
+            p_light = selector_pmf(sel, px, py, pz, nx, ny, nz, light, compensated)
+            if p_light > 0.0:
+                p_light *= light_pdf_of(
+                    lights, env, light, c.light_strategy, compensated, px, py, pz, nx, ny, nz, wx, wy, wz
+                )
             share = bsdf_share(c, slots.tpdf[r], p_light)
         r_sum += lr * share
         g_sum += lg * share
