@@ -176,6 +176,29 @@ def test_sphere_irradiance_on_axis_is_pi_l_sin2(strategy, distance):
         assert abs(mean - expected) < 4 * se + 1e-9 * expected, (tilt, mean, expected, se)
 
 
+@pytest.mark.parametrize(("distance", "radius"), [(0.41, 0.4), (3.0, 0.4), (1000.0, 0.01)])
+def test_a_sphere_sample_is_where_its_direction_first_meets_the_sphere(distance, radius):
+    """Solid-angle samples of a sphere light (its point found from the cone's angle, no ray traced): the distance
+    is the nearer root of the ray-sphere equation along the sampled direction, the radiance the light's for every
+    sample, the cone's rim (u1 = 1) included, near, far and 1000 radii away."""
+    centre = np.array([0.3, 2.0, -0.2])
+    light = AreaLight.sphere(centre, radius, 1.5)
+    m = 20_000
+    u = np.random.default_rng(11).random((m, 2))
+    u[:500, 1] = 1.0  # on the rim
+    u[500:1000, 1] = 0.0  # toward the centre
+    p = centre - np.array([0.0, distance, 0.0])
+    s = light.sample_li(np.tile(p, (m, 1)), np.tile([0.0, 1.0, 0.0], (m, 1)), u)
+    np.testing.assert_array_equal(s.radiance, np.full((m, 3), 1.5))
+    oc = p - centre
+    b = s.direction @ oc
+    c = oc @ oc - radius * radius
+    near = -b - np.sqrt(np.maximum(b * b - c, 0.0))
+    np.testing.assert_allclose(s.distance[500:], near[500:], rtol=1e-9, atol=1e-9 * distance)
+    # the rim, where the roots meet (and their formula loses half its digits): the tangent distance sqrt(d^2 - r^2)
+    np.testing.assert_allclose(s.distance[:500], math.sqrt(distance**2 - radius**2), rtol=1e-7)
+
+
 def test_triangle_irradiance_matches_the_polygon_form_factor():
     p, n = np.array([0.05, 0.8, 0.0]), np.array([0.0, 1.0, 0.0])
     g = TRIANGLE.geom

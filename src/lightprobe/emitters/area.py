@@ -398,6 +398,35 @@ def _sample_spherical_triangle(a, b, c, omega, u0, u1):
 
 
 @jit
+def _sample_sphere_cone(lights, l, px, py, pz, omega, u0, u1):
+    """A direction uniform in the cone of solid angle omega that sphere light l fills seen from p (pbrt-v4
+    ``Sphere::Sample(ctx, u)``): 1 - cos(theta) = u1 (1 - cos(theta_max)), phi = 2 pi u0, and the point where that
+    direction first meets the sphere found from the angle alpha at the centre (cos alpha = sin^2(theta) /
+    sin(theta_max) + cos(theta) sqrt(1 - sin^2(theta) / sin^2(theta_max))), so no ray is traced and a direction on
+    the cone's rim still meets it.  1 - cos(theta_max) is omega / 2 pi, exact for small spheres."""
+    g = lights.geom[l]
+    dx, dy, dz = g[0] - px, g[1] - py, g[2] - pz
+    d = math.sqrt(dx * dx + dy * dy + dz * dz)
+    cx, cy, cz = dx / d, dy / d, dz / d
+    sin2_max = (g[3] / d) ** 2
+    one_minus_cos = u1 * (omega / TWO_PI)
+    sin2 = one_minus_cos * (2.0 - one_minus_cos)
+    cos_t = 1.0 - one_minus_cos
+    cos_a = sin2 / math.sqrt(sin2_max) + cos_t * math.sqrt(max(0.0, 1.0 - sin2 / sin2_max))
+    sin_a = math.sqrt(max(0.0, 1.0 - cos_a * cos_a))
+    phi = TWO_PI * u0
+    ts, tt = coordinate_system(cx, cy, cz)
+    # the outward normal at the point: -(alpha, phi) about the axis from p to the centre
+    nx, ny, nz = to_world(ts, tt, (cx, cy, cz), -sin_a * math.cos(phi), -sin_a * math.sin(phi), -cos_a)
+    qx, qy, qz = g[0] + g[3] * nx - px, g[1] + g[3] * ny - py, g[2] + g[3] * nz - pz
+    dist = math.sqrt(qx * qx + qy * qy + qz * qz)
+    wx, wy, wz = qx / dist, qy / dist, qz / dist
+    # the point faces p by construction (cos_light >= 0 up to round-off on the rim): the front's radiance
+    r, gg, b = light_radiance(lights, l, 1.0)
+    return wx, wy, wz, dist, r, gg, b, 1.0 / omega
+
+
+@jit
 def _toward(lights, l, px, py, pz, wx, wy, wz, pdf):
     """The sample record for direction w from p: distance and radiance where the ray meets light l."""
     t, cos_light = light_intersect(lights, l, px, py, pz, wx, wy, wz)
@@ -467,22 +496,9 @@ def light_sample(lights, l, strategy, px, py, pz, nx, ny, nz, u0, u1):
                     r, gg, b = light_radiance(lights, l, -_dot(g[9], g[10], g[11], wx, wy, wz))
                     return wx, wy, wz, dist, r, gg, b, 1.0 / omega
         else:  # a sphere: a direction uniform in the cone of directions that hit it
-            spherical, omega, cos_max = _solid_angle_mode(lights, l, px, py, pz)
+            spherical, omega, _ = _solid_angle_mode(lights, l, px, py, pz)
             if spherical:
-                cx, cy, cz = normalize(g[0] - px, g[1] - py, g[2] - pz)
-                ts, tt = coordinate_system(cx, cy, cz)
-                one_minus_cos = u1 * (1.0 - cos_max)
-                cos_t = 1.0 - one_minus_cos
-                sin_t = math.sqrt(max(0.0, one_minus_cos * (2.0 - one_minus_cos)))
-                phi = TWO_PI * u0
-                wx, wy, wz = to_world(ts, tt, (cx, cy, cz), sin_t * math.cos(phi), sin_t * math.sin(phi), cos_t)
-                wx, wy, wz = normalize(wx, wy, wz)
-                rec = _toward(lights, l, px, py, pz, wx, wy, wz, 1.0 / omega)
-                if rec[3] == math.inf:  # the cone's rim grazes the sphere (round-off): the tangent point's distance
-                    d = math.sqrt((g[0] - px) ** 2 + (g[1] - py) ** 2 + (g[2] - pz) ** 2)
-                    r, gg, b = light_radiance(lights, l, 1e-12)
-                    return wx, wy, wz, math.sqrt(max(0.0, d * d - g[3] * g[3])), r, gg, b, 1.0 / omega
-                return rec
+                return _sample_sphere_cone(lights, l, px, py, pz, omega, u0, u1)
     # area sampling (the strategy itself, or the fallback of solid-angle sampling)
     q, nq = _sample_area_point(lights, l, px, py, pz, u0, u1)
     dx, dy, dz = q[0] - px, q[1] - py, q[2] - pz
