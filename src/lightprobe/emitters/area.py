@@ -28,7 +28,8 @@ Strategies (``STRATEGIES``), each with its density per steradian:
 ``solid-angle``
     uniform in the solid angle the light subtends: spherical rectangles (Urena et al. 2013, as pbrt-v4's
     ``SampleSphericalRectangle``), spherical triangles (Arvo 1995, pbrt-v4's ``SampleSphericalTriangle``) and
-    cones for spheres (pbrt-v4's ``Sphere::Sample``): p(w) = 1 / Omega.  Fallbacks, decided from the reference
+    cones for spheres (pbrt-v4's ``Sphere::Sample``, the point built from the cone's angle, no ray traced):
+    p(w) = 1 / Omega.  Fallbacks, decided from the reference
     point alone (so the sample and the pdf always agree): area sampling when Omega < 3e-4 sr (float round-off in
     the spherical formulas exceeds the variance they save; pbrt-v4's ``MinSphericalSampleArea``), when Omega > 6.22
     sr (the triangle nearly covers a hemisphere and Arvo's inversion loses precision; pbrt-v4's
