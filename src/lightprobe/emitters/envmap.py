@@ -500,7 +500,8 @@ class EnvironmentMap:
             row_angles,
             column_angles,
             *guides,
-            bool(np.all(image == image[:1, :1])),
+            # every texel the same radiance: a luminance that varies rules a map out without comparing its texels
+            bool(lum.min() == lum.max() and np.all(image == image[:1, :1])),
         )
 
     def _build_piecewise_constant(self, lum, pdf_weights, pdf_resolution):
