@@ -51,11 +51,20 @@ def test_every_plan_runs_known_stages_in_the_estimators_order():
         assert "finish" in names and "setup" in names
 
 
-@pytest.mark.parametrize("vector, scalar_flag", [("camera", "lanes"), ("analytic_shadows_lanes", "lanes")])
-def test_a_vector_stage_falls_back_to_its_twin(vector, scalar_flag):
-    """Without the vector intrinsics (``lanes`` false) a plan runs the twin the table names."""
+@pytest.mark.parametrize(
+    "vector, scalar_flag, scene_flags",
+    [
+        ("camera", "lanes", ()),
+        ("analytic_shadows_lanes", "lanes", ()),
+        ("analytic_shadows_lanes", "lanes", ("bounded_lights",)),
+        ("nearest_analytic_lanes", "lanes", ("bounded_lights", "emissive_surfaces")),
+    ],
+)
+def test_a_vector_stage_falls_back_to_its_twin(vector, scalar_flag, scene_flags):
+    """Without the vector intrinsics (``lanes`` false) a plan runs the twin the table names; with them, the vector
+    stage serves scenes lit by the environment and by area lights alike."""
     twin = pipeline.STAGES[pipeline.stage_id(vector)].twin
-    base = dict.fromkeys(FLAGS, False)
+    base = dict.fromkeys(FLAGS, False) | dict.fromkeys(scene_flags, True)
     assert vector in pipeline.Plan(**{**base, scalar_flag: True}).stages()
     without = pipeline.Plan(**base).stages()
     assert vector not in without and twin in without

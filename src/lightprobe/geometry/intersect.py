@@ -108,7 +108,7 @@ def rect_coordinates(rects, i, px, py, pz):
 def rect_hit(ox, oy, oz, dx, dy, dz, rects, i, tmax):
     """Distance to parallelogram i of ``rects`` (rows of :func:`rectangle_rows`), INF if missed before tmax.  The
     single routine for every caller: camera, shadow and BSDF rays, the light table (``emitters/area.py``), and the
-    vector lanes' ``_rect_t`` (geometry/shadow_lanes.py) in the same operations."""
+    vector lanes' ``_rect_t`` (integrators/stages/ray_lanes.py) in the same operations."""
     nx, ny, nz = rects[i, 9], rects[i, 10], rects[i, 11]
     denom = dx * nx + dy * ny + dz * nz
     if denom == 0.0:

@@ -1,7 +1,7 @@
 """A bounding volume hierarchy over the analytic shapes (spheres and parallelograms), in float64.
 
 A scene with a few spheres and rectangles tests every one for every ray (the loops of
-:func:`lightprobe.geometry.intersect.closest_analytic` and the 8-wide lanes of ``camera_lanes`` / ``shadow_lanes``).
+:func:`lightprobe.geometry.intersect.closest_analytic` and the 8-wide lanes of ``integrators/stages/ray_lanes.py``).
 A scene file with thousands of rectangle lights would pay for all of them on every camera, BSDF and shadow ray
 (about 20x the time of the same quads as one mesh at 2,000, issue 32).  Above :data:`SHAPES_FOR_BVH` shapes the
 scene carries this hierarchy and every analytic ray query walks it instead (decisions.md 70 has the measurements).

@@ -7,8 +7,9 @@ Every scene goes through the same stages (``stages/``), each a plain function ov
 A :class:`Plan` says what a scene needs and :meth:`Plan.stages` picks each stage's variant: where the environment map
 is the only light, the light-sample stage samples it without a selector (8 samples at a time in vector IR where its
 density allows), BSDF rays need only their lat-long coordinates and the radiance lookups get a stage of their own;
-with emissive surfaces a BSDF ray finds its nearest hit (analytic shapes, then Embree) to see what it meets; shadow
-rays go 8 at a time where every one is unbounded.  :data:`STAGES` is the one registry: each stage's body, what it
+with emissive surfaces a BSDF ray finds its nearest hit (analytic shapes, then Embree) to see what it meets.  The
+camera, BSDF and shadow rays meet the analytic shapes 8 at a time (vector IR) wherever the scene has no shape
+hierarchy.  :data:`STAGES` is the one registry: each stage's body, what it
 counts (camera samples, slots, blocks of 8), and the scalar twin of a vector stage.
 
 :func:`run_stage` is the loop over a stage's items, written once (pbrt-v4's ``ForAllQueued``): a worker claims chunks
@@ -33,6 +34,7 @@ from .stages.bsdf_rays import (
     environment_coords_lanes,
     infinite_lights,
     nearest_analytic,
+    nearest_analytic_lanes,
     nearest_mesh,
     non_light_blocks,
     what_bsdf_rays_see,
@@ -49,7 +51,12 @@ from .stages.light_samples import (
 )
 from .stages.radiance import environment_radiance, environment_radiance_lanes, slot_blocks
 from .stages.setup import shading_setup
-from .stages.shadows import analytic_shadows, analytic_shadows_lanes, mesh_shadows, mesh_shadows_single
+from .stages.shadows import (
+    analytic_shadows,
+    analytic_shadows_lanes,
+    mesh_shadows,
+    mesh_shadows_single,
+)
 
 __all__ = ["STAGES", "Launcher", "Plan", "Stage", "run_stage", "stage_id"]
 
@@ -76,6 +83,7 @@ STAGES: tuple[Stage, ...] = (
     Stage("environment_coords_lanes", environment_coords_lanes, non_light_blocks, twin="environment_coords"),
     Stage("environment_coords", environment_coords, slots_of_pass),
     Stage("infinite_lights", infinite_lights, slots_of_pass),
+    Stage("nearest_analytic_lanes", nearest_analytic_lanes, slot_blocks, twin="nearest_analytic"),
     Stage("nearest_analytic", nearest_analytic, slots_of_pass),
     Stage("nearest_mesh", nearest_mesh, slots_of_pass),
     Stage("what_bsdf_rays_see", what_bsdf_rays_see, slots_of_pass),
@@ -192,14 +200,14 @@ class Plan:
         else:
             names.append("light_samples")
             if self.emissive_surfaces:
-                names.append("nearest_analytic")
+                names.append("nearest_analytic_lanes" if self.lanes else "nearest_analytic")
                 if self.meshes:
                     names.append("nearest_mesh")
                 names.append("what_bsdf_rays_see")
             else:  # the infinite lights are all a BSDF ray can see (none: it is dropped)
                 names.append("infinite_lights")
         names.append("finish")
-        names.append("analytic_shadows_lanes" if self.lanes and not self.bounded_lights else "analytic_shadows")
+        names.append("analytic_shadows_lanes" if self.lanes else "analytic_shadows")
         if self.meshes:
             names.append("mesh_shadows" if self.packets else "mesh_shadows_single")
         names.append("accumulate")

@@ -50,6 +50,7 @@ from .pass_state import PassConstants, camera_buffers, slot_buffers, views
 from .schedule import pass_pixels
 from .settings import DIFFUSE, HEURISTICS, RenderSettings, settings_record
 from .stages import environment_lanes
+from .stages.ray_lanes import FIELDS as RAY_FIELDS
 from .techniques import STRATEGIES
 
 __all__ = [
@@ -256,6 +257,7 @@ class _Pass:
             # a camera sample's Sobol' numbers, one row per thread (rows of whole cache lines: 8 slots x 24 bytes)
             numbers=np.zeros((threads_max, (m + LANES - 1) // LANES * LANES, 3)),
             packet_slots=np.zeros((threads_max, PACKET), np.int64),
+            lane_rays=np.zeros((threads_max, RAY_FIELDS, LANES)),
             pixels=np.zeros(0, np.int64),
             spp_pass=1,
             sample_start=0,

@@ -6,9 +6,10 @@ Numba compiles the renderer's stages one slot at a time: its loop vectoriser giv
 shadow and camera rays' shape tests, the Sobol' numbers) are written as intrinsics that emit the operation for 8
 slots at once: :class:`Lanes` holds the operations, each as the scalar code's Python operator compiles (float
 arithmetic with the kernels' fast-math flags, ``max``/``min`` as Numba's builtins), so a lane computes what the
-scalar twin computes, operation for operation.  The intrinsics live beside the scalar code they mirror
-(``emitters/envmap_lanes.py``, ``geometry/shadow_lanes.py``, ``geometry/camera_lanes.py``,
-``sampling/sobol_lanes.py``); each has a test that compares it with its twin.
+scalar twin computes, operation for operation.  The intrinsics live beside the stages they serve (in
+``integrators/stages/``: ``environment_lanes.py``, ``ray_lanes.py``, ``sobol_lanes.py``; and
+``emitters/light_tree_lanes.py``, ``geometry/shape_tree_lanes.py``); each has a test that compares it with its twin.
+The shape tests take rays that the stages' scalar code built (``ray_lanes``), so a ray has one source.
 
 This package depends on nothing of lightprobe's: the constants an intrinsic needs (slot states, shadow flags) come
 from the module that owns them.

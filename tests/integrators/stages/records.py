@@ -13,6 +13,7 @@ from lightprobe.geometry.scene import Scene
 from lightprobe.integrators import outlines, pipeline
 from lightprobe.integrators.accumulation import Accumulator
 from lightprobe.integrators.pass_state import CameraSamples, PassConstants, Slots, camera_buffers, slot_buffers
+from lightprobe.integrators.stages.ray_lanes import FIELDS as RAY_FIELDS
 from lightprobe.integrators.techniques import STRATEGIES
 
 
@@ -39,6 +40,7 @@ def constants(m: int, **given) -> PassConstants:
         "ray_counts": np.zeros((threads, 8), np.int64),
         "numbers": np.zeros((threads, (m + 7) // 8 * 8, 3)),
         "packet_slots": np.zeros((threads, PACKET), np.int64),
+        "lane_rays": np.zeros((threads, RAY_FIELDS, 8)),
         "pixels": np.zeros(0, np.int64),
         "spp_pass": 1,
         "sample_start": 0,

@@ -32,6 +32,7 @@ from ...geometry.intersect import MESH, MISS, closest_analytic, may_hit_mesh, ra
 from ...simd import LANES
 from ..techniques import ENV, MIS, SLOT_BSDF, SLOT_HEMI, SLOT_LIGHT, SLOT_NONE, bsdf_share
 from .environment_lanes import env_coords_block
+from .ray_lanes import CROSSED, DIRECTION, HIT_INDEX, HIT_KIND, HIT_T, ORIGIN, TMAX, ray_block
 from .setup import emitter_of
 
 __all__ = [
@@ -39,6 +40,7 @@ __all__ = [
     "environment_coords_lanes",
     "infinite_lights",
     "nearest_analytic",
+    "nearest_analytic_lanes",
     "nearest_mesh",
     "non_light_blocks",
     "what_bsdf_rays_see",
@@ -154,6 +156,52 @@ def nearest_analytic(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
         slots.hit_b1[r] = 0.0
         slots.hit_b2[r] = 0.0
         slots.hit_mesh[r] = may_hit_mesh(s, qx, qy, qz, wx, wy, wz, th)
+
+
+@jit_body
+def nearest_analytic_lanes(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
+    """Blocks lo .. hi - 1 of 8 slots: as ``nearest_analytic``, the rays built one at a time and their shape tests
+    made 8 at a time (``ray_lanes.ray_block``); a scene with a shape hierarchy walks it one ray at a time."""
+    if slots.hit_t.shape[0] == 0:  # never without the hit record (pass_state.py)
+        return
+    n = slots.state.shape[0]
+    if s.tree_skip.shape[0] > 0:
+        nearest_analytic(s, env, lights, sel, c, cams, slots, acc, worker, lo * LANES, min(hi * LANES, n))
+        return
+    m = c.m
+    block = c.lane_rays[worker]
+    for first in range(lo * LANES, hi * LANES, LANES):
+        live = False
+        for lane in range(LANES):
+            r = first + lane
+            if r >= n or (slots.state[r] != SLOT_BSDF and slots.state[r] != SLOT_HEMI):
+                block[TMAX, lane] = -1.0  # finds nothing
+                continue
+            k = r // m
+            wx, wy, wz = slots.wdir[r, 0], slots.wdir[r, 1], slots.wdir[r, 2]
+            qx, qy, qz = ray_offset(
+                cams.point[k, 0], cams.point[k, 1], cams.point[k, 2], cams.gnormal[k, 0], cams.gnormal[k, 1],
+                cams.gnormal[k, 2], cams.point_error[k], wx, wy, wz,
+            )  # fmt: skip
+            slots.ray_o[r, 0], slots.ray_o[r, 1], slots.ray_o[r, 2] = qx, qy, qz
+            block[ORIGIN, lane], block[ORIGIN + 1, lane], block[ORIGIN + 2, lane] = qx, qy, qz
+            block[DIRECTION, lane], block[DIRECTION + 1, lane], block[DIRECTION + 2, lane] = wx, wy, wz
+            block[TMAX, lane] = np.inf
+            live = True
+        if not live:
+            continue
+        ray_block(block, s.spheres, s.rects, s.mesh_bounds, s.mesh_spheres)
+        for lane in range(LANES):
+            r = first + lane
+            if r >= n or (slots.state[r] != SLOT_BSDF and slots.state[r] != SLOT_HEMI):
+                continue
+            slots.hit_t[r] = block[HIT_T, lane]
+            slots.hit_kind[r] = np.int64(block[HIT_KIND, lane])
+            slots.hit_index[r] = np.int64(block[HIT_INDEX, lane])
+            slots.hit_prim[r] = 0
+            slots.hit_b1[r] = 0.0
+            slots.hit_b2[r] = 0.0
+            slots.hit_mesh[r] = block[CROSSED, lane] != 0.0
 
 
 @jit_body

@@ -1,10 +1,10 @@
 """Stage 1, camera rays: each camera sample's ray (box filter with jitter) and its nearest hit.
 
-Analytic shapes first, 8 rays at a time in vector IR (geometry/camera_lanes.py; one at a time through the shapes'
-hierarchy when the scene has one), then meshes through Embree where a ray may reach a mesh's bounds before its
-analytic hit.  Meshes in the same loop: camera rays are coherent, and here they cost 0.27 s of the peer scene's
-64-spp render against 0.42 s in a loop of their own (the opposite of shadow rays, decisions.md 30).  One ray at a
-time where the vector intrinsics do not compile (``camera_scalar``).
+Analytic shapes first, 8 rays at a time in vector IR (``ray_lanes.ray_block``, which also says whether a ray may
+reach a mesh; one at a time through the shapes' hierarchy when the scene has one), then meshes through Embree where a
+ray may reach a mesh's bounds before its analytic hit.  Meshes in the same loop: camera rays are coherent, and here
+they cost 0.27 s of the peer scene's 64-spp render against 0.42 s in a loop of their own (the opposite of shadow
+rays, decisions.md 30).  One ray at a time where the vector intrinsics do not compile (``camera_scalar``).
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from ...geometry.embree import closest_mesh_hit
 from ...geometry.intersect import MESH, closest_analytic, may_hit_mesh
 from ...sampling.rng import SOBOL, sample_state, uniform_2d
 from ...simd import LANES
-from .camera_lanes import nearest_block
+from .ray_lanes import CROSSED, DIRECTION, HIT_INDEX, HIT_KIND, HIT_T, ORIGIN, TMAX, ray_block
 from .sobol_lanes import camera_numbers_block
 
 __all__ = ["camera_blocks", "camera_lanes", "camera_samples", "camera_scalar"]
@@ -46,22 +46,32 @@ def _ray_into(c, cams, k):
 
 
 @jit_inline
-def _mesh_hit_into(s, c, cams, worker, k):
+def _mesh_hit_into(s, c, cams, worker, k, may_hit):
     """Camera sample k's nearest mesh hit through Embree, where its ray may reach a mesh's bounds before its
-    analytic hit t[k]; the mesh hit replaces that one when nearer."""
+    analytic hit t[k] (``may_hit``: ``may_hit_mesh``); the mesh hit replaces that one when nearer."""
     cams.prim[k] = 0
     cams.b1[k] = 0.0
     cams.b2[k] = 0.0
     ox, oy, oz = c.cam[0], c.cam[1], c.cam[2]
     dx, dy, dz = cams.dirs[k, 0], cams.dirs[k, 1], cams.dirs[k, 2]
     t = cams.t[k]
-    if c.mesh_scene != 0 and may_hit_mesh(s, ox, oy, oz, dx, dy, dz, t):
+    if c.mesh_scene != 0 and may_hit:
         c.ray_counts[worker, 0] += 1
         far = t if t < np.inf else MESH_FAR
         mt, mesh, face, mb1, mb2 = closest_mesh_hit(c.mesh_scene, c.scratch[worker], ox, oy, oz, dx, dy, dz, far)
         if mesh >= 0:
             cams.t[k], cams.kind[k], cams.index[k] = mt, MESH, mesh
             cams.prim[k], cams.b1[k], cams.b2[k] = face, mb1, mb2
+
+
+@jit_inline
+def _nearest_hit_into(s, c, cams, worker, k):
+    """Camera sample k's nearest hit, one ray at a time: analytic shapes, then meshes."""
+    ox, oy, oz = c.cam[0], c.cam[1], c.cam[2]
+    dx, dy, dz = cams.dirs[k, 0], cams.dirs[k, 1], cams.dirs[k, 2]
+    t, cams.kind[k], cams.index[k] = closest_analytic(s, ox, oy, oz, dx, dy, dz, np.inf)
+    cams.t[k] = t
+    _mesh_hit_into(s, c, cams, worker, k, may_hit_mesh(s, ox, oy, oz, dx, dy, dz, t))
 
 
 @jit_body
@@ -83,24 +93,33 @@ def camera_lanes(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
         else:
             for k in range(start, stop):
                 _ray_into(c, cams, k)
-        if s.tree_skip.shape[0] == 0:
-            nearest_block(dirs, cams.t, cams.kind, cams.index, c.cam, s.spheres, s.rects, start)
+        if s.tree_skip.shape[0] == 0:  # the shape tests 8 rays at a time (ray_lanes.py)
+            rays = c.lane_rays[worker]
+            for lane in range(LANES):
+                k = start + lane
+                if k >= stop:
+                    rays[TMAX, lane] = -1.0  # finds nothing
+                    continue
+                rays[ORIGIN, lane], rays[ORIGIN + 1, lane], rays[ORIGIN + 2, lane] = c.cam[0], c.cam[1], c.cam[2]
+                rays[DIRECTION, lane], rays[DIRECTION + 1, lane], rays[DIRECTION + 2, lane] = (
+                    dirs[k, 0], dirs[k, 1], dirs[k, 2]
+                )  # fmt: skip
+                rays[TMAX, lane] = np.inf
+            ray_block(rays, s.spheres, s.rects, s.mesh_bounds, s.mesh_spheres)
+            for k in range(start, stop):
+                lane = k - start
+                cams.t[k] = rays[HIT_T, lane]
+                cams.kind[k] = np.int64(rays[HIT_KIND, lane])
+                cams.index[k] = np.int64(rays[HIT_INDEX, lane])
+                _mesh_hit_into(s, c, cams, worker, k, rays[CROSSED, lane] != 0.0)
         else:  # many shapes: each ray walks their hierarchy (geometry/shape_bvh.py)
             for k in range(start, stop):
-                cams.t[k], cams.kind[k], cams.index[k] = closest_analytic(
-                    s, c.cam[0], c.cam[1], c.cam[2], dirs[k, 0], dirs[k, 1], dirs[k, 2], np.inf
-                )
-        for k in range(start, stop):
-            _mesh_hit_into(s, c, cams, worker, k)
+                _nearest_hit_into(s, c, cams, worker, k)
 
 
 @jit_body
 def camera_scalar(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
     """Camera samples lo .. hi - 1, one ray at a time."""
-    ox, oy, oz = c.cam[0], c.cam[1], c.cam[2]
     for k in range(lo, hi):
         _ray_into(c, cams, k)
-        cams.t[k], cams.kind[k], cams.index[k] = closest_analytic(
-            s, ox, oy, oz, cams.dirs[k, 0], cams.dirs[k, 1], cams.dirs[k, 2], np.inf
-        )
-        _mesh_hit_into(s, c, cams, worker, k)
+        _nearest_hit_into(s, c, cams, worker, k)

@@ -7,9 +7,10 @@ point of a bounded light, that point moved toward the shading point by its own e
 ``SHADOW_EPSILON`` of its length short (pbrt-v4's ``SpawnRayTo`` and ``ShadowEpsilon``).
 
 ``analytic_shadows`` tests it against the spheres and rectangles (``BLOCKED``), then the meshes' bounding boxes and
-spheres (``TEST_MESH`` for the mesh stage, or ``VISIBLE``).  Where every shadow ray is unbounded (scenes lit by the
-environment map alone) ``analytic_shadows_lanes`` does so 8 slots at a time in vector IR (``shadow_lanes.py``: in
-the finish stage, one ray at a time with early exits, these tests were half of its time, decisions.md 49).
+spheres (``TEST_MESH`` for the mesh stage, or ``VISIBLE``).  ``analytic_shadows_lanes`` builds the same rays one at a
+time and tests them 8 at a time in vector IR (``ray_lanes.ray_block``), for every scene without a shape hierarchy (in
+the finish stage, one ray at a time with early exits, these tests were half of its time, decisions.md 49; one stage
+for bounded and unbounded rays since decisions.md 101).
 ``mesh_shadows`` traces the ``TEST_MESH`` rays through Embree 8 at a time where its 8-ray packets are native
 (decisions.md 55), ``mesh_shadows_single`` one at a time elsewhere; they run in loops of their own, where the
 shading work does not evict Embree's BVH between rays (decisions.md 30), and gather their rays as they scan the
@@ -30,7 +31,7 @@ from ...geometry.embree import PACKET, mesh_occluded, occluded_packet, packet_ra
 from ...geometry.intersect import blocked_by_mesh_core, may_hit_mesh, occluded_analytic, ray_offset
 from ...simd import LANES
 from ..techniques import BLOCKED, SLOT_LIGHT, TEST_ANALYTIC, TEST_MESH, VISIBLE
-from .shadow_lanes import shadow_block
+from .ray_lanes import CORE, CROSSED, DIRECTION, HIT_T, ORIGIN, TMAX, ray_block
 
 __all__ = [
     "SHADOW_EPSILON",
@@ -103,17 +104,39 @@ def analytic_shadows(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
 
 @jit_body
 def analytic_shadows_lanes(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
-    """Blocks lo .. hi - 1 of 8 slots, every shadow ray unbounded (a scene with a shape hierarchy walks it one ray
-    at a time, as ``analytic_shadows``)."""
+    """Blocks lo .. hi - 1 of 8 slots, shadow rays of any kind (to a light's sampled point or unbounded): as
+    ``analytic_shadows``, each ray built by ``shadow_ray`` and the shape tests made 8 rays at a time
+    (``ray_lanes.ray_block``); a scene with a shape hierarchy walks it one ray at a time."""
+    n = slots.flags.shape[0]
     if s.tree_skip.shape[0] > 0:
-        n = slots.flags.shape[0]
         analytic_shadows(s, env, lights, sel, c, cams, slots, acc, worker, lo * LANES, min(hi * LANES, n))
         return
-    for block in range(lo, hi):
-        shadow_block(
-            slots.flags, cams.point, cams.gnormal, cams.point_error, slots.wdir, s.spheres, s.rects, s.mesh_bounds,
-            s.mesh_spheres, c.m, block * LANES,
-        )  # fmt: skip
+    block = c.lane_rays[worker]
+    for first in range(lo * LANES, hi * LANES, LANES):
+        live = False
+        for lane in range(LANES):
+            r = first + lane
+            if r >= n or slots.flags[r] != TEST_ANALYTIC:
+                block[TMAX, lane] = -1.0  # finds nothing
+                continue
+            qx, qy, qz, wx, wy, wz, tmax = shadow_ray(lights, c, cams, slots, r)
+            block[ORIGIN, lane], block[ORIGIN + 1, lane], block[ORIGIN + 2, lane] = qx, qy, qz
+            block[DIRECTION, lane], block[DIRECTION + 1, lane], block[DIRECTION + 2, lane] = wx, wy, wz
+            block[TMAX, lane] = tmax
+            live = True
+        if not live:
+            continue
+        ray_block(block, s.spheres, s.rects, s.mesh_bounds, s.mesh_spheres)
+        for lane in range(LANES):
+            r = first + lane
+            if r >= n or slots.flags[r] != TEST_ANALYTIC:
+                continue
+            tmax = block[TMAX, lane]
+            # occluded_analytic: a hit before tmax; blocked_by_mesh_core: only for a ray to infinity
+            if block[HIT_T, lane] < tmax or (tmax == math.inf and block[CORE, lane] != 0.0):
+                slots.flags[r] = BLOCKED
+            else:  # no hit: the mesh test's bound, HIT_T, is tmax (may_hit_mesh(..., tmax))
+                slots.flags[r] = TEST_MESH if block[CROSSED, lane] != 0.0 else VISIBLE
 
 
 @jit_body

@@ -1,5 +1,5 @@
-"""The camera rays' nearest analytic hits in lanes (integrators/stages/camera_lanes.py) against the scalar stage, ray
-for ray."""
+"""The camera stage's nearest hits, the shape tests in lanes (integrators/stages/ray_lanes.py), against the scalar
+stage, ray for ray."""
 
 from __future__ import annotations
 
