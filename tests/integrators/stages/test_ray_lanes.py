@@ -34,18 +34,8 @@ HIT_FIELDS = ("ray_o", "hit_t", "hit_kind", "hit_index", "hit_prim", "hit_b1", "
 
 
 def _scene(meshes=True, spheres=True):
-    """Occluders (a blob, two spheres, the ground, a wall) and three kinds of area light: a rectangle, a sphere and
-    two triangles."""
-    sc = Scene(Camera([0, 1, 5], [0, 0, 0]))
-    sc.add_material("m", Lambert(0.5))
-    if meshes:
-        sc.add(blob_mesh(2), "m", transform={"scale": 0.7, "translate": [0, 0.8, 0]})
-        sc.add(blob_mesh(1), "m", transform={"scale": 0.3, "translate": [1.5, 0.3, 0.5]})
-    if spheres:
-        sc.add(Sphere([-1.5, 0.5, 0], 0.5), "m")
-        sc.add(Sphere([0.5, 1.8, -1.0], 0.3), "m")
-    sc.add(Rectangle.ground(size=8), "m")
-    sc.add(Rectangle([-2.0, 0.0, -2.0], [0.0, 2.0, 0.0], [0.0, 0.0, 1.5]), "m")  # a wall facing +x
+    """Occluders (``_occluders``) and three kinds of area light: a rectangle, a sphere and two triangles."""
+    sc = _occluders(Scene(Camera([0, 1, 5], [0, 0, 0])), meshes, spheres)
     sc.add(Rectangle([-1.0, 2.4, -1.0], [0.0, 0.0, 1.2], [1.2, 0.0, 0.0]), emission=5.0)  # facing down
     sc.add(Sphere([1.4, 1.3, -0.6], 0.2), emission=20.0)
     triangles = np.array([[1.0, 2.2, 1.0], [2.0, 2.2, 1.0], [1.5, 2.2, 2.0], [-2.5, 1.5, 1.0], [-2.5, 1.5, 2.0],
@@ -69,8 +59,12 @@ def _points(n_samples, seed):
     on_sphere /= np.linalg.norm(on_sphere, axis=1)[:, None]
     point[1::2] = np.array([-1.5, 0.5, 0.0]) + 0.5 * on_sphere
     normal[1::2] = on_sphere
-    error = ANALYTIC_ERROR * (np.abs(point) * np.abs(normal)).sum(axis=1) + ANALYTIC_ERROR * 8.0
-    return point, normal, error
+    return point, normal, _errors(point, normal)
+
+
+def _errors(point, normal):
+    """Error bounds of analytic points (intersect.point_error with a shape of size 8, the ground's)."""
+    return ANALYTIC_ERROR * (np.abs(point) * np.abs(normal)).sum(axis=1) + ANALYTIC_ERROR * 8.0
 
 
 def _directions(n, rng):
@@ -202,7 +196,13 @@ def _shadow_stage(name, arrays, m, point, normal, wdir, flags):
 
 
 def _environment_scene(meshes=True, spheres=True):
+    """The occluders under a uniform environment map, compiled."""
     sc = Scene(Camera([0, 1, 5], [0, 0, 0]), EnvironmentMap.from_array(np.ones((2, 4, 3))))
+    return _occluders(sc, meshes, spheres).compile()
+
+
+def _occluders(sc, meshes, spheres):
+    """Two blobs, two spheres, the ground and a wall, added to scene ``sc``."""
     sc.add_material("m", Lambert(0.5))
     if meshes:
         sc.add(blob_mesh(2), "m", transform={"scale": 0.7, "translate": [0, 0.8, 0]})
@@ -212,32 +212,15 @@ def _environment_scene(meshes=True, spheres=True):
         sc.add(Sphere([0.5, 1.8, -1.0], 0.3), "m")
     sc.add(Rectangle.ground(size=8), "m")
     sc.add(Rectangle([-2.0, 0.0, -2.0], [0.0, 2.0, 0.0], [0.0, 0.0, 1.5]), "m")  # a wall facing +x
-    return sc.compile()
-
-
-def _errors(point, normal):
-    """Error bounds of analytic points (intersect.point_error with a shape of size 8, the ground's)."""
-    return ANALYTIC_ERROR * (np.abs(point) * np.abs(normal)).sum(axis=1) + ANALYTIC_ERROR * 8.0
+    return sc
 
 
 def _unbounded_rays(n_samples, m, seed):
-    """Shading points on and above the ground, half of them on the sphere; directions random, axis-aligned (the
-    slab test's zero components) and grazing the sphere."""
+    """Shading points (``_points``) and for each of their m slots a random direction, every seventh along an axis,
+    with a flag: most TEST_ANALYTIC, some not to be tested."""
     rng = np.random.default_rng(seed)
-    point = np.column_stack(
-        [rng.uniform(-3, 3, n_samples), rng.uniform(0, 1.5, n_samples), rng.uniform(-3, 3, n_samples)]
-    )
-    point[::3, 1] = 0.0
-    normal = rng.normal(size=(n_samples, 3))
-    normal /= np.linalg.norm(normal, axis=1)[:, None]
-    normal[::3] = [0.0, 1.0, 0.0]
-    on_sphere = rng.normal(size=(n_samples // 2, 3))
-    on_sphere /= np.linalg.norm(on_sphere, axis=1)[:, None]
-    point[1::2] = np.array([-1.5, 0.5, 0.0]) + 0.5 * on_sphere
-    normal[1::2] = on_sphere
-    wdir = rng.normal(size=(n_samples * m, 3))
-    wdir[::7] = np.eye(3)[rng.integers(0, 3, wdir[::7].shape[0])] * rng.choice([-1.0, 1.0], (wdir[::7].shape[0], 1))
-    wdir /= np.linalg.norm(wdir, axis=1)[:, None]
+    point, normal, _ = _points(n_samples, seed)
+    wdir = _directions(n_samples * m, rng)
     flags = rng.choice([NONE, TEST_ANALYTIC, TEST_ANALYTIC, TEST_ANALYTIC, VISIBLE], n_samples * m).astype(np.int8)
     return point, normal, wdir, flags
 

@@ -32,7 +32,7 @@ from ...geometry.intersect import MESH, MISS, closest_analytic, may_hit_mesh, ra
 from ...simd import LANES
 from ..techniques import ENV, MIS, SLOT_BSDF, SLOT_HEMI, SLOT_LIGHT, SLOT_NONE, bsdf_share
 from .environment_lanes import env_coords_block
-from .ray_lanes import CROSSED, DIRECTION, HIT_INDEX, HIT_KIND, HIT_T, ORIGIN, TMAX, ray_block
+from .ray_lanes import CROSSED, HIT_INDEX, HIT_KIND, HIT_T, put_ray, ray_block
 from .setup import emitter_of
 
 __all__ = [
@@ -132,24 +132,36 @@ def _weigh_escaping(env, lights, sel, c, cams, slots, r, k):
     slots.radiance[r, 0], slots.radiance[r, 1], slots.radiance[r, 2] = r_sum, g_sum, b_sum
 
 
+@jit_inline
+def _traced(slots, r):
+    """Slot r is a BSDF or hemisphere sample, whose ray looks for its nearest hit."""
+    return slots.state[r] == SLOT_BSDF or slots.state[r] == SLOT_HEMI
+
+
+@jit_inline
+def _bsdf_ray_into(c, cams, slots, r):
+    """Slot r's ray from its camera sample's point, offset by the point's error bound (into ``ray_o``): (origin,
+    direction)."""
+    k = r // c.m
+    wx, wy, wz = slots.wdir[r, 0], slots.wdir[r, 1], slots.wdir[r, 2]
+    qx, qy, qz = ray_offset(
+        cams.point[k, 0], cams.point[k, 1], cams.point[k, 2], cams.gnormal[k, 0], cams.gnormal[k, 1],
+        cams.gnormal[k, 2], cams.point_error[k], wx, wy, wz,
+    )  # fmt: skip
+    slots.ray_o[r, 0], slots.ray_o[r, 1], slots.ray_o[r, 2] = qx, qy, qz
+    return qx, qy, qz, wx, wy, wz
+
+
 @jit_body
 def nearest_analytic(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
     """Slots lo .. hi - 1: a BSDF or hemisphere ray's origin (offset from the surface by the point's error bound)
     and its nearest analytic hit; ``hit_mesh`` where a mesh may be nearer."""
     if slots.hit_t.shape[0] == 0:  # never without the hit record (pass_state.py)
         return
-    m = c.m
     for r in range(lo, hi):
-        st = slots.state[r]
-        if st != SLOT_BSDF and st != SLOT_HEMI:
+        if not _traced(slots, r):
             continue
-        k = r // m
-        wx, wy, wz = slots.wdir[r, 0], slots.wdir[r, 1], slots.wdir[r, 2]
-        qx, qy, qz = ray_offset(
-            cams.point[k, 0], cams.point[k, 1], cams.point[k, 2], cams.gnormal[k, 0], cams.gnormal[k, 1],
-            cams.gnormal[k, 2], cams.point_error[k], wx, wy, wz,
-        )  # fmt: skip
-        slots.ray_o[r, 0], slots.ray_o[r, 1], slots.ray_o[r, 2] = qx, qy, qz
+        qx, qy, qz, wx, wy, wz = _bsdf_ray_into(c, cams, slots, r)
         th, kh, ih = closest_analytic(s, qx, qy, qz, wx, wy, wz, np.inf)
         slots.hit_t[r], slots.hit_kind[r], slots.hit_index[r] = th, kh, ih
         slots.hit_prim[r] = 0
@@ -168,32 +180,23 @@ def nearest_analytic_lanes(s, env, lights, sel, c, cams, slots, acc, worker, lo,
     if s.tree_skip.shape[0] > 0:
         nearest_analytic(s, env, lights, sel, c, cams, slots, acc, worker, lo * LANES, min(hi * LANES, n))
         return
-    m = c.m
     block = c.lane_rays[worker]
     for first in range(lo * LANES, hi * LANES, LANES):
         live = False
         for lane in range(LANES):
             r = first + lane
-            if r >= n or (slots.state[r] != SLOT_BSDF and slots.state[r] != SLOT_HEMI):
-                block[TMAX, lane] = -1.0  # finds nothing
+            if r >= n or not _traced(slots, r):
+                put_ray(block, lane, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, -1.0)
                 continue
-            k = r // m
-            wx, wy, wz = slots.wdir[r, 0], slots.wdir[r, 1], slots.wdir[r, 2]
-            qx, qy, qz = ray_offset(
-                cams.point[k, 0], cams.point[k, 1], cams.point[k, 2], cams.gnormal[k, 0], cams.gnormal[k, 1],
-                cams.gnormal[k, 2], cams.point_error[k], wx, wy, wz,
-            )  # fmt: skip
-            slots.ray_o[r, 0], slots.ray_o[r, 1], slots.ray_o[r, 2] = qx, qy, qz
-            block[ORIGIN, lane], block[ORIGIN + 1, lane], block[ORIGIN + 2, lane] = qx, qy, qz
-            block[DIRECTION, lane], block[DIRECTION + 1, lane], block[DIRECTION + 2, lane] = wx, wy, wz
-            block[TMAX, lane] = np.inf
+            qx, qy, qz, wx, wy, wz = _bsdf_ray_into(c, cams, slots, r)
+            put_ray(block, lane, qx, qy, qz, wx, wy, wz, np.inf)
             live = True
         if not live:
             continue
         ray_block(block, s.spheres, s.rects, s.mesh_bounds, s.mesh_spheres)
         for lane in range(LANES):
             r = first + lane
-            if r >= n or (slots.state[r] != SLOT_BSDF and slots.state[r] != SLOT_HEMI):
+            if r >= n or not _traced(slots, r):
                 continue
             slots.hit_t[r] = block[HIT_T, lane]
             slots.hit_kind[r] = np.int64(block[HIT_KIND, lane])

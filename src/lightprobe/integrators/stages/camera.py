@@ -18,7 +18,7 @@ from ...geometry.embree import closest_mesh_hit
 from ...geometry.intersect import MESH, closest_analytic, may_hit_mesh
 from ...sampling.rng import SOBOL, sample_state, uniform_2d
 from ...simd import LANES
-from .ray_lanes import CROSSED, DIRECTION, HIT_INDEX, HIT_KIND, HIT_T, ORIGIN, TMAX, ray_block
+from .ray_lanes import CROSSED, HIT_INDEX, HIT_KIND, HIT_T, put_ray, ray_block
 from .sobol_lanes import camera_numbers_block
 
 __all__ = ["camera_blocks", "camera_lanes", "camera_samples", "camera_scalar"]
@@ -98,13 +98,9 @@ def camera_lanes(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
             for lane in range(LANES):
                 k = start + lane
                 if k >= stop:
-                    rays[TMAX, lane] = -1.0  # finds nothing
+                    put_ray(rays, lane, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, -1.0)  # finds nothing
                     continue
-                rays[ORIGIN, lane], rays[ORIGIN + 1, lane], rays[ORIGIN + 2, lane] = c.cam[0], c.cam[1], c.cam[2]
-                rays[DIRECTION, lane], rays[DIRECTION + 1, lane], rays[DIRECTION + 2, lane] = (
-                    dirs[k, 0], dirs[k, 1], dirs[k, 2]
-                )  # fmt: skip
-                rays[TMAX, lane] = np.inf
+                put_ray(rays, lane, c.cam[0], c.cam[1], c.cam[2], dirs[k, 0], dirs[k, 1], dirs[k, 2], np.inf)
             ray_block(rays, s.spheres, s.rects, s.mesh_bounds, s.mesh_spheres)
             for k in range(start, stop):
                 lane = k - start

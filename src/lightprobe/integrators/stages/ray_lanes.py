@@ -26,6 +26,7 @@ from numba import types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
+from ..._numba import jit_inline
 from ...geometry.intersect import MISS, RECT, RECT_WIDTH, SPHERE
 from ...simd import F64, I64, LANES, VF64, Lanes, array_structs, c_array, dot3, ir_loop, splat_row
 
@@ -39,6 +40,7 @@ __all__ = [
     "HIT_T",
     "ORIGIN",
     "TMAX",
+    "put_ray",
     "ray_block",
 ]
 
@@ -48,6 +50,14 @@ HIT_T, HIT_KIND, HIT_INDEX, CROSSED, CORE = 7, 8, 9, 10, 11  # out
 FIELDS = 12
 
 _INF = float("inf")
+
+
+@jit_inline
+def put_ray(block, lane, ox, oy, oz, dx, dy, dz, tmax):
+    """A stage's scalar code puts lane ``lane``'s ray into ``block`` (tmax <= 0: a lane that finds nothing)."""
+    block[ORIGIN, lane], block[ORIGIN + 1, lane], block[ORIGIN + 2, lane] = ox, oy, oz
+    block[DIRECTION, lane], block[DIRECTION + 1, lane], block[DIRECTION + 2, lane] = dx, dy, dz
+    block[TMAX, lane] = tmax
 
 
 def _toward_centre(v: Lanes, o, d, centre):

@@ -31,7 +31,7 @@ from ...geometry.embree import PACKET, mesh_occluded, occluded_packet, packet_ra
 from ...geometry.intersect import blocked_by_mesh_core, may_hit_mesh, occluded_analytic, ray_offset
 from ...simd import LANES
 from ..techniques import BLOCKED, SLOT_LIGHT, TEST_ANALYTIC, TEST_MESH, VISIBLE
-from .ray_lanes import CORE, CROSSED, DIRECTION, HIT_T, ORIGIN, TMAX, ray_block
+from .ray_lanes import CORE, CROSSED, HIT_T, TMAX, put_ray, ray_block
 
 __all__ = [
     "SHADOW_EPSILON",
@@ -117,12 +117,10 @@ def analytic_shadows_lanes(s, env, lights, sel, c, cams, slots, acc, worker, lo,
         for lane in range(LANES):
             r = first + lane
             if r >= n or slots.flags[r] != TEST_ANALYTIC:
-                block[TMAX, lane] = -1.0  # finds nothing
+                put_ray(block, lane, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, -1.0)  # finds nothing
                 continue
             qx, qy, qz, wx, wy, wz, tmax = shadow_ray(lights, c, cams, slots, r)
-            block[ORIGIN, lane], block[ORIGIN + 1, lane], block[ORIGIN + 2, lane] = qx, qy, qz
-            block[DIRECTION, lane], block[DIRECTION + 1, lane], block[DIRECTION + 2, lane] = wx, wy, wz
-            block[TMAX, lane] = tmax
+            put_ray(block, lane, qx, qy, qz, wx, wy, wz, tmax)
             live = True
         if not live:
             continue
