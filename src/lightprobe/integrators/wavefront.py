@@ -256,7 +256,7 @@ class _Pass:
             ray_counts=self.ray_counts,
             # a camera sample's Sobol' numbers, one row per thread (rows of whole cache lines: 8 slots x 24 bytes)
             numbers=np.zeros((threads_max, (m + LANES - 1) // LANES * LANES, 3)),
-            packet_slots=np.zeros((threads_max, PACKET), np.int64),
+            packet_slots=np.zeros((threads_max, max(PACKET, LANES)), np.int64),
             lane_rays=np.zeros((threads_max, RAY_FIELDS, LANES)),
             pixels=np.zeros(0, np.int64),
             spp_pass=1,

@@ -181,23 +181,24 @@ def nearest_analytic_lanes(s, env, lights, sel, c, cams, slots, acc, worker, lo,
         nearest_analytic(s, env, lights, sel, c, cams, slots, acc, worker, lo * LANES, min(hi * LANES, n))
         return
     block = c.lane_rays[worker]
-    for first in range(lo * LANES, hi * LANES, LANES):
-        live = False
-        for lane in range(LANES):
-            r = first + lane
-            if r >= n or not _traced(slots, r):
-                put_ray(block, lane, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, -1.0)
+    lanes = c.packet_slots[worker]  # the slot of each lane
+    end = min(hi * LANES, n)
+    count = 0
+    for r in range(lo * LANES, end + 1):  # the traced slots gathered as they are found (decisions.md 60, 101)
+        if r < end:
+            if not _traced(slots, r):
                 continue
             qx, qy, qz, wx, wy, wz = _bsdf_ray_into(c, cams, slots, r)
-            put_ray(block, lane, qx, qy, qz, wx, wy, wz, np.inf)
-            live = True
-        if not live:
+            put_ray(block, count, qx, qy, qz, wx, wy, wz, np.inf)
+            lanes[count] = r
+            count += 1
+        if count < LANES and (r < end or count == 0):
             continue
+        for lane in range(count, LANES):
+            put_ray(block, lane, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, -1.0)  # finds nothing
         ray_block(block, s.spheres, s.rects, s.mesh_bounds, s.mesh_spheres)
-        for lane in range(LANES):
-            r = first + lane
-            if r >= n or not _traced(slots, r):
-                continue
+        for lane in range(count):
+            r = lanes[lane]
             slots.hit_t[r] = block[HIT_T, lane]
             slots.hit_kind[r] = np.int64(block[HIT_KIND, lane])
             slots.hit_index[r] = np.int64(block[HIT_INDEX, lane])
@@ -205,6 +206,7 @@ def nearest_analytic_lanes(s, env, lights, sel, c, cams, slots, acc, worker, lo,
             slots.hit_b1[r] = 0.0
             slots.hit_b2[r] = 0.0
             slots.hit_mesh[r] = block[CROSSED, lane] != 0.0
+        count = 0
 
 
 @jit_body

@@ -112,29 +112,31 @@ def analytic_shadows_lanes(s, env, lights, sel, c, cams, slots, acc, worker, lo,
         analytic_shadows(s, env, lights, sel, c, cams, slots, acc, worker, lo * LANES, min(hi * LANES, n))
         return
     block = c.lane_rays[worker]
-    for first in range(lo * LANES, hi * LANES, LANES):
-        live = False
-        for lane in range(LANES):
-            r = first + lane
-            if r >= n or slots.flags[r] != TEST_ANALYTIC:
-                put_ray(block, lane, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, -1.0)  # finds nothing
+    lanes = c.packet_slots[worker]  # the slot of each lane
+    end = min(hi * LANES, n)
+    count = 0
+    for r in range(lo * LANES, end + 1):  # the flagged slots gathered as they are found (decisions.md 60, 101)
+        if r < end:
+            if slots.flags[r] != TEST_ANALYTIC:
                 continue
             qx, qy, qz, wx, wy, wz, tmax = shadow_ray(lights, c, cams, slots, r)
-            put_ray(block, lane, qx, qy, qz, wx, wy, wz, tmax)
-            live = True
-        if not live:
+            put_ray(block, count, qx, qy, qz, wx, wy, wz, tmax)
+            lanes[count] = r
+            count += 1
+        if count < LANES and (r < end or count == 0):
             continue
+        for lane in range(count, LANES):
+            put_ray(block, lane, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, -1.0)  # finds nothing
         ray_block(block, s.spheres, s.rects, s.mesh_bounds, s.mesh_spheres)
-        for lane in range(LANES):
-            r = first + lane
-            if r >= n or slots.flags[r] != TEST_ANALYTIC:
-                continue
+        for lane in range(count):
+            r = lanes[lane]
             tmax = block[TMAX, lane]
             # occluded_analytic: a hit before tmax; blocked_by_mesh_core: only for a ray to infinity
             if block[HIT_T, lane] < tmax or (tmax == math.inf and block[CORE, lane] != 0.0):
                 slots.flags[r] = BLOCKED
             else:  # no hit: the mesh test's bound, HIT_T, is tmax (may_hit_mesh(..., tmax))
                 slots.flags[r] = TEST_MESH if block[CROSSED, lane] != 0.0 else VISIBLE
+        count = 0
 
 
 @jit_body
