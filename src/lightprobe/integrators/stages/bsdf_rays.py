@@ -32,7 +32,7 @@ from ...geometry.intersect import MESH, MISS, closest_analytic, may_hit_mesh, ra
 from ...simd import LANES
 from ..techniques import ENV, MIS, SLOT_BSDF, SLOT_HEMI, SLOT_LIGHT, SLOT_NONE, bsdf_share
 from .environment_lanes import env_coords_block
-from .ray_lanes import CROSSED, HIT_INDEX, HIT_KIND, HIT_T, put_ray, ray_block
+from .ray_lanes import CROSSED, HIT_INDEX, HIT_KIND, HIT_T, put_ray, shape_tests
 from .setup import emitter_of
 
 __all__ = [
@@ -194,9 +194,7 @@ def nearest_analytic_lanes(s, env, lights, sel, c, cams, slots, acc, worker, lo,
             count += 1
         if count < LANES and (r < end or count == 0):
             continue
-        for lane in range(count, LANES):
-            put_ray(block, lane, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, -1.0)  # finds nothing
-        ray_block(block, s.spheres, s.rects, s.mesh_bounds, s.mesh_spheres)
+        shape_tests(block, count, s.spheres, s.rects, s.mesh_bounds, s.mesh_spheres)
         for lane in range(count):
             r = lanes[lane]
             slots.hit_t[r] = block[HIT_T, lane]

@@ -18,7 +18,7 @@ from ...geometry.embree import closest_mesh_hit
 from ...geometry.intersect import MESH, closest_analytic, may_hit_mesh
 from ...sampling.rng import SOBOL, sample_state, uniform_2d
 from ...simd import LANES
-from .ray_lanes import CROSSED, HIT_INDEX, HIT_KIND, HIT_T, put_ray, ray_block
+from .ray_lanes import CROSSED, HIT_INDEX, HIT_KIND, HIT_T, put_ray, shape_tests
 from .sobol_lanes import camera_numbers_block
 
 __all__ = ["camera_blocks", "camera_lanes", "camera_samples", "camera_scalar"]
@@ -95,13 +95,9 @@ def camera_lanes(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
                 _ray_into(c, cams, k)
         if s.tree_skip.shape[0] == 0:  # the shape tests 8 rays at a time (ray_lanes.py)
             rays = c.lane_rays[worker]
-            for lane in range(LANES):
-                k = start + lane
-                if k >= stop:
-                    put_ray(rays, lane, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, -1.0)  # finds nothing
-                    continue
-                put_ray(rays, lane, c.cam[0], c.cam[1], c.cam[2], dirs[k, 0], dirs[k, 1], dirs[k, 2], np.inf)
-            ray_block(rays, s.spheres, s.rects, s.mesh_bounds, s.mesh_spheres)
+            for k in range(start, stop):
+                put_ray(rays, k - start, c.cam[0], c.cam[1], c.cam[2], dirs[k, 0], dirs[k, 1], dirs[k, 2], np.inf)
+            shape_tests(rays, stop - start, s.spheres, s.rects, s.mesh_bounds, s.mesh_spheres)
             for k in range(start, stop):
                 lane = k - start
                 cams.t[k] = rays[HIT_T, lane]

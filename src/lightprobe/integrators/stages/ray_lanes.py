@@ -42,6 +42,7 @@ __all__ = [
     "TMAX",
     "put_ray",
     "ray_block",
+    "shape_tests",
 ]
 
 # rows of a block (each LANES wide)
@@ -221,3 +222,12 @@ def ray_block(typingctx, block, spheres, rects, bounds, proxies):
         return context.get_dummy_value()
 
     return types.void(block, spheres, rects, bounds, proxies), codegen
+
+
+@jit_inline
+def shape_tests(block, count, spheres, rects, bounds, proxies):
+    """``ray_block`` on a block whose first ``count`` lanes hold rays (``put_ray``); the other lanes get a ray that
+    finds nothing."""
+    for lane in range(count, LANES):
+        put_ray(block, lane, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, -1.0)
+    ray_block(block, spheres, rects, bounds, proxies)

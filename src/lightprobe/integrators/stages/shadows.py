@@ -31,7 +31,7 @@ from ...geometry.embree import PACKET, mesh_occluded, occluded_packet, packet_ra
 from ...geometry.intersect import blocked_by_mesh_core, may_hit_mesh, occluded_analytic, ray_offset
 from ...simd import LANES
 from ..techniques import BLOCKED, SLOT_LIGHT, TEST_ANALYTIC, TEST_MESH, VISIBLE
-from .ray_lanes import CORE, CROSSED, HIT_T, TMAX, put_ray, ray_block
+from .ray_lanes import CORE, CROSSED, HIT_T, TMAX, put_ray, shape_tests
 
 __all__ = [
     "SHADOW_EPSILON",
@@ -125,9 +125,7 @@ def analytic_shadows_lanes(s, env, lights, sel, c, cams, slots, acc, worker, lo,
             count += 1
         if count < LANES and (r < end or count == 0):
             continue
-        for lane in range(count, LANES):
-            put_ray(block, lane, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, -1.0)  # finds nothing
-        ray_block(block, s.spheres, s.rects, s.mesh_bounds, s.mesh_spheres)
+        shape_tests(block, count, s.spheres, s.rects, s.mesh_bounds, s.mesh_spheres)
         for lane in range(count):
             r = lanes[lane]
             tmax = block[TMAX, lane]
