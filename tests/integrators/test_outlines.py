@@ -97,7 +97,7 @@ def test_a_pixels_cover_is_the_share_of_its_rays_that_meet_the_light(case, offse
         camera = Camera(camera.origin + offset, camera.target + offset, fov=100, resolution=(48, 36))
     scene = _scene(*CASES[case], camera=camera, offset=(offset, offset, offset))
     lights = scene.light_table()
-    table = outlines.table(scene.camera, lights)
+    table = outlines.table(scene.camera, lights, None)
     assert table.cover.size >= 12, "the outline crosses a dozen pixels at least"
     o = scene.camera.origin
     errors = []
@@ -137,13 +137,14 @@ def test_the_shapes_it_leaves_out():
     """A one-sided rectangle seen from its back (it sends nothing to the camera), a sphere across the camera's plane
     and a rectangle partly behind the camera get no entries; the same rectangle two-sided, seen from its back, does."""
     back = Rectangle([-0.5, -0.5, 0.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0])  # u x v = -z: faces away from the camera
-    assert outlines.table(_scene((back, 5.0, False)).camera, _scene((back, 5.0, False)).light_table()).cover.size == 0
+    one_sided = _scene((back, 5.0, False))
+    assert outlines.table(one_sided.camera, one_sided.light_table(), None).cover.size == 0
     two_sided = _scene((back, 5.0, True))
-    assert outlines.table(two_sided.camera, two_sided.light_table()).cover.size > 0
+    assert outlines.table(two_sided.camera, two_sided.light_table(), None).cover.size > 0
     across = _scene((Sphere([0.0, 0.0, 5.2], 0.5), 5.0, False))
-    assert outlines.table(across.camera, across.light_table()).cover.size == 0
+    assert outlines.table(across.camera, across.light_table(), None).cover.size == 0
     behind = _scene((Rectangle([-0.5, -0.5, 3.0], [1.0, 0.0, 0.0], [0.0, 0.0, 4.0]), 5.0, True))
-    assert outlines.table(behind.camera, behind.light_table()).cover.size == 0
+    assert outlines.table(behind.camera, behind.light_table(), None).cover.size == 0
 
 
 def test_no_entry_where_two_emitters_overlap_and_a_neighbour_keeps_its_own():
@@ -154,7 +155,7 @@ def test_no_entry_where_two_emitters_overlap_and_a_neighbour_keeps_its_own():
     long = Rectangle([-0.4, -0.6, 3.0], [0.0, 0.5, -6.0], [0.8, 0.0, 0.0])  # from z = 3 to z = -3, tilted
     front = Rectangle([-0.15, -0.3, 0.5], [0.3, 0.0, 0.0], [0.0, 0.3, 0.0])  # at z = 0.5, over long's far part
     scene = _scene((long, 5.0, True), (front, 2.0, False))
-    table = outlines.table(scene.camera, scene.light_table())
+    table = outlines.table(scene.camera, scene.light_table(), None)
     film = _Film(scene.camera)
     shapes = _shapes(film, scene.light_table())
     assert shapes.light.size == 2 and shapes.light[0] == 0, "the long panel's nearest corner is the nearer"
@@ -172,7 +173,7 @@ def test_no_entry_where_two_emitters_overlap_and_a_neighbour_keeps_its_own():
         np.array([[0, 1, 2], [0, 2, 3]]),
     )
     scene = _scene((quad, 5.0, False))
-    table = outlines.table(scene.camera, scene.light_table())
+    table = outlines.table(scene.camera, scene.light_table(), None)
     both = [p for p in range(table.start.size - 1) if table.start[p + 1] - table.start[p] == 2]
     assert len(both) >= 10, "the pixels along the shared diagonal keep both triangles"
 
@@ -190,8 +191,10 @@ def _lit_wall(offset=0.0, occluder=False, wall=True):
     return scene
 
 
-def _outline_pixels(scene) -> np.ndarray:
-    table = outlines.table(scene.camera, scene.light_table())
+def _outline_pixels(scene, seen: bool = False) -> np.ndarray:
+    """(H, W) bool: the pixels an emitter's outline crosses (``seen``: where the camera sees the emitter there)."""
+    geometry, visible = _tables(scene)
+    table = visible if seen else geometry
     w, h = scene.camera.resolution
     return (np.diff(table.start) > 0).reshape(h, w)
 
@@ -215,7 +218,9 @@ def test_the_outline_keeps_its_mean_and_loses_its_noise(occluder, wall):
         var = (result.variance[..., 0] + ref.variance[..., 0])[mask].astype(np.float64)
         assert abs(diff.sum()) / math.sqrt(var.sum()) < 4.0
         assert np.all(np.abs(diff) / np.sqrt(var + 1e-12) < 5.0)
-    assert with_cv.stats["outline_pixels"] == mask.sum() and without.stats["outline_pixels"] == 0
+    served = _outline_pixels(scene, seen=True)
+    assert with_cv.stats["outline_pixels"] == served.sum() and without.stats["outline_pixels"] == 0
+    assert served.sum() < mask.sum() if occluder else np.array_equal(served, mask), "the ball hides part of it"
     noise_with, noise_without = with_cv.variance[..., 0][mask].sum(), without.variance[..., 0][mask].sum()
     if not occluder:
         assert noise_with * 20 < noise_without, (noise_with, noise_without)
@@ -231,3 +236,115 @@ def test_far_from_the_origin_the_outline_renders_the_same():
     assert np.all(np.abs(diff) / np.sqrt(var) < 5.0)
     assert abs(diff.sum()) / math.sqrt(var.sum()) < 4.0
     assert _outline_pixels(_lit_wall(offset=1000.0)).sum() == _outline_pixels(_lit_wall()).sum()
+
+
+# --- visibility: entries only where the camera sees the emitter (issue 57) ----------------------------------------
+def _occluded_scene(case: str) -> Scene:
+    """A light and what hides it, at 48 x 36: ``behind-a-wall``, a ceiling panel of the next room whose outline
+    projects onto the wall in front of it (the building of issue 57); ``behind-a-pillar``, a sphere light with a thin
+    post in front of its middle; ``half-hidden``, a panel whose left half a wall's edge hides."""
+    scene = Scene(Camera([0.0, 1.0, 5.0], [0.0, 1.0, 0.0], fov=40, resolution=(48, 36)))
+    grey = Lambert(0.5)
+    if case == "behind-a-wall":
+        scene.add(Rectangle([-3.0, -1.0, 0.0], [6.0, 0.0, 0.0], [0.0, 4.0, 0.0]), grey)
+        # faces down (u x v = -y), seen from below: its emitting side toward the camera
+        scene.add(Rectangle([-0.4, 2.5, -1.4], [0.8, 0.0, 0.0], [0.0, 0.0, 0.8]), Lambert(0.0), emission=40.0)
+        scene.add(Rectangle([-3.0, -0.2, -3.0], [0.0, 0.0, 6.0], [6.0, 0.0, 0.0]), grey)  # the floor, lit
+    elif case == "behind-a-pillar":
+        scene.add(Sphere([0.0, 1.0, 0.0], 0.5), Lambert(0.0), emission=30.0)
+        scene.add(Rectangle([-0.04, -1.0, 2.0], [0.08, 0.0, 0.0], [0.0, 4.0, 0.0]), grey)
+        scene.add(Rectangle([-3.0, -3.0, -1.0], [6.0, 0.0, 0.0], [0.0, 6.0, 0.0]), grey)
+    else:
+        scene.add(Rectangle([-0.5, 0.5, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]), Lambert(0.0), emission=20.0)
+        scene.add(Rectangle([-3.0, -2.0, 2.0], [3.02, 0.0, 0.0], [0.0, 6.0, 0.0]), grey)
+        scene.add(Rectangle([-3.0, -3.0, -1.0], [6.0, 0.0, 0.0], [0.0, 6.0, 0.0]), grey)
+    return scene
+
+
+def _tables(scene):
+    """(the table of the geometry alone, the table of what the camera sees)."""
+    from lightprobe.geometry.raytracer import RayTracer
+
+    tracer = RayTracer(scene.compile())
+    try:
+        return outlines.table(scene.camera, scene.light_table(), None), outlines.table(
+            scene.camera, scene.light_table(), tracer
+        )
+    finally:
+        tracer.close()
+
+
+def _hidden_share(scene, pixel, row, n=48) -> float:
+    """The share of an n x n grid of the pixel's camera rays inside the shape of ``row`` whose nearest hit is not an
+    emitter (the tests' scenes have one)."""
+    from lightprobe.geometry.intersect import RECT, SPHERE
+    from lightprobe.geometry.raytracer import RayTracer
+
+    a = (np.arange(n) + 0.5) / n
+    offsets = np.stack(np.meshgrid(a, a, indexing="ij"), axis=-1).reshape(-1, 2)
+    origins, dirs = scene.camera.rays(np.full(n * n, pixel), offsets)
+    inside = np.array([_inside(row, *d) for d in dirs])
+    arrays = scene.compile()
+    tracer = RayTracer(arrays)
+    try:
+        _, kind, index, *_ = tracer.intersect(origins[inside], dirs[inside])
+    finally:
+        tracer.close()
+    light = np.full(kind.shape, -1)
+    light[kind == SPHERE] = arrays.sphere_light[index[kind == SPHERE]]
+    light[kind == RECT] = arrays.rect_light[index[kind == RECT]]
+    return float(np.mean(light < 0))
+
+
+def _pixels(table) -> set[int]:
+    return set(np.flatnonzero(np.diff(table.start)).tolist()) if table.start.size else set()
+
+
+OCCLUDED = ["behind-a-wall", "behind-a-pillar", "half-hidden"]
+
+
+@pytest.mark.parametrize("case", OCCLUDED)
+def test_no_entry_where_something_hides_the_emitter(case):
+    """The geometry alone gives the emitter an outline (a dozen pixels at least); with the scene's rays, every entry
+    kept is a pixel where a 48 x 48 grid of camera rays inside the shape all see the emitter, and every entry dropped
+    one where some of them do not: behind the wall none is kept, behind the pillar and the wall's edge some are."""
+    scene = _occluded_scene(case)
+    geometry, seen = _tables(scene)
+    everywhere, kept = _pixels(geometry), _pixels(seen)
+    assert len(everywhere) >= 12
+    assert kept <= everywhere
+    if case == "behind-a-wall":
+        assert not kept
+    else:
+        assert 6 <= len(kept) < len(everywhere)
+    start = geometry.start
+    for pixel in everywhere:
+        row = geometry.geom[geometry.shape[start[pixel]]]
+        hidden = _hidden_share(scene, pixel, row)
+        if pixel in kept:
+            assert hidden == 0.0, (pixel, hidden)
+        else:
+            assert hidden > 0.0, (pixel, hidden)
+
+
+@pytest.mark.parametrize("case", OCCLUDED)
+def test_a_hidden_emitter_adds_no_noise(case):
+    """64 spp with and without the control variate, uniform counts, the same seed: a pixel without an entry renders
+    the same bits either way (behind the wall: the whole image; with every entry kept, the wall's pixels took -40 on
+    the hidden panel's rays and +40 a, new noise), and where entries are kept the outline's variance falls at least
+    ten-fold with the same mean (pooled z within 4)."""
+    scene = _occluded_scene(case)
+    _, seen = _tables(scene)
+    w, h = scene.camera.resolution
+    served = np.zeros(w * h, bool)
+    served[list(_pixels(seen))] = True
+    served = served.reshape(h, w)
+    on = render(scene, RenderSettings(spp=64, seed=1, adaptive=False))
+    off = render(scene, RenderSettings(spp=64, seed=1, adaptive=False, outline_control_variate=False))
+    assert on.stats["outline_pixels"] == served.sum()
+    assert np.array_equal(on.image[~served], off.image[~served])
+    if served.any():
+        diff = (on.image[..., 0] - off.image[..., 0])[served].astype(np.float64)
+        var = (on.variance[..., 0] + off.variance[..., 0])[served].astype(np.float64)
+        assert abs(diff.sum()) / math.sqrt(var.sum()) < 4.0
+        assert on.variance[..., 0][served].sum() * 10 < off.variance[..., 0][served].sum()

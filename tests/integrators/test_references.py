@@ -62,7 +62,7 @@ def _outline_variance(scene) -> np.ndarray:
     A reference's own estimate misses it where none of its samples met a panel covering a hundred-thousandth of a
     pixel (the many-light scene: a mean of 0 and a variance of 0 at 65,536 spp, where lightprobe's outline control
     variate knows the exact L a, 0.001); integrators/outlines.py's table gives every such a."""
-    table = outlines.table(scene.camera, scene.light_table())
+    table = outlines.table(scene.camera, scene.light_table(), None)
     w, h = scene.camera.resolution
     floor = np.zeros((w * h, 3))
     if table.start.size == 0:  # no emitter seen

@@ -261,7 +261,7 @@ class _Pass:
             pixels=np.zeros(0, np.int64),
             spp_pass=1,
             sample_start=0,
-            **outlines.pass_fields(scene.camera, lights, settings.outline_control_variate),
+            **outlines.pass_fields(scene.camera, lights, tracer, settings.outline_control_variate),
         )
         self.m = m
         self.largest = largest_pass

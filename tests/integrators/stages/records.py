@@ -44,7 +44,7 @@ def constants(m: int, **given) -> PassConstants:
         "pixels": np.zeros(0, np.int64),
         "spp_pass": 1,
         "sample_start": 0,
-        **outlines.pass_fields(None, None, enabled=False),
+        **outlines.pass_fields(None, None, None, enabled=False),
     }
     values.update(given)
     return PassConstants(**values)
