@@ -117,7 +117,17 @@ def _copy_inlined_functions_in_one_pass() -> bool:
 
 INLINE_COPY_IN_ONE_PASS = _copy_inlined_functions_in_one_pass()
 
-__all__ = ["FASTMATH", "is_cached", "jit", "jit_alloc", "jit_body", "jit_inline", "jit_parallel", "prange"]
+__all__ = [
+    "FASTMATH",
+    "cached_signatures",
+    "is_cached",
+    "jit",
+    "jit_alloc",
+    "jit_body",
+    "jit_inline",
+    "jit_parallel",
+    "prange",
+]
 
 # Fast-math flags that keep IEEE semantics for NaN and infinities: contraction into FMA, reciprocal approximations
 # and approximate library functions.  'nnan'/'ninf' are left out on purpose: the renderer tests isfinite() to keep
@@ -171,6 +181,16 @@ def jit_inline(func):
 def jit_parallel(func):
     """Compile a batch kernel that splits its ``prange`` loop over all cores (cached on disk)."""
     return njit(cache=True, nogil=True, parallel=True, error_model="numpy", fastmath=FASTMATH)(func)
+
+
+def cached_signatures(kernel) -> list[tuple]:
+    """The argument types of every compiled version of ``kernel`` in the on-disk cache (Numba's index file, an
+    internal detail: an empty list when it cannot be read)."""
+    try:
+        index = kernel._cache._cache_file._load_index()
+        return [key[0] for key in index]
+    except Exception:  # any failure to read Numba's internals means "not known to be cached"
+        return []
 
 
 def is_cached(*kernels) -> bool:

@@ -33,6 +33,8 @@ def test_every_plan_runs_known_stages_in_the_estimators_order():
     def concern(name):
         if name.startswith("camera"):
             return "camera"
+        if name.startswith("setup"):
+            return "setup"
         if name in ("light_samples",) or name.startswith("environment_samples"):
             return "samples"
         if name.startswith(("environment_coords", "environment_radiance", "infinite_lights", "nearest_", "what_")):
@@ -48,7 +50,7 @@ def test_every_plan_runs_known_stages_in_the_estimators_order():
         ranks = [order.index(concern(n)) for n in names]
         assert ranks == sorted(ranks), (plan, names)
         assert names[0].startswith("camera") and names[-1] == "accumulate"
-        assert "finish" in names and "setup" in names
+        assert "finish" in names and ("setup_textured" if plan.textured else "setup") in names
 
 
 @pytest.mark.parametrize(
@@ -68,3 +70,56 @@ def test_a_vector_stage_falls_back_to_its_twin(vector, scalar_flag, scene_flags)
     assert vector in pipeline.Plan(**{**base, scalar_flag: True}).stages()
     without = pipeline.Plan(**base).stages()
     assert vector not in without and twin in without
+
+
+def test_each_plan_has_its_own_group_of_stages():
+    """Every plan's stages are a group of the stage loop's table, as is each stage alone; a group's ids name back its
+    stages, and stages no plan runs together are refused in one line."""
+    for plan in _plans():
+        ids = tuple(pipeline.stage_id(name) for name in plan.stages())
+        assert pipeline.GROUPS[pipeline.group_id(ids)] == ids
+    for i in range(len(pipeline.STAGES)):
+        assert pipeline.GROUPS[pipeline.group_id((i,))] == (i,)
+    with pytest.raises(ValueError, match="no stage group"):
+        pipeline.group_id((pipeline.stage_id("accumulate"), pipeline.stage_id("camera")))
+
+
+def test_a_group_compiles_its_own_stages_and_no_others(tmp_path):
+    """In a fresh process with an empty kernel cache, running the accumulation stage compiles its body and its item
+    count and no other stage's (the loop over every stage compiled all 22 bodies at a first render: decisions.md
+    102)."""
+    import json
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = """
+import json
+import numpy as np
+from lightprobe.integrators import pipeline
+from tests.integrators.stages import records
+c = records.constants(1, n_bsdf=0, pixels=np.arange(4), spp_pass=1)
+records.run("accumulate", records.records(c, records.cameras(4), records.slots(4)), threads=1)
+print(json.dumps([stage.name for stage in pipeline.STAGES if stage.body.signatures or stage.items.signatures]))
+"""
+    root = Path(__file__).resolve().parents[2]
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True, cwd=root, env=env)
+    compiled = json.loads(out.stdout.strip().splitlines()[-1])
+    items = {stage.name for stage in pipeline.STAGES if stage.items is pipeline.STAGES[-1].items}
+    assert set(compiled) <= items and "accumulate" in compiled, compiled
+
+
+def test_the_setup_stage_of_a_scene_without_textures_has_no_texture_code():
+    """The setup stage's texture step is chosen at compile time: with a constant False it is empty (no texture
+    lookup is typed or compiled), with True it applies the material's textures."""
+    from numba import types
+
+    from lightprobe.integrators.stages import setup
+
+    args = (types.int64,) * 6
+    without = setup._textures_if_overload(types.literal(False), *args)
+    with_textures = setup._textures_if_overload(types.literal(True), *args)
+    assert "apply_textures" not in without.__code__.co_names
+    assert "apply_textures" in with_textures.__code__.co_names

@@ -20,11 +20,14 @@ machine, then loaded from the cache: decisions.md 77).
 
 from __future__ import annotations
 
+import itertools
 import warnings
 from concurrent.futures import ThreadPoolExecutor, wait
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
-from numba import literal_unroll, njit, typeof
+from numba import literal_unroll, literally, njit, typeof, types
+from numba.core.errors import TypingError
+from numba.extending import overload
 
 from .._numba import FASTMATH
 from .._worksharing import claim_range, new_counter
@@ -50,7 +53,7 @@ from .stages.light_samples import (
     slots_of_pass,
 )
 from .stages.radiance import environment_radiance, environment_radiance_lanes, slot_blocks
-from .stages.setup import shading_setup
+from .stages.setup import shading_setup, shading_setup_textured
 from .stages.shadows import (
     analytic_shadows,
     analytic_shadows_lanes,
@@ -58,7 +61,7 @@ from .stages.shadows import (
     mesh_shadows_single,
 )
 
-__all__ = ["STAGES", "Launcher", "Plan", "Stage", "run_stage", "stage_id"]
+__all__ = ["GROUPS", "STAGES", "Launcher", "Plan", "Stage", "group_id", "run_stage", "stage_id"]
 
 
 @dataclass(frozen=True)
@@ -76,6 +79,7 @@ STAGES: tuple[Stage, ...] = (
     Stage("camera", camera_lanes, camera_blocks, twin="camera_scalar"),
     Stage("camera_scalar", camera_scalar, camera_samples),
     Stage("setup", shading_setup, camera_samples),
+    Stage("setup_textured", shading_setup_textured, camera_samples),
     Stage("light_samples", light_samples, slots_of_pass),
     Stage("environment_samples_lanes", environment_lanes, environment_blocks, twin="environment_samples"),
     Stage("environment_samples", environment_scalar, slots_of_pass),
@@ -115,59 +119,93 @@ def stage_id(name: str) -> int:
     return _IDS[name]
 
 
-@jit_stage_loop
-def run_stage(stage, s, env, lights, sel, c, cams, slots, acc, counter, worker):
-    """Worker ``worker``'s share of stage ``stage`` (its index in :data:`STAGES`): chunks of the stage's items
-    claimed from ``counter`` until none is left.  The stage's body and item count come from the table, unrolled:
-    the table is the dispatch."""
-    n = 0
-    i = 0
-    for items in literal_unroll(_ITEMS):
-        if i == stage:
-            n = items(c, cams, slots)
-        i += 1
-    lo, hi = claim_range(counter, n)
-    while lo < hi:
+def _run_group(group, position, s, env, lights, sel, c, cams, slots, acc, counter, worker):
+    """The claim loop of :func:`run_stage` for one stage group (the overload below)."""
+
+
+@overload(_run_group, prefer_literal=True, inline="always")
+def _run_group_overload(group, position, s, env, lights, sel, c, cams, slots, acc, counter, worker):
+    """The loop for the group whose index ``group`` is a compile-time constant: the group's own table of bodies and
+    item counts, unrolled (only its stages are typed and compiled; indexing a global table of every group made Numba
+    lower all of it, 4.8 s)."""
+    if not isinstance(group, types.IntegerLiteral):
+        raise TypingError("run_stage's group must be a compile-time constant")
+    bodies, counts = _GROUP_BODIES[group.literal_value], _GROUP_ITEMS[group.literal_value]
+
+    def loop(group, position, s, env, lights, sel, c, cams, slots, acc, counter, worker):
+        n = 0
         i = 0
-        for body in literal_unroll(_BODIES):
-            if i == stage:
-                body(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi)
+        for items in literal_unroll(counts):
+            if i == position:
+                n = items(c, cams, slots)
             i += 1
         lo, hi = claim_range(counter, n)
+        while lo < hi:
+            i = 0
+            for body in literal_unroll(bodies):
+                if i == position:
+                    body(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi)
+                i += 1
+            lo, hi = claim_range(counter, n)
+
+    return loop
+
+
+@jit_stage_loop
+def run_stage(group, position, s, env, lights, sel, c, cams, slots, acc, counter, worker):
+    """Worker ``worker``'s share of the stage at ``position`` of stage group ``group`` (an index into
+    :data:`GROUPS`): chunks of the stage's items claimed from ``counter`` until none is left.  ``group`` is a
+    compile-time constant (``literally``): each group, a plan's stages, compiles one loop whose table is its own
+    stages' bodies and item counts, unrolled (the table is the dispatch), so a render compiles the stages its plan
+    runs and no others (decisions.md 102)."""
+    literally(group)
+    _run_group(group, position, s, env, lights, sel, c, cams, slots, acc, counter, worker)
 
 
 class Launcher:
-    """Runs stages with ``threads`` workers: the calling thread is worker 0, a shared pool's threads the others.
-    Each worker runs :func:`run_stage`, which releases the GIL, so the workers run in parallel; which worker takes
-    which chunk changes nothing in the image (every item of a stage is independent, and a worker's scratch rows
-    are its own).  Measured against Numba's parallel loops, decisions.md 77."""
+    """Runs the stages ``stages`` (ids; one compiled loop for them all, :func:`run_stage`; None: each stage alone)
+    with ``threads`` workers: the calling thread is worker 0, a shared pool's threads the others.  Each worker runs
+    :func:`run_stage`, which releases the GIL, so the workers run in parallel; which worker takes which chunk changes
+    nothing in the image (every item of a stage is independent, and a worker's scratch rows are its own).  Measured
+    against Numba's parallel loops, decisions.md 77."""
 
     _pool: ThreadPoolExecutor | None = None
     _pool_size = 0
 
-    def __init__(self, threads: int):
+    def __init__(self, threads: int, stages: tuple[int, ...] | None = None):
         self.threads = threads
+        self.stages = None if stages is None else tuple(stages)
         if threads > 1 and Launcher._pool_size < threads - 1:
             Launcher._pool = ThreadPoolExecutor(max_workers=threads - 1, thread_name_prefix="lightprobe-stage")
             Launcher._pool_size = threads - 1
         self.counter = new_counter()  # the chunk claims' shared counter (_worksharing.py)
-        self._entry = None
+        self._entries: dict[int, object] = {}
+
+    def _place(self, stage: int) -> tuple[int, int]:
+        """(group, position) of ``stage`` in :data:`GROUPS`."""
+        if self.stages is None:
+            return group_id((stage,)), 0
+        return group_id(self.stages), self.stages.index(stage)
 
     def run(self, stage: int, records: tuple) -> None:
-        """Stage ``stage`` over the pass whose ``records`` are (s, env, lights, sel, c, cams, slots, acc)."""
+        """Stage ``stage`` (an id) over the pass whose ``records`` are (s, env, lights, sel, c, cams, slots, acc)."""
+        group, position = self._place(stage)
         self.counter[0] = 0
-        call = self._entry or run_stage
-        futures = [Launcher._pool.submit(call, stage, *records, self.counter, w) for w in range(1, self.threads)]
+        call = self._entries.get(group, run_stage)
+        futures = [
+            Launcher._pool.submit(call, group, position, *records, self.counter, w) for w in range(1, self.threads)
+        ]
         try:
-            call(stage, *records, self.counter, 0)
+            call(group, position, *records, self.counter, 0)
         finally:
             wait(futures)  # never leave a worker writing into the pass after a Ctrl-C or an error
         for f in futures:
             f.result()
-        if self._entry is None:  # later calls skip the dispatcher's typing of ~150 arrays (a millisecond a call)
-            signature = tuple(typeof(x) for x in (stage, *records, self.counter, 0))
+        if group not in self._entries:  # later calls skip the dispatcher's typing of ~150 arrays (a millisecond)
+            signature = (types.literal(group), *(typeof(x) for x in (position, *records, self.counter, 0)))
             compiled = run_stage.overloads.get(signature)
-            self._entry = compiled.entry_point if compiled is not None else None
+            if compiled is not None:
+                self._entries[group] = compiled.entry_point
 
 
 @dataclass(frozen=True)
@@ -184,10 +222,12 @@ class Plan:
     environment_coords_in_lanes: bool
     environment_radiance_in_lanes: bool
     packets: bool  # Embree's 8-ray packets are native
+    textured: bool = False  # some material has textures (the setup stage's texture lookups compile only then)
+    shape_tree: bool = False  # a hierarchy over many spheres and rectangles, which rays walk one at a time
 
     def stages(self) -> tuple[str, ...]:
         """The names of this render's stages, in order."""
-        names = ["camera" if self.lanes else "camera_scalar", "setup"]
+        names = ["camera" if self.lanes else "camera_scalar", "setup_textured" if self.textured else "setup"]
         if self.environment_alone:
             if self.resampled:
                 names.append("environment_samples_resampled")
@@ -200,15 +240,39 @@ class Plan:
         else:
             names.append("light_samples")
             if self.emissive_surfaces:
-                names.append("nearest_analytic_lanes" if self.lanes else "nearest_analytic")
+                names.append("nearest_analytic_lanes" if self.lanes and not self.shape_tree else "nearest_analytic")
                 if self.meshes:
                     names.append("nearest_mesh")
                 names.append("what_bsdf_rays_see")
             else:  # the infinite lights are all a BSDF ray can see (none: it is dropped)
                 names.append("infinite_lights")
         names.append("finish")
-        names.append("analytic_shadows_lanes" if self.lanes else "analytic_shadows")
+        names.append("analytic_shadows_lanes" if self.lanes and not self.shape_tree else "analytic_shadows")
         if self.meshes:
             names.append("mesh_shadows" if self.packets else "mesh_shadows_single")
         names.append("accumulate")
         return tuple(names)
+
+
+def _groups() -> tuple[tuple[int, ...], ...]:
+    """Every plan's stages (:meth:`Plan.stages` over all values of its fields), then each stage alone (the tests run
+    stages one at a time): the stage groups :func:`run_stage` compiles a loop for, one group at a time."""
+    plans = {
+        tuple(_IDS[name] for name in Plan(*values).stages())
+        for values in itertools.product((False, True), repeat=len(fields(Plan)))
+    }
+    return tuple(sorted(plans)) + tuple((i,) for i in range(len(STAGES)))
+
+
+GROUPS = _groups()
+_GROUP_IDS = {group: i for i, group in enumerate(GROUPS)}
+_GROUP_BODIES = tuple(tuple(_BODIES[i] for i in group) for group in GROUPS)
+_GROUP_ITEMS = tuple(tuple(_ITEMS[i] for i in group) for group in GROUPS)
+
+
+def group_id(stages: tuple[int, ...]) -> int:
+    """The index in :data:`GROUPS` of the stage ids ``stages`` (a plan's, or one stage)."""
+    try:
+        return _GROUP_IDS[tuple(stages)]
+    except KeyError:
+        raise ValueError(f"no stage group runs the stages {stages}: a plan's stages or one stage") from None

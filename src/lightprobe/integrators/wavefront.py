@@ -42,6 +42,8 @@ from ..errors import LightprobeWarning, ParameterError
 from ..geometry.embree import PACKET, packets_native
 from ..geometry.raytracer import RayTracer
 from ..geometry.scene import Scene
+from ..geometry.shape_bvh import SHAPES_FOR_BVH
+from ..geometry.shapes import Rectangle, Sphere
 from ..sampling.rng import SAMPLERS
 from ..simd import LANES
 from . import adaptive, outlines, pipeline
@@ -164,6 +166,8 @@ def plan_for(scene: Scene, settings: RenderSettings) -> pipeline.Plan:
         environment_coords_in_lanes=alone and environment_lanes.coords_apply(k),
         environment_radiance_in_lanes=alone and environment_lanes.applies(k.image, k.lookup == BILINEAR),
         packets=packets_native(),
+        textured=any(material.textures is not None for material in scene.materials.values()),
+        shape_tree=sum(isinstance(o.shape, Sphere | Rectangle) for o in scene.objects) > SHAPES_FOR_BVH,
     )
 
 
@@ -234,7 +238,7 @@ class _Pass:
             env_irradiance_compensated=environment.compensated_irradiance_terms if environment is not None else None,
         )
         self.ray_counts = np.zeros((threads_max, 8), np.int64)  # per worker (a row = a cache line)
-        self.launcher = pipeline.Launcher(threads)
+        self.launcher = pipeline.Launcher(threads, self.stages)
         compensated = compensation_for(scene, settings)
         self.compensated = compensated
         self.constants = PassConstants(
@@ -481,12 +485,18 @@ def render(
 
 
 def kernels_cached(scene: Scene | None = None, settings: RenderSettings | None = None) -> bool:
-    """Whether the render core's stages are in the on-disk cache; else the first render compiles them (about a
-    minute and a half on 2 cores).  One compiled stage loop serves every scene and setting: the pass records have
-    the same types whatever they hold (``pass_state.py``), so the arguments are accepted and not needed."""
-    from .._numba import is_cached
+    """Whether the stage loop of a render of ``scene`` with ``settings`` (the demo's, by default) is in the on-disk
+    cache; else that render compiles it first.  Each plan compiles its own loop and the stages it runs
+    (:func:`pipeline.run_stage`); the pass records have the same types whatever they hold (``pass_state.py``)."""
+    from .._numba import cached_signatures
 
-    return is_cached(pipeline.run_stage)
+    if scene is None:
+        from ..demo import demo_scene
+
+        scene = demo_scene((8, 5))
+    plan = plan_for(scene, settings or RenderSettings())
+    group = numba.types.literal(pipeline.group_id(tuple(pipeline.stage_id(name) for name in plan.stages())))
+    return any(signature[0] == group for signature in cached_signatures(pipeline.run_stage))
 
 
 class _Stop(Exception):

@@ -173,13 +173,11 @@ def nearest_analytic(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
 @jit_body
 def nearest_analytic_lanes(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
     """Blocks lo .. hi - 1 of 8 slots: as ``nearest_analytic``, the rays built one at a time and their shape tests
-    made 8 at a time (``ray_lanes.ray_block``); a scene with a shape hierarchy walks it one ray at a time."""
+    made 8 at a time (``ray_lanes.ray_block``).  Not for a scene with a shape hierarchy, whose rays walk it one at a
+    time in ``nearest_analytic`` (the plan picks that stage there: ``pipeline.Plan.shape_tree``)."""
     if slots.hit_t.shape[0] == 0:  # never without the hit record (pass_state.py)
         return
     n = slots.state.shape[0]
-    if s.tree_skip.shape[0] > 0:
-        nearest_analytic(s, env, lights, sel, c, cams, slots, acc, worker, lo * LANES, min(hi * LANES, n))
-        return
     block = c.lane_rays[worker]
     lanes = c.packet_slots[worker]  # the slot of each lane
     end = min(hi * LANES, n)

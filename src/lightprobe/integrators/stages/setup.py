@@ -11,6 +11,9 @@ sample, its weight f cos / pdf) or, for a light slot, its 2D pair for the light-
 
 from __future__ import annotations
 
+from numba import types
+from numba.extending import overload
+
 from ..._numba import jit, jit_body, jit_inline
 from ...emitters.lights import emitted, escaped_radiance
 from ...geometry.frame import to_world
@@ -33,7 +36,7 @@ from ..techniques import (
 from ..textured_hits import apply_textures, material_parameters
 from .sobol_lanes import slot_numbers_block
 
-__all__ = ["emitter_of", "shading_setup"]
+__all__ = ["emitter_of", "shading_setup", "shading_setup_textured"]
 
 
 @jit_inline
@@ -71,9 +74,43 @@ def camera_samples(c, cams, slots):
     return cams.t.shape[0]
 
 
+def _textures_if(textured, s, cams, k, dx, dy, dz):
+    """Camera sample k's textures (``textured_hits.apply_textures``) where its material has them, in the stage of a
+    scene with textured materials (``textured`` a compile-time True); nothing, and no texture code compiled, in the
+    other's (decisions.md 102: the texture lookups were 7 of the demo's 70 s of compiling)."""
+
+
+@overload(_textures_if, prefer_literal=True)
+def _textures_if_overload(textured, s, cams, k, dx, dy, dz):
+    if isinstance(textured, types.BooleanLiteral) and textured.literal_value:
+
+        def with_textures(textured, s, cams, k, dx, dy, dz):
+            if s.material_textured[cams.material[k]] == 1:
+                apply_textures(s, cams, k, dx, dy, dz)
+
+        return with_textures
+
+    def without(textured, s, cams, k, dx, dy, dz):
+        pass
+
+    return without
+
+
 @jit_body
 def shading_setup(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
-    """Camera samples lo .. hi - 1."""
+    """Camera samples lo .. hi - 1 of a scene without textures."""
+    _shading_setup(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi, False)
+
+
+@jit_body
+def shading_setup_textured(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
+    """Camera samples lo .. hi - 1 of a scene with textured materials."""
+    _shading_setup(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi, True)
+
+
+@jit_inline
+def _shading_setup(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi, textured):
+    """Camera samples lo .. hi - 1 (``textured``: a compile-time constant, whether their materials may be)."""
     m, n_bsdf = c.m, c.n_bsdf
     ox, oy, oz = c.cam[0], c.cam[1], c.cam[2]
     state, wdir, tpdf = slots.state, slots.wdir, slots.tpdf
@@ -104,8 +141,7 @@ def shading_setup(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
         _add_outlines(c, cams, k, dx, dy, dz)
         if wo[2] <= 0.0:
             continue
-        if s.material_textured[cams.material[k]] == 1:
-            apply_textures(s, cams, k, dx, dy, dz)
+        _textures_if(textured, s, cams, k, dx, dy, dz)
         ts, tt, ns, wo = load_shading_frame(cams.frame, cams.wo_local, k)
         mk, mp = s.material_kind[cams.material[k]], material_parameters(s, cams, k)
         rs = sample_state(c.sampler, c.seed, c.pixels[k // c.spp_pass], c.sample_start + k % c.spp_pass)

@@ -106,11 +106,9 @@ def analytic_shadows(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
 def analytic_shadows_lanes(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
     """Blocks lo .. hi - 1 of 8 slots, shadow rays of any kind (to a light's sampled point or unbounded): as
     ``analytic_shadows``, each ray built by ``shadow_ray`` and the shape tests made 8 rays at a time
-    (``ray_lanes.ray_block``); a scene with a shape hierarchy walks it one ray at a time."""
+    (``ray_lanes.ray_block``).  Not for a scene with a shape hierarchy, whose rays walk it one at a time in
+    ``analytic_shadows`` (the plan picks that stage there: ``pipeline.Plan.shape_tree``)."""
     n = slots.flags.shape[0]
-    if s.tree_skip.shape[0] > 0:
-        analytic_shadows(s, env, lights, sel, c, cams, slots, acc, worker, lo * LANES, min(hi * LANES, n))
-        return
     block = c.lane_rays[worker]
     lanes = c.packet_slots[worker]  # the slot of each lane
     end = min(hi * LANES, n)
