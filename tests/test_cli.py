@@ -354,7 +354,7 @@ def test_compiling_is_announced(capsys, tmp_path, monkeypatch):
     monkeypatch.setattr(wavefront, "kernels_cached", lambda *scene_and_settings: False)
     assert main(["render", str(_scene_file(tmp_path)), "-o", str(tmp_path / "o.exr"), "--spp", "1", "-q"]) == 0
     err = capsys.readouterr().err
-    assert "compiling kernels (first run only" in err and "compiled kernels in" in err
+    assert "compiling kernels (once for this kind of scene" in err and "compiled kernels in" in err
     monkeypatch.setattr(wavefront, "kernels_cached", lambda *scene_and_settings: True)
     assert main(["render", str(_scene_file(tmp_path)), "-o", str(tmp_path / "o.exr"), "--spp", "1", "-q"]) == 0
     assert "compiling kernels" not in capsys.readouterr().err
@@ -537,3 +537,40 @@ def test_every_render_option_with_flags_is_an_option_of_the_render_command():
 
     flagged = {name for name, option in options().items() if option.flags}
     assert flagged == set(RENDER_COMMAND_OPTIONS)
+
+
+def test_version_and_doctor(capsys):
+    """``--version`` prints the version; ``doctor`` names the kernel cache, its size and whether the demo's kernels
+    are ready, in one line each."""
+    import lightprobe
+
+    assert main(["--version"]) == 0
+    assert capsys.readouterr().out.strip() == f"lightprobe {lightprobe.__version__}"
+    assert main(["doctor"]) == 0
+    out = capsys.readouterr().out
+    rows = dict(line.split(None, 1) if "  " not in line else line.split("  ", 1) for line in out.splitlines())
+    assert {"lightprobe", "kernel cache", "cache size", "demo kernels", "cores"} <= {k.strip() for k in rows}
+    assert rows["demo kernels"].strip().startswith(("ready", "not compiled yet"))
+
+
+def test_the_compile_is_shown_stage_by_stage():
+    """While a render compiles, each stage of its plan is reported once, in the order Numba starts compiling them,
+    with the plan's count; other functions' compiles are not stages."""
+    from numba.core import event
+
+    from lightprobe.cli import _stage_compiles
+    from lightprobe.demo import demo_scene
+    from lightprobe.integrators import pipeline
+    from lightprobe.integrators.wavefront import RenderSettings, plan_for
+
+    scene, settings = demo_scene((8, 5)), RenderSettings()
+    names = plan_for(scene, settings).stages()
+    steps = []
+    with _stage_compiles(scene, settings, lambda *step: steps.append(step)):
+        for name in ("setup", "setup", "accumulate"):
+            body = pipeline.STAGES[pipeline.stage_id(name)].body
+            event.start_event("numba:compile", data={"dispatcher": body})
+            event.end_event("numba:compile", data={"dispatcher": body})
+        event.start_event("numba:compile", data={"dispatcher": pipeline.run_stage})
+        event.end_event("numba:compile", data={"dispatcher": pipeline.run_stage})
+    assert steps == [(1, len(names), "setup"), (2, len(names), "accumulate")]

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 from numba import njit
 from numba.core import inline_closurecall
@@ -84,3 +86,52 @@ def test_nested_inlined_helpers_compute_what_python_computes():
     xs = np.linspace(-7.0, 9.0, 41)
     expected = np.array([middle(x, 6) + _branchy(x, 6) for x in xs])
     np.testing.assert_array_equal(_outer(xs, 6), expected)
+
+
+# --- the cache: kernels stamped by their modules' import closure (decisions.md 102) ---------------------------------
+def _package(root, files: dict[str, str]):
+    package = root / "pkg"
+    for name, text in files.items():
+        path = package / name
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(text)
+    return package
+
+
+def test_an_edit_changes_the_stamps_of_the_modules_that_reach_it_and_no_others(tmp_path):
+    """a imports b (relative, from a subpackage), b imports c, d imports nothing of the package, e imports c only
+    inside a function (never in a jitted one's reach): an edit to c changes a's, b's and c's stamps, not d's or e's;
+    an edit to a changes a's alone."""
+    package = _package(
+        tmp_path,
+        {
+            "__init__.py": "",
+            "a.py": "from .sub.b import g\nimport numpy\n",
+            "sub/__init__.py": "",
+            "sub/b.py": "from .. import c\ntry:\n    from ..c import h\nexcept ImportError:\n    pass\n",
+            "c.py": "X = 1\n",
+            "d.py": "import math\n",
+            "e.py": "def later():\n    from . import c\n",
+        },
+    )
+    before = _numba.import_closure_stamps(package)
+    (package / "c.py").write_text("X = 2\n")
+    after = _numba.import_closure_stamps(package)
+    changed = {Path(p).relative_to(package).as_posix() for p in before if before[p] != after[p]}
+    assert changed == {"a.py", "sub/b.py", "c.py"}
+    (package / "a.py").write_text("from .sub.b import g\nimport numpy  # edited\n")
+    again = _numba.import_closure_stamps(package)
+    assert {Path(p).relative_to(package).as_posix() for p in after if after[p] != again[p]} == {"a.py"}
+
+
+def test_the_package_kernels_carry_their_import_closure_stamp():
+    """On this Numba the rules are installed: a cached kernel of the package (the stage loop) is stamped with its
+    module's closure stamp, not with its own file's hash, and the index is written under a lock."""
+    from numba.core import caching
+
+    from lightprobe.integrators import pipeline
+
+    assert _numba.STAMPED_BY_IMPORTS
+    stamp = pipeline.run_stage._cache._cache_file._source_stamp
+    assert stamp == _numba._closure_stamps()[str(Path(pipeline.__file__).resolve())]
+    assert getattr(caching.IndexDataCacheFile.save, "_lightprobe", False)

@@ -2,10 +2,12 @@
 
 All kernels are compiled with ``cache=True`` so that a second process loads machine code from disk instead of
 recompiling.  Numba invalidates a cached function only when *its own* source file changes, not when a function it
-calls (and inlines) changes in another file; a stale kernel then silently runs old code.  So the cache lives in a
-directory named after a fingerprint of every source file of this package (``$XDG_CACHE_HOME/lightprobe/numba/``
-or ``~/.cache/...``): any edit starts a fresh cache, and older ones are removed.  Set ``NUMBA_CACHE_DIR`` to choose
-the location yourself.
+calls (and inlines) changes in another file; a stale kernel would then silently run old code.  So a kernel of this
+package is stamped with a hash of its module and of every module of the package that it imports, transitively (the
+top-level imports: a jitted function can only call what its module imports): an edit recompiles the kernels whose
+modules reach the edited one, and no others (decisions.md 102; before, any edit started a fresh cache for all).
+The cache lives in ``$XDG_CACHE_HOME/lightprobe/numba/kernels`` (or ``~/.cache/...``); set ``NUMBA_CACHE_DIR`` to
+choose the location yourself.
 
 Scalar kernels (one sample, returning tuples) are ``njit`` functions without reference counting (``jit``; the few
 that allocate arrays, ``jit_alloc``, keep it); batch kernels loop over samples and are the only ones marked
@@ -28,37 +30,168 @@ from pathlib import Path
 os.environ.setdefault("NUMBA_THREADING_LAYER", "workqueue")
 
 
+PACKAGE = Path(__file__).resolve().parent
+
+
 def _source_fingerprint() -> str:
-    package = Path(__file__).resolve().parent
+    """A fingerprint of every source file of the package (path, size, modification time): cheap, for naming the
+    file that keeps the modules' stamps."""
     h = hashlib.sha256()
-    for path in sorted(package.rglob("*.py")):
+    for path in sorted(PACKAGE.rglob("*.py")):
         st = path.stat()
-        h.update(f"{path.relative_to(package)}:{st.st_size}:{st.st_mtime_ns}".encode())
+        h.update(f"{path.relative_to(PACKAGE)}:{st.st_size}:{st.st_mtime_ns}".encode())
     return h.hexdigest()[:16]
 
 
-def _cache_dir() -> str:
-    root = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "lightprobe" / "numba"
-    target = root / _source_fingerprint()
+def _cache_root() -> Path:
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "lightprobe" / "numba"
+
+
+def _cache_dir(stamped: bool) -> str:
+    """The kernels' cache: one folder whose kernels carry their import closure's stamp (``stamped``); else, on a
+    Numba whose cache this module cannot stamp, a folder per fingerprint of all sources (any edit starts afresh),
+    older ones removed."""
+    root = _cache_root()
+    target = root / ("kernels" if stamped else _source_fingerprint())
     try:
         target.mkdir(parents=True, exist_ok=True)
-        probe = target / ".writable"
-        probe.touch()
-        for old in root.iterdir():  # caches of older sources can never be used again
-            if old.is_dir() and old != target:
+        (target / ".writable").touch()
+        for old in root.iterdir():  # a fingerprint's folder of older sources can never be used again
+            if old.is_dir() and old != target and len(old.name) == 16 and set(old.name) <= set("0123456789abcdef"):
                 shutil.rmtree(old, ignore_errors=True)
         return str(target)
     except OSError:
-        return str(Path(tempfile.gettempdir()) / f"lightprobe-numba-{_source_fingerprint()}")
+        return str(Path(tempfile.gettempdir()) / f"lightprobe-numba-{target.name}")
 
 
-if "NUMBA_CACHE_DIR" not in os.environ:
-    os.environ["NUMBA_CACHE_DIR"] = _cache_dir()
+def _module_imports(name: str, path: Path, modules: dict[str, Path]) -> set[str]:
+    """The package's modules that module ``name`` imports at its top level (also under a top-level ``if`` or
+    ``try``): what its jitted functions can reach."""
+    import ast
+
+    tree = ast.parse(path.read_bytes())
+    package = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
+    found = set()
+    nodes = [n for top in tree.body for n in (ast.walk(top) if isinstance(top, ast.If | ast.Try) else [top])]
+    for node in nodes:
+        if isinstance(node, ast.ImportFrom):
+            if node.level:  # relative: from the package, one level up per dot after the first
+                anchor = package[: len(package) - node.level + 1]
+                target = ".".join([*anchor, node.module] if node.module else anchor)
+            else:
+                target = node.module or ""
+            for alias in node.names:
+                for candidate in (f"{target}.{alias.name}", target):
+                    if candidate in modules:
+                        found.add(candidate)
+                        break
+        elif isinstance(node, ast.Import):
+            found.update(alias.name for alias in node.names if alias.name in modules)
+    return found
+
+
+def import_closure_stamps(package: Path) -> dict[str, str]:
+    """Per source file of ``package``, a hash of its contents and of the contents of every module of the package it
+    imports, transitively (top-level imports, :func:`_module_imports`)."""
+    modules = {}
+    for path in sorted(package.rglob("*.py")):
+        parts = list(path.relative_to(package.parent).with_suffix("").parts)
+        modules[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
+    content = {name: hashlib.sha256(path.read_bytes()).hexdigest() for name, path in modules.items()}
+    graph = {name: _module_imports(name, path, modules) for name, path in modules.items()}
+    stamps = {}
+    for name, path in modules.items():
+        reached, todo = {name}, [name]
+        while todo:
+            for other in graph[todo.pop()] - reached:
+                reached.add(other)
+                todo.append(other)
+        h = hashlib.sha256()
+        for other in sorted(reached):
+            h.update(f"{other}:{content[other]};".encode())
+        stamps[str(path)] = h.hexdigest()
+    return stamps
+
+
+def _closure_stamps() -> dict[str, str]:
+    """This package's :func:`import_closure_stamps`, kept beside the cache under the sources' fingerprint, so that
+    only a changed package parses its modules again (about half a second)."""
+    import json
+
+    record = Path(os.environ["NUMBA_CACHE_DIR"]) / f"stamps-{_source_fingerprint()}.json"
+    try:
+        return json.loads(record.read_text())
+    except (OSError, ValueError):
+        pass
+    stamps = import_closure_stamps(PACKAGE)
+    try:
+        for old in record.parent.glob("stamps-*.json"):
+            old.unlink(missing_ok=True)
+        tmp = record.with_suffix(f".{os.getpid()}.tmp")
+        tmp.write_text(json.dumps(stamps))
+        os.replace(tmp, record)
+    except OSError:
+        pass
+    return stamps
+
 
 from numba import config as _config  # noqa: E402
 from numba import njit, prange  # noqa: E402
 
-_config.CACHE_DIR = os.environ["NUMBA_CACHE_DIR"]  # in case Numba was imported (and configured) before us
+
+def _install_cache_rules() -> bool:
+    """The package's kernels stamped by their import closure (the module docstring); and Numba's index of a
+    function's cached versions updated under a file lock, so that processes compiling into one cache at once
+    (pytest-xdist's workers) cannot give two versions the same data file."""
+    import fcntl
+    import threading
+
+    from numba.core import caching
+
+    impl = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl", None)
+    if impl is None or not hasattr(caching, "UserProvidedCacheLocator") or not hasattr(caching, "IndexDataCacheFile"):
+        return False
+    stamps: dict[str, str] = {}
+    lock = threading.Lock()
+
+    class PackageLocator(caching.UserProvidedCacheLocator):
+        def get_source_stamp(self):
+            with lock:
+                if not stamps:
+                    stamps.update(_closure_stamps())
+            return stamps.get(str(Path(self._py_file).resolve())) or super().get_source_stamp()
+
+        @classmethod
+        def from_function(cls, py_func, py_file):
+            if not Path(py_file).resolve().is_relative_to(PACKAGE):
+                return None
+            return super().from_function(py_func, py_file)
+
+    if not any(getattr(c, "_lightprobe", False) for c in impl._locator_classes):
+        PackageLocator._lightprobe = True
+        impl._locator_classes.insert(0, PackageLocator)
+
+    save = caching.IndexDataCacheFile.save
+    if getattr(save, "_lightprobe", False):
+        return True
+
+    def locked_save(self, key, data):
+        with open(self._index_path + ".lock", "a") as guard:
+            fcntl.flock(guard, fcntl.LOCK_EX)
+            try:
+                save(self, key, data)
+            finally:
+                fcntl.flock(guard, fcntl.LOCK_UN)
+
+    locked_save._lightprobe = True
+    caching.IndexDataCacheFile.save = locked_save
+    return True
+
+
+STAMPED_BY_IMPORTS = _install_cache_rules()
+if "NUMBA_CACHE_DIR" not in os.environ:
+    os.environ["NUMBA_CACHE_DIR"] = _cache_dir(STAMPED_BY_IMPORTS)
+_config.CACHE_DIR = os.environ["NUMBA_CACHE_DIR"]  # Numba read its configuration when imported, before this
 
 
 def _copy_inlined_functions_in_one_pass() -> bool:
@@ -194,10 +327,7 @@ def cached_signatures(kernel) -> list[tuple]:
 
 
 def is_cached(*kernels) -> bool:
-    """Whether every one of ``kernels`` (compiled functions) has machine code in the on-disk cache, i.e. whether
-    calling them will load rather than compile (a first run compiles for about half a minute).  Looks at Numba's
-    index file, an internal detail: when it cannot be found, says False (the cost is a needless notice)."""
-    try:
-        return all(os.path.exists(k._cache._cache_file._index_path) for k in kernels)
-    except AttributeError:
-        return False
+    """Whether every one of ``kernels`` (compiled functions) has machine code in the on-disk cache, current for its
+    sources, i.e. whether calling them will load rather than compile.  Reads Numba's index file, an internal detail:
+    when it cannot be read, says False (the cost is a needless notice)."""
+    return all(cached_signatures(k) for k in kernels)

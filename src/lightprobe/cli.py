@@ -6,6 +6,7 @@ warnings print one line each.  Run ``lightprobe --help`` or ``lightprobe COMMAND
 
 from __future__ import annotations
 
+import contextlib
 import json
 import sys
 import time
@@ -37,6 +38,26 @@ envmap_app = typer.Typer(
 exercise_app = typer.Typer(
     rich_markup_mode=PLAIN_HELP, no_args_is_help=True, help="The Krivanek exercise: write the sampling, get it graded."
 )
+
+
+def _print_version(value: bool) -> None:
+    if value:
+        from . import __version__
+
+        typer.echo(f"lightprobe {__version__}")
+        raise typer.Exit(0)
+
+
+@app.callback()
+def _options(
+    version: Annotated[
+        bool,
+        typer.Option("--version", callback=_print_version, is_eager=True, help="Print lightprobe's version and exit."),
+    ] = False,
+) -> None:
+    """Monte Carlo image-based lighting with verified importance sampling."""
+
+
 app.add_typer(experiment_app, name="experiment")
 app.add_typer(envmap_app, name="envmap")
 app.add_typer(exercise_app, name="exercise")
@@ -301,6 +322,41 @@ def render_command(
     )
     if stats["nonfinite_samples"]:
         warnings.warn(f"{stats['nonfinite_samples']} samples were NaN or infinite and counted as 0", stacklevel=1)
+
+
+@app.command("doctor")
+def doctor_command() -> None:
+    """What this machine gives lightprobe: versions, cores, the vector kernels, and the compiled-kernel cache (where
+    it is, its size, and whether the demo's kernels are ready or its first render will compile them)."""
+    import os
+    import platform
+
+    import numba
+    import numpy
+
+    from . import __version__, _numba
+    from .geometry.embree import packets_native
+    from .integrators.stages import environment_lanes
+    from .integrators.wavefront import kernels_cached
+
+    cache = Path(os.environ["NUMBA_CACHE_DIR"])
+    files = [p for p in cache.rglob("*") if p.is_file()] if cache.is_dir() else []
+    size = sum(p.stat().st_size for p in files)
+    rows = [
+        ("lightprobe", __version__),
+        ("python", f"{platform.python_version()} ({sys.executable})"),
+        ("numpy / numba", f"{numpy.__version__} / {numba.__version__}"),
+        ("cores", f"{os.cpu_count()} (numba threads {numba.config.NUMBA_NUM_THREADS})"),
+        ("vector kernels", "yes" if environment_lanes.compiles() else "no (scalar stages: slower, same images)"),
+        ("embree 8-ray packets", "yes" if packets_native() else "no (one shadow ray per call)"),
+        ("kernel cache", str(cache)),
+        ("cache size", f"{size / 2**20:.1f} MiB in {sum(p.suffix == '.nbc' for p in files)} compiled functions"),
+        ("cache rule", "per module and its imports" if _numba.STAMPED_BY_IMPORTS else "one per version of all sources"),
+        ("demo kernels", "ready" if kernels_cached() else "not compiled yet: the first render compiles them (~1 min)"),
+    ]
+    width = max(len(name) for name, _ in rows)
+    for name, value in rows:
+        typer.echo(f"{name:<{width}}  {value}")
 
 
 @app.command("reference")
@@ -695,7 +751,7 @@ def _render_with_progress(scene, settings, render, *, quiet: bool, core: bool = 
     from .integrators.wavefront import kernels_cached
 
     compiling = not kernels_cached(scene, settings) if core else lab_compiles
-    what, when = ("kernels", "first run only") if core else ("the techniques' loops", "on every run")
+    what, when = ("kernels", "once for this kind of scene") if core else ("the techniques' loops", "on every run")
     started = time.perf_counter()
     interactive = not quiet and sys.stderr.isatty()
     if compiling and not interactive:
@@ -727,10 +783,17 @@ def _render_with_progress(scene, settings, render, *, quiet: bool, core: bool = 
         TextColumn("ETA"),
         TimeRemainingColumn(),
     )
-    with Progress(*columns, transient=True, console=_stderr_console()) as bar:
+    with Progress(*columns, transient=True, console=_stderr_console()) as bar, contextlib.ExitStack() as steps:
         compile_task = None
         if compiling:
             compile_task = bar.add_task(f"compiling {what} ({when})", total=None, spp="-", passes="-", rate="")
+            if core:
+
+                def step(done: int, count: int, stage: str) -> None:
+                    description = f"compiling {what} ({when}): stage {done} of {count}, {stage}"
+                    bar.update(compile_task, description=description)
+
+                steps.enter_context(_stage_compiles(scene, settings, step))
         task = bar.add_task("rendering", total=total, spp=0, passes=0, rate="", visible=not compiling)
 
         def update(stats):
@@ -753,6 +816,33 @@ def _render_with_progress(scene, settings, render, *, quiet: bool, core: bool = 
         result = render(scene, settings, progress=update)
     compiled(_echo_err)
     return result
+
+
+@contextlib.contextmanager
+def _stage_compiles(scene, settings, step):
+    """Within: ``step(done, count, stage)`` as Numba starts compiling each stage of the render's plan (the compile
+    as a step with its progress, not a silent minute)."""
+    from numba.core import event
+
+    from .integrators import pipeline
+    from .integrators.wavefront import plan_for
+
+    names = plan_for(scene, settings).stages()
+    bodies = {pipeline.STAGES[pipeline.stage_id(name)].body.py_func: name for name in names}
+    seen: set[str] = set()
+
+    class Listener(event.Listener):
+        def on_start(self, ev):
+            func = getattr(ev.data.get("dispatcher"), "py_func", None)
+            if func in bodies and bodies[func] not in seen:
+                seen.add(bodies[func])
+                step(len(seen), len(names), bodies[func])
+
+        def on_end(self, ev):
+            pass
+
+    with event.install_listener("numba:compile", Listener()):
+        yield
 
 
 def _echo_err(text: str) -> None:
