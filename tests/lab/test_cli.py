@@ -3,7 +3,11 @@ strategy (exit statuses, files written, one-line errors)."""
 
 import json
 import shutil
+import subprocess
+import sys
 from pathlib import Path
+
+import pytest
 
 from lightprobe.cli import main
 
@@ -120,3 +124,34 @@ def test_render_with_njit_techniques_announces_their_compile(tmp_path, capsys):
         args[3] = token
         assert main([*args, "-q"]) == 0
         assert "compiling" not in capsys.readouterr().err
+
+
+COSINE = (
+    "import numpy as np\n\nclass Cosine:\n    kind = 'bsdf'\n\n    def sample(self, u, ctx):\n"
+    "        r, phi = np.sqrt(u[:, 0]), 2 * np.pi * u[:, 1]\n        z = np.sqrt(1 - u[:, 0])\n"
+    "        return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1), z / np.pi\n\n"
+    "    def pdf(self, wi, ctx):\n        return np.maximum(wi[:, 2], 0) / np.pi\n"
+)
+
+
+@pytest.mark.parametrize(
+    ("ending", "said"),
+    [
+        ("import sys\nsys.exit(0)\n", "line 14: importing it ended the program (sys.exit(0))"),
+        ("raise SystemExit('bye')\n", "line 13: importing it ended the program (sys.exit('bye'))"),
+        ("import os\nos._exit(0)\n", "importing it ended the whole process (exit status 0, as os._exit does)"),
+        ("import os\nos._exit(7)\n", "importing it ended the whole process (exit status 7, as os._exit does)"),
+        ("import os, signal\nos.kill(os.getpid(), signal.SIGKILL)\n", "importing it killed the process (SIGKILL)"),
+    ],
+)
+def test_a_technique_file_that_ends_the_program_at_import_is_one_line(tmp_path, ending, said):
+    """A file that calls sys.exit() or os._exit() when imported ended `check` with status 0 and nothing printed, which
+    a student reads as a pass. Run as a user runs it (a process of its own): os._exit would end a test's process."""
+    file = tmp_path / "mine.py"
+    file.write_text(COSINE + ending)
+    out = subprocess.run([sys.executable, "-m", "lightprobe", "check", f"{file}:Cosine", "--samples", "2000",
+                          "-o", str(tmp_path / "c.html")], capture_output=True, text=True, timeout=300)  # fmt: skip
+    lines = out.stderr.strip().splitlines()
+    assert out.returncode == 2 and len(lines) == 1 and not out.stdout, (out.returncode, out.stdout, out.stderr)
+    assert lines[0].startswith(f"lightprobe: error: {file}: ") and said in lines[0], lines
+    assert not (tmp_path / "c.html").exists()

@@ -30,8 +30,10 @@ takes too long) into one :class:`TechniqueError` naming the function, the check 
 
 from __future__ import annotations
 
+import contextlib
 import importlib.util
 import inspect
+import os
 import signal
 import sys
 import threading
@@ -151,7 +153,8 @@ def _module_techniques(module) -> dict[str, object]:
 
 
 def load_module(path: str | Path, *, what: str = "technique file"):
-    """Import a user's Python file; a missing file or an error while importing it is one line naming the file."""
+    """Import a user's Python file; a missing file, an error while importing it or an import that would end the
+    program (``sys.exit``, ``os._exit``, a crash) is one line naming the file."""
     file = Path(path)
     if not file.is_file():
         raise TechniqueError(f"{file}: no such {what}")
@@ -159,17 +162,70 @@ def load_module(path: str | Path, *, what: str = "technique file"):
     spec = importlib.util.spec_from_file_location(name, file)
     if spec is None or spec.loader is None:
         raise TechniqueError(f"{file}: not a Python file")
+    ended = _ends_the_process(spec)
+    if ended is not None:
+        raise TechniqueError(f"{file}: importing it {ended}; a {what} must not end the program")
     module = importlib.util.module_from_spec(spec)
     sys.modules[name] = module
     try:
         spec.loader.exec_module(module)
     except SyntaxError as exc:
         raise TechniqueError(f"{file}: line {exc.lineno}: syntax error: {exc.msg}") from None
+    except SystemExit as exc:  # sys.exit(), exit(): it would end lightprobe with the file's status, silently
+        raise TechniqueError(
+            f"{file}{_user_line(exc, file)}: importing it ended the program (sys.exit({exc.code!r})); a {what} "
+            "must not end the program"
+        ) from None
     except Exception as exc:  # the user's code: any error it raises on import is reported, not a traceback
         raise TechniqueError(
             f"{file}{_user_line(exc, file)}: importing it raised {type(exc).__name__}: {exc}"
         ) from None
     return module
+
+
+def _ends_the_process(spec) -> str | None:
+    """Import the file of ``spec`` in a forked child first: how the import ended the child's whole process, which
+    no ``except`` can catch (``os._exit``, a fatal signal, a crash in a C extension), or None when it returned or
+    raised (the caller's own import then reports the raise). The child's output goes nowhere: the caller's import
+    prints what the file prints, once. A fork of this process costs 10-20 ms (decisions.md 102); where there is no
+    fork, the caller's import is the only one."""
+    if not hasattr(os, "fork"):
+        return None
+    read, write = os.pipe()
+    try:
+        pid = os.fork()
+    except OSError:  # no room for another process: import in this one only
+        os.close(read)
+        os.close(write)
+        return None
+    if pid == 0:  # the child: never return into the caller's code, never run its exit handlers
+        try:
+            os.close(read)
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, 1)
+            os.dup2(devnull, 2)
+            try:
+                spec.loader.exec_module(importlib.util.module_from_spec(spec))
+            except BaseException:  # a raise or sys.exit: the caller's own import reports it
+                pass
+            os.write(write, b"returned")
+        finally:
+            os._exit(0)
+    os.close(write)
+    try:
+        with os.fdopen(read, "rb") as said:
+            returned = said.read() == b"returned"
+        _, status = os.waitpid(pid, 0)
+    except BaseException:  # Ctrl-C while the child imports: end it too
+        with contextlib.suppress(OSError):
+            os.kill(pid, signal.SIGKILL)
+            os.waitpid(pid, 0)
+        raise
+    if returned:
+        return None
+    if os.WIFSIGNALED(status):
+        return f"killed the process ({signal.Signals(os.WTERMSIG(status)).name})"
+    return f"ended the whole process (exit status {os.waitstatus_to_exitcode(status)}, as os._exit does)"
 
 
 def load_technique(spec: str, *, time_limit: float = DEFAULT_TIME_LIMIT) -> GuardedTechnique:
