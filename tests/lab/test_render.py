@@ -79,6 +79,23 @@ def test_the_test_sees_a_biased_heuristic(exercise_scene):
     assert _z(result, reference)["pooled_z"] > 4.0
 
 
+@pytest.mark.parametrize("ending", ["raise", "exit"])
+def test_a_heuristic_that_raises_or_exits_is_a_technique_error(exercise_scene, ending):
+    """A user's NumPy heuristic is the user's code like a technique: a raise was a traceback and a sys.exit() ended
+    the program; both are one error naming it, with what was rendered before it."""
+    import sys
+
+    scene, _ = exercise_scene
+
+    def broken(n_f, p_f, n_g, p_g):
+        if ending == "exit":
+            sys.exit(3)
+        raise ZeroDivisionError("my weights")
+
+    with pytest.raises(LabRenderError, match=r"broken raised (SystemExit: 3|ZeroDivisionError: my weights)"):
+        render_lab(scene, LabStrategy((builtin("bsdf"), builtin("light")), broken), RenderSettings(spp=2, seed=1))
+
+
 def test_deterministic_and_resumable(exercise_scene):
     scene, _ = exercise_scene
     strategy, _ = parse_lab_token(f"mis:{SOLUTIONS}:PhongLobes")

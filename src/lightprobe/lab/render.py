@@ -111,7 +111,10 @@ def _weight(heuristic, n_f, p_f, n_g, p_g) -> np.ndarray:
         except Exception as exc:  # the user's code
             raise TechniqueError(f"{name} raised {type(exc).__name__}: {exc} (check: MIS weights)") from None
     else:
-        w = np.asarray(heuristic(n_f, p_f, n_g, p_g), dtype=np.float64)
+        try:
+            w = np.asarray(heuristic(n_f, p_f, n_g, p_g), dtype=np.float64)
+        except (Exception, SystemExit) as exc:  # the user's code; a sys.exit() in it must not end lightprobe
+            raise TechniqueError(f"{name} raised {type(exc).__name__}: {exc} (check: MIS weights)") from None
     if w.shape != np.shape(p_f) or not np.all(np.isfinite(w)) or np.any(w < 0) or np.any(w > 1 + 1e-9):
         raise TechniqueError(f"{name}: returned weights outside [0, 1], not finite or of shape {w.shape} (expected "
                              f"{np.shape(p_f)}) (check: MIS weights)")  # fmt: skip

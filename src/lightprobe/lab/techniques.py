@@ -249,7 +249,7 @@ def load_technique(spec: str, *, time_limit: float = DEFAULT_TIME_LIMIT) -> Guar
     if inspect.isclass(obj):
         try:
             obj = obj()
-        except Exception as exc:
+        except (Exception, SystemExit) as exc:  # a sys.exit() in the user's code must not end lightprobe
             raise TechniqueError(f"{file}:{name}: creating it raised {type(exc).__name__}: {exc}") from None
     return GuardedTechnique(obj, f"{Path(file).name}:{name}", time_limit=time_limit)
 
@@ -322,7 +322,7 @@ class GuardedTechnique:
             ) from None
         except TechniqueError:
             raise
-        except Exception as exc:
+        except (Exception, SystemExit) as exc:  # a sys.exit() in the user's code must not end lightprobe
             line = _user_line(exc).lstrip(": ") or "no line"
             raise TechniqueError(
                 f"{self.label}.{method} raised {type(exc).__name__}: {exc} ({line}; "
