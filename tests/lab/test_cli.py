@@ -5,6 +5,7 @@ import json
 import shutil
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -155,3 +156,29 @@ def test_a_technique_file_that_ends_the_program_at_import_is_one_line(tmp_path, 
     assert out.returncode == 2 and len(lines) == 1 and not out.stdout, (out.returncode, out.stdout, out.stderr)
     assert lines[0].startswith(f"lightprobe: error: {file}: ") and said in lines[0], lines
     assert not (tmp_path / "c.html").exists()
+
+
+def test_the_time_limit_stops_a_slow_technique_and_keeps_its_passes(tmp_path, capsys):
+    """--time-limit bounds a render with user techniques as it bounds the core's: a technique's call in flight at
+    the limit is stopped and the passes before it written. Before, the limit was looked at between passes only, and
+    a call ran on to the technique's own 60-s limit (an error)."""
+    target = tmp_path / "ex"
+    main(["exercise", "init", str(target)])
+    out = tmp_path / "slow.exr"
+    args = ["render", str(target / "scene.toml"), "--techniques", f"{TECHNIQUES}:SlowLater", "--spp", "8",
+            "--width", "24", "--time-limit", "4", "-o", str(out), "-q"]  # fmt: skip
+    capsys.readouterr()
+    start = time.perf_counter()
+    assert main(args) == 0, capsys.readouterr().err
+    assert time.perf_counter() - start < 30.0  # the fourth call sleeps 100 s
+    sidecar = json.loads((tmp_path / "slow.exr.json").read_text())
+    assert sidecar["stopped_by_time_limit"] is True and sidecar["spp_done"] == 1
+    assert "(stopped by the time limit)" in capsys.readouterr().err
+    # a technique too slow for a single pass (5 s a call): nothing to write, and the command says so in one line
+    args[3], args[9] = f"{TECHNIQUES}:Slow", "1"
+    out.unlink()
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()  # the scene's summary, then the error
+    assert err[1:] == [f"lightprobe: error: the time limit (1 s) ran out before the first pass was finished; {out} "
+                       "was not written"], err  # fmt: skip
+    assert not out.exists()

@@ -8,6 +8,7 @@ import pytest
 
 from lightprobe.analysis.metrics import block_z_test
 from lightprobe.bsdfs import Lambert
+from lightprobe.errors import LightprobeError
 from lightprobe.experiments.compare import compare
 from lightprobe.integrators.settings import RenderSettings
 from lightprobe.integrators.wavefront import render
@@ -157,3 +158,33 @@ def test_compare_takes_user_strategies(exercise_scene):
     assert runs[0].label == "mis" and runs[0].error is None
     assert runs[1].spp == 4 and runs[1].error is None and runs[1].metrics["relmse"] > 0
     assert runs[2].error is not None and "ran out of luck" in runs[2].error and runs[2].rounds
+
+
+def test_the_render_clock_does_not_count_compiling():
+    """A render's time limit is the render's, not Numba's: a compile (or a load from the cache) on a kernel's first
+    use, in the first pass, is not counted, as the render core warms up its stages before its clock starts."""
+    import time
+
+    import numba
+
+    from lightprobe.lab.techniques import RenderClock
+
+    @numba.njit
+    def fresh(x):  # compiled at its first call, under Numba's compiler lock
+        return x + 1.0
+
+    with RenderClock(1000.0) as clock:
+        fresh(1.0)
+        wall = time.perf_counter() - clock.start
+        spent = clock.seconds_spent()
+    assert 0.0 <= spent < wall - 0.01, (spent, wall)
+    assert RenderClock(None).seconds_left() is None
+
+
+def test_a_technique_too_slow_for_a_pass_at_equal_time_is_one_error(exercise_scene):
+    """At equal time a user technique slower than the whole budget (5 s a call, 0.5 s given) is stopped by the time
+    limit; with nothing rendered there is nothing to measure, and the error says so (before, it ran its first pass
+    to the end, 10-15 s, and was measured)."""
+    scene, reference = exercise_scene
+    with pytest.raises(LightprobeError, match=r"Slow': the 0.5 s ran out before its first pass was finished"):
+        compare(scene, [f"{TECHNIQUES}:Slow"], reference.image, reference.variance, equal="time", seconds=0.5)

@@ -187,3 +187,14 @@ class FailsLater(Cosine):
         if self.calls > 3:
             raise RuntimeError("ran out of luck")
         return _cosine(u)
+
+
+class SlowLater(FailsLater):
+    """Right and quick for its first 3 calls (the first pass of the exercise's scene), then 100 s a call: longer
+    than its own 60-s limit, so only a render's time limit ends it in time."""
+
+    def sample(self, u, ctx):
+        self.calls += 1
+        if self.calls > 3:
+            time.sleep(100.0)
+        return _cosine(u)

@@ -55,7 +55,8 @@ from .jit_techniques import (
     user_inline,
 )
 from .jit_techniques import user_serial as _user_serial
-from .techniques import UNIT_TOLERANCE, Context, GuardedTechnique, Heuristic, TechniqueError
+from .technique_errors import _RenderTimeUp
+from .techniques import UNIT_TOLERANCE, Context, GuardedTechnique, Heuristic, RenderClock, TechniqueError
 
 __all__ = ["LabRenderError", "LabStrategy", "render_lab"]
 
@@ -337,6 +338,8 @@ class _Shader:
         self.dims = [t.dimensions for t in strategy.techniques]
         self.sampler = SAMPLERS[settings.sampler]
         self.rays = 0  # shadow rays traced
+        #: the render's clock, for its time limit (set by render_lab)
+        self.clock = RenderClock(None)
         # every technique an njit function (or lightprobe's own) and the heuristic a name or an njit function: the
         # compiled estimator (_shade_compiled); otherwise the NumPy one (_shade)
         self.compiled = all(t.jit is not None for t in strategy.techniques) and (
@@ -423,6 +426,9 @@ class _Shader:
                 self.rays = rays_before
                 return self._shade(ctx, numbers, gnormal, error)
             elapsed_check(tech.label, "sample", start, max(t.time_limit for t in techniques), m)
+            # compiled code cannot be stopped from outside (and a signal must not land in Numba's compiler, which
+            # the first call runs): the render's time limit, like the technique's own, is looked at after the batch
+            self.clock.seconds_left()
             f, scale, d, origin = np.empty((m, 3)), np.zeros(m), np.zeros((m, 3)), np.zeros((m, 3))
             live = np.zeros(m, dtype=np.bool_)
             _shadow_rays(material.kind, material.params, count, wo, gnormal, error, position, local, world, pdf,
@@ -501,24 +507,31 @@ def render_lab(
     pixels_all = np.arange(width * height, dtype=np.int64)
     done = 0
     pass_seconds = 0.0
+    # the time limit bounds the whole render, not only the passes after the one in flight: a technique's call is
+    # stopped at the limit however long its own limit (GuardedTechnique.clock), and the pass it was in is dropped
+    clock = shader.clock = RenderClock(settings.time_limit)
+    for technique in strategy.techniques:
+        technique.clock = clock
     try:
-        for sample in range(first, first + settings.spp):
-            spent = time.perf_counter() - start
-            if settings.time_limit is not None and done > 0 and spent + pass_seconds > settings.time_limit:
-                stopped = True
-                break
-            t0 = time.perf_counter()
-            values = np.empty((width * height, 3))
-            for lo in range(0, pixels_all.size, BATCH):
-                block = pixels_all[lo : lo + BATCH]
-                values[lo : lo + BATCH] = shader.values(block, sample)
-            acc.add(values)
-            done += 1
-            pass_seconds = time.perf_counter() - t0
-            if progress is not None:
-                progress(_stats(settings, strategy, start, done, False, False, shader, acc))
+        with clock:  # lightprobe's and Numba's compiling is not the render's time
+            for sample in range(first, first + settings.spp):
+                spent = clock.seconds_spent()
+                if settings.time_limit is not None and done > 0 and spent + pass_seconds > settings.time_limit:
+                    stopped = True
+                    break
+                values = np.empty((width * height, 3))
+                for lo in range(0, pixels_all.size, BATCH):
+                    block = pixels_all[lo : lo + BATCH]
+                    values[lo : lo + BATCH] = shader.values(block, sample)
+                acc.add(values)
+                done += 1
+                pass_seconds = clock.seconds_spent() - spent
+                if progress is not None:
+                    progress(_stats(settings, strategy, start, done, False, False, shader, acc))
     except KeyboardInterrupt:
         interrupted = True
+    except _RenderTimeUp:  # the pass in flight is dropped (its pixels would have uneven counts)
+        stopped = True
     except TechniqueError as exc:
         stats = _stats(settings, strategy, start, done, False, False, shader, acc)
         partial = result_from(acc, width, height, stats) if done else None
@@ -527,6 +540,8 @@ def render_lab(
         ) from None
     finally:
         shader.close()
+        for technique in strategy.techniques:
+            technique.clock = None
     stats = _stats(settings, strategy, start, done, stopped, interrupted, shader, acc)
     return result_from(acc, width, height, stats)
 

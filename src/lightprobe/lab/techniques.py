@@ -37,6 +37,7 @@ import os
 import signal
 import sys
 import threading
+import time
 from collections.abc import Callable
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -46,7 +47,7 @@ import numpy as np
 
 from . import jit_techniques as jt
 from .jit_techniques import JitTechnique, jit_functions, technique_data
-from .technique_errors import TechniqueError, _row, _TooLong, _user_line
+from .technique_errors import TechniqueError, _RenderTimeUp, _row, _TooLong, _user_line
 
 __all__ = [
     "KINDS",
@@ -274,8 +275,50 @@ def _time_limit(seconds: float):
         signal.signal(signal.SIGALRM, previous)
 
 
+class RenderClock:
+    """A render's time limit as the user techniques it calls see it: the seconds left, not counting what Numba
+    spends compiling or loading machine code meanwhile (lightprobe's kernels on their first use, the loops around
+    njit techniques), as the render core starts its clock only after warming up its stages. Use it as a context
+    manager: the compile timer listens while it is open."""
+
+    def __init__(self, time_limit: float | None):
+        from numba.core import event
+
+        self.time_limit = time_limit
+        self.start = time.perf_counter()
+        # Numba takes its global compiler lock around every compile and every load from its cache
+        self._compiling = event.TimingListener()
+        self._listening = event.install_listener("numba:compiler_lock", self._compiling)
+
+    def __enter__(self) -> RenderClock:
+        self._listening.__enter__()
+        self.start = time.perf_counter()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._listening.__exit__(*exc)
+
+    def seconds_spent(self) -> float:
+        """Seconds since the render started, Numba's compiling and loading not counted."""
+        compiling = self._compiling.duration if self._compiling.done else 0.0
+        return time.perf_counter() - self.start - compiling
+
+    def seconds_left(self) -> float | None:
+        """Seconds before the limit (None without one); a :class:`_RenderTimeUp` once it has passed."""
+        if self.time_limit is None:
+            return None
+        left = self.time_limit - self.seconds_spent()
+        if left <= 0.0:
+            raise _RenderTimeUp
+        return left
+
+
 class GuardedTechnique:
     """A technique whose every call is checked: see the module docstring."""
+
+    #: the clock of the render that calls the technique (set by ``render_lab`` for a render), or None: a call is
+    #: stopped at the earlier of the render's time limit and the technique's own ``time_limit``
+    clock: RenderClock | None = None
 
     def __init__(self, technique, label: str, *, time_limit: float = DEFAULT_TIME_LIMIT):
         self.user = technique
@@ -310,17 +353,23 @@ class GuardedTechnique:
 
     def _call(self, method: str, check: str, args, first_input: np.ndarray, input_name: str):
         fn = getattr(self.technique, method)
+        render_ends_first = False
         try:
             if self._compiled_loops and method in ("sample", "pdf"):
                 self.technique.compile(method, *args)  # before the time limit: compiling is not the technique's time
-            with _time_limit(self.time_limit):
+            limit, left = self.time_limit, None if self.clock is None else self.clock.seconds_left()
+            if left is not None and not (limit and 0 < limit <= left):
+                limit, render_ends_first = left, True
+            with _time_limit(limit):
                 return fn(*args)
         except _TooLong:
+            if render_ends_first:  # the render's time is up, not the technique's: the render stops, no error
+                raise _RenderTimeUp from None
             raise TechniqueError(
                 f"{self.label}.{method}: took longer than {self.time_limit:g} s on a batch of {len(first_input)} "
                 f"(check: time limit; first sample {input_name} = {_row(first_input, 0)})"
             ) from None
-        except TechniqueError:
+        except (TechniqueError, _RenderTimeUp):
             raise
         except (Exception, SystemExit) as exc:  # a sys.exit() in the user's code must not end lightprobe
             line = _user_line(exc).lstrip(": ") or "no line"
