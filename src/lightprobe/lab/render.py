@@ -487,9 +487,10 @@ def render_lab(
     scene, strategy: LabStrategy, settings: RenderSettings | None = None, *, resume=None, progress=None
 ) -> RenderResult:
     """Render ``settings.spp`` samples per pixel from ``settings.first_sample`` (continuing ``resume``, an
-    :class:`Accumulator` at that count) with the techniques of ``strategy``; ``settings.time_limit`` stops between
-    passes, Ctrl-C keeps the passes done; ``progress(stats)`` after each pass (the render core's stats keys). See
-    the module docstring."""
+    :class:`Accumulator` at that count) with the techniques of ``strategy``; ``settings.time_limit`` stops the
+    render between passes, or stops a technique's call in flight at the limit (a compiled batch: after it) and drops
+    its pass (Numba's compiling not counted); Ctrl-C keeps the passes done; ``progress(stats)`` after each pass (the
+    render core's stats keys). See the module docstring."""
     from ..integrators.wavefront import settings_for
 
     _check_scene(scene)
