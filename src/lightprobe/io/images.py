@@ -40,6 +40,44 @@ def _oiio():
     return oiio
 
 
+@contextlib.contextmanager
+def library_output_held():
+    """Hold what C libraries write to the process's stderr (file descriptor 2) inside the block: libpng prints
+    ``libpng error: ...`` there before OpenImageIO returns the same words as an error, so a corrupt file gave a
+    stray line before lightprobe's one-line error.  Yields a list; the caller appends True if the read succeeded,
+    and only then is the held output (a library's warnings) written out, after the block.  Python's own
+    ``sys.stderr`` is flushed first, so nothing of it is held."""
+    import sys
+    import tempfile
+
+    outcome: list[bool] = []
+    try:
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError, AttributeError):  # no stderr to hold (closed, or None): read as it is
+        yield outcome
+        return
+    with tempfile.TemporaryFile() as held:
+        os.dup2(held.fileno(), 2)
+        try:
+            yield outcome
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+        if outcome and outcome[0]:
+            held.seek(0)
+            if text := held.read():
+                os.write(2, text)
+
+
+def library_message(text: str, default: str) -> str:
+    """An image library's error text on one line: OpenImageIO returns libpng's messages one a line, a message often
+    repeated inside the next one; the distinct ones joined with '; '."""
+    lines = [line.strip() for line in (text or "").splitlines() if line.strip()]
+    kept = [line for line in dict.fromkeys(lines) if not any(line != other and line in other for other in lines)]
+    return "; ".join(kept) or default
+
+
 def read_image(path: str | os.PathLike) -> np.ndarray:
     """Read an image's stored values as float32 (H, W, C), without colour conversion (an 8-bit PNG gives its
     code values / 255).  Raises :class:`ImageError` naming the file if it cannot.  For radiance, use
@@ -95,20 +133,21 @@ def _read(p: Path) -> tuple[np.ndarray, str]:
     if p.suffix.lower() == ".pfm":
         return _read_pfm(p), "linear"
     oiio = _oiio()
-    inp = oiio.ImageInput.open(str(p))
-    if inp is None:
-        msg = oiio.geterror().strip().splitlines()
-        raise ImageError(f"{p}: cannot read image ({msg[-1] if msg else 'unknown format'})")
-    try:
-        spec = inp.spec()
-        stored = str(spec.format)
-        encoding = _encoding(str(spec.getattribute("oiio:ColorSpace") or ""), stored.startswith(("uint", "int")))
-        pixels = inp.read_image(oiio.FLOAT)
-        err = inp.geterror()
-    finally:
-        inp.close()
-    if pixels is None or not isinstance(pixels, np.ndarray) or pixels.size == 0:
-        raise ImageError(f"{p}: cannot read image data ({err.strip() or 'corrupt or truncated file'})")
+    with library_output_held() as succeeded:
+        inp = oiio.ImageInput.open(str(p))
+        if inp is None:
+            raise ImageError(f"{p}: cannot read image ({library_message(oiio.geterror(), 'unknown format')})")
+        try:
+            spec = inp.spec()
+            stored = str(spec.format)
+            encoding = _encoding(str(spec.getattribute("oiio:ColorSpace") or ""), stored.startswith(("uint", "int")))
+            pixels = inp.read_image(oiio.FLOAT)
+            err = inp.geterror()
+        finally:
+            inp.close()
+        if pixels is None or not isinstance(pixels, np.ndarray) or pixels.size == 0:
+            raise ImageError(f"{p}: cannot read image data ({library_message(err, 'corrupt or truncated file')})")
+        succeeded.append(True)
     if pixels.ndim == 2:
         pixels = pixels[:, :, None]
     return np.ascontiguousarray(pixels, dtype=np.float32), encoding
