@@ -241,14 +241,14 @@ def _write_oiio(p: Path, spec, pixels: np.ndarray) -> None:
     with _replaced_atomically(p) as tmp:
         out = oiio.ImageOutput.create(str(tmp))
         if out is None or not out.open(str(tmp), spec):
-            raise ImageError(f"{p}: cannot write ({oiio.geterror().strip() or 'open failed'})")
+            raise ImageError(f"{p}: cannot write ({library_message(oiio.geterror(), 'open failed')})")
         try:
             ok = out.write_image(pixels)
             err = out.geterror()
         finally:
             out.close()
         if not ok:
-            raise ImageError(f"{p}: cannot write ({err.strip() or 'write failed'})")
+            raise ImageError(f"{p}: cannot write ({library_message(err, 'write failed')})")
 
 
 def write_png(path: str | os.PathLike, linear_rgb: np.ndarray, *, exposure: float = 0.0) -> Path:
