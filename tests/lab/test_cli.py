@@ -81,6 +81,8 @@ def test_compare_with_user_strategies_writes_the_report(tmp_path, capsys):
     assert main(args) == 2
     err = capsys.readouterr().err
     assert "ran out of luck" in err and report.exists() and "stopped early" in report.read_text()
+    # one count, said once: the first round's sample is what the strategy kept (it said "0 ... kept" here)
+    assert "stopped at 1 spp" in err and "(during sample 1; 1 sample(s) per pixel kept)" in err, err
     args[3] = f"mis:{SOLUTIONS}:PhongLobes/bogus=1"
     assert main(args) == 2
     assert "'bogus=1' is not key=value with a key among" in capsys.readouterr().err

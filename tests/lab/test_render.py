@@ -120,6 +120,21 @@ def test_a_failing_technique_keeps_what_was_rendered(exercise_scene):
     assert "1 sample(s) per pixel kept" in str(info.value)
 
 
+def test_a_technique_failing_in_a_continued_render_counts_what_the_render_holds(exercise_scene):
+    """A render that continues another (compare's rounds do) and fails in its first pass holds the samples it
+    continued: the error counts them and carries them. Before, it said "0 sample(s) per pixel kept" (and carried
+    nothing), which compare put beside "stopped at 1 spp"."""
+    scene, _ = exercise_scene
+    strategy, _ = parse_lab_token(f"{TECHNIQUES}:FailsLater")
+    first = render_lab(scene, strategy, RenderSettings(spp=1, seed=1))
+    with pytest.raises(LabRenderError) as info:
+        render_lab(scene, strategy, RenderSettings(spp=2, seed=1, first_sample=1), resume=first.accumulator)
+    assert "(during sample 1; 1 sample(s) per pixel kept)" in str(info.value), str(info.value)
+    kept = info.value.result
+    assert kept is not None and kept.counts.min() == kept.counts.max() == 1
+    assert np.array_equal(kept.image, first.image)
+
+
 def test_strategy_tokens_and_scene_checks(exercise_scene):
     with pytest.raises(TechniqueError, match="MIS needs one BSDF and one light"):
         parse_lab_token(f"mis:{SOLUTIONS}:PhongLobes+{SOLUTIONS}:CosineHemisphere")

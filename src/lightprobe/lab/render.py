@@ -535,9 +535,12 @@ def render_lab(
         stopped = True
     except TechniqueError as exc:
         stats = _stats(settings, strategy, start, done, False, False, shader, acc)
-        partial = result_from(acc, width, height, stats) if done else None
+        # what the render holds: the samples it continued and the passes it finished (compare's rounds continue
+        # each other, and its message counts them all)
+        kept = int(acc.count.min())
+        partial = result_from(acc, width, height, stats) if kept else None
         raise LabRenderError(
-            f"{exc} (during sample {first + done}; {done} sample(s) per pixel kept)", partial
+            f"{exc} (during sample {first + done}; {kept} sample(s) per pixel kept)", partial
         ) from None
     finally:
         shader.close()
