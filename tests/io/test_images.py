@@ -81,7 +81,7 @@ def test_a_librarys_output_is_held_and_written_out_only_after_a_read_that_succee
     it is written out as before."""
     import os
 
-    from lightprobe.io.images import library_output_held
+    from lightprobe.errors import library_output_held
 
     with library_output_held() as succeeded:
         os.write(2, b"libpng warning: kept\n")

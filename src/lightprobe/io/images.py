@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..color import linear_to_srgb, srgb_to_linear
-from ..errors import ImageError, ParameterError, warn_once
+from ..errors import ImageError, ParameterError, library_message, library_output_held, warn_once
 
 __all__ = [
     "LINEAR_FORMATS",
@@ -38,44 +38,6 @@ def _oiio():
     import OpenImageIO as oiio  # imported lazily: it is only needed for file I/O
 
     return oiio
-
-
-@contextlib.contextmanager
-def library_output_held():
-    """Hold what C libraries write to the process's stderr (file descriptor 2) inside the block: libpng prints
-    ``libpng error: ...`` there before OpenImageIO returns the same words as an error, so a corrupt file gave a
-    stray line before lightprobe's one-line error.  Yields a list; the caller appends True if the read succeeded,
-    and only then is the held output (a library's warnings) written out, after the block.  Python's own
-    ``sys.stderr`` is flushed first, so nothing of it is held."""
-    import sys
-    import tempfile
-
-    outcome: list[bool] = []
-    try:
-        sys.stderr.flush()
-        saved = os.dup(2)
-    except (OSError, ValueError, AttributeError):  # no stderr to hold (closed, or None): read as it is
-        yield outcome
-        return
-    with tempfile.TemporaryFile() as held:
-        os.dup2(held.fileno(), 2)
-        try:
-            yield outcome
-        finally:
-            os.dup2(saved, 2)
-            os.close(saved)
-        if outcome and outcome[0]:
-            held.seek(0)
-            if text := held.read():
-                os.write(2, text)
-
-
-def library_message(text: str, default: str) -> str:
-    """An image library's error text on one line: OpenImageIO returns libpng's messages one a line, a message often
-    repeated inside the next one; the distinct ones joined with '; '."""
-    lines = [line.strip() for line in (text or "").splitlines() if line.strip()]
-    kept = [line for line in dict.fromkeys(lines) if not any(line != other and line in other for other in lines)]
-    return "; ".join(kept) or default
 
 
 def read_image(path: str | os.PathLike) -> np.ndarray:

@@ -30,7 +30,7 @@ import numpy as np
 
 from .._numba import jit, jit_alloc, jit_inline
 from ..color import srgb_to_linear
-from ..errors import ImageError, ParameterError
+from ..errors import ImageError, ParameterError, library_message, library_output_held
 
 __all__ = [
     "CLAMP",
@@ -148,8 +148,6 @@ class ImageTexture:
 def _decode(path: Path, label: str) -> np.ndarray:
     """An image file's pixels: uint8 for 8-bit files, float32 otherwise (16-bit: code / 65535)."""
     import OpenImageIO as oiio
-
-    from ..io.images import library_message, library_output_held
 
     with library_output_held() as succeeded:  # libpng's own 'libpng error' lines: the error below says it
         inp = oiio.ImageInput.open(os.fspath(path))
