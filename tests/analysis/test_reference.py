@@ -69,7 +69,7 @@ def test_a_checkpoint_of_another_render_is_refused(scene_file, tmp_path):
     with pytest.raises(LightprobeError, match="scene differ"):
         render_reference(scene, RenderSettings(spp=4, seed=3), out, chunk=2, scene_id="other")
     checkpoint_path(out).write_bytes(b"not a checkpoint")
-    with pytest.raises(LightprobeError, match="not a readable checkpoint"):
+    with pytest.raises(LightprobeError, match=r"damaged checkpoint \(16 bytes that are not an \.npz archive"):
         render_reference(scene, RenderSettings(spp=4, seed=3), out, chunk=2, scene_id="s")
 
 
