@@ -300,6 +300,11 @@ def render_command(
         result = _render_with_progress(scene, settings, render, quiet=quiet)
     stats = result.stats
     if not result.counts.any():
+        if stats["stopped_by_time_limit"]:  # a user technique's call can outlast the limit in the first pass
+            raise LightprobeError(
+                f"the time limit ({settings.time_limit:g} s) ran out before the first pass was finished; {output} was "
+                "not written"
+            )
         raise LightprobeError(f"interrupted before the first sample was taken; {output} was not written")
     files = write_render(output, result, variance=variance, exposure=exposure, png=png)
     if object_ids is not None:

@@ -2,12 +2,18 @@
 
 Every exception a user can cause by bad input (a missing or corrupt file, an invalid parameter, a degenerate
 scene) derives from :class:`LightprobeError`; the command-line interface prints its message on one line and
-exits with status 2 instead of showing a traceback.  Anything else is a bug in lightprobe.
+exits with status 2 instead of showing a traceback.  Anything else is a bug in lightprobe.  A C library's error
+text (OpenImageIO's, libpng's) becomes one line with :func:`library_message`, and :func:`library_output_held` keeps
+the library from printing its own error line beside lightprobe's.
 """
 
 from __future__ import annotations
 
+import contextlib
 import numbers
+import os
+import sys
+import tempfile
 import warnings
 
 import numpy as np
@@ -18,6 +24,8 @@ __all__ = [
     "LightprobeWarning",
     "ParameterError",
     "SceneError",
+    "library_message",
+    "library_output_held",
     "numeric_array",
     "warn_once",
 ]
@@ -76,3 +84,38 @@ def numeric_array(value, what: str, error: type[LightprobeError] = ParameterErro
         except (TypeError, ValueError):
             pass
     raise error(f"{what} must be a number or a list of numbers, got {value!r}")
+
+
+@contextlib.contextmanager
+def library_output_held():
+    """Hold what C libraries write to the process's stderr (file descriptor 2) inside the block: libpng prints
+    ``libpng error: ...`` there before OpenImageIO returns the same words as an error, so a corrupt file gave a
+    stray line before lightprobe's one-line error.  Yields a list; the caller appends True if the read succeeded,
+    and only then is the held output (a library's warnings) written out, after the block.  Python's own
+    ``sys.stderr`` is flushed first, so nothing of it is held."""
+    outcome: list[bool] = []
+    try:
+        sys.stderr.flush()
+        saved = os.dup(2)
+    except (OSError, ValueError, AttributeError):  # no stderr to hold (closed, or None): read as it is
+        yield outcome
+        return
+    with tempfile.TemporaryFile() as held:
+        os.dup2(held.fileno(), 2)
+        try:
+            yield outcome
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+        if outcome and outcome[0]:
+            held.seek(0)
+            if text := held.read():
+                os.write(2, text)
+
+
+def library_message(text: str, default: str) -> str:
+    """An image library's error text on one line: OpenImageIO returns libpng's messages one a line, a message often
+    repeated inside the next one; the distinct ones joined with '; '."""
+    lines = [line.strip() for line in (text or "").splitlines() if line.strip()]
+    kept = [line for line in dict.fromkeys(lines) if not any(line != other and line in other for other in lines)]
+    return "; ".join(kept) or default

@@ -69,7 +69,7 @@ def test_a_checkpoint_of_another_render_is_refused(scene_file, tmp_path):
     with pytest.raises(LightprobeError, match="scene differ"):
         render_reference(scene, RenderSettings(spp=4, seed=3), out, chunk=2, scene_id="other")
     checkpoint_path(out).write_bytes(b"not a checkpoint")
-    with pytest.raises(LightprobeError, match="not a readable checkpoint"):
+    with pytest.raises(LightprobeError, match=r"damaged checkpoint \(16 bytes that are not an \.npz archive"):
         render_reference(scene, RenderSettings(spp=4, seed=3), out, chunk=2, scene_id="s")
 
 
@@ -172,6 +172,53 @@ def test_a_checkpoint_from_before_maps_beside_lights_were_compensated(scene_file
         else:
             with pytest.raises(LightprobeError, match=r"checkpoint of a different render \(mis_compensation differ"):
                 render_reference(scene, RenderSettings(spp=4, seed=3, **settings), out, chunk=2, scene_id="s")
+
+
+def _damaged(good: bytes, damage: str, n_pixels: int) -> bytes:
+    """A checkpoint's bytes after ``damage``: cut short, overwritten in its arrays or at its start, emptied, an .npy
+    array instead of the archive, or a readable archive whose arrays do not fit the image."""
+    import io
+    import json
+
+    if damage == "truncated":
+        return good[: len(good) // 3]
+    if damage == "garbage in the arrays":
+        return good[:2000] + b"\xab" * 400 + good[2400:]
+    if damage == "garbage at the start":
+        return b"\xab" * 64 + good[64:]
+    if damage == "empty":
+        return b""
+    out = io.BytesIO()
+    if damage == "an .npy array":
+        np.save(out, np.zeros(4))
+    else:  # the arrays of another image, or a mean with two channels
+        identity = json.loads(str(np.load(io.BytesIO(good))["identity"]))
+        arrays = {"mean": np.zeros((n_pixels, 2)), "m2": np.zeros((n_pixels, 3)), "count": np.full(n_pixels, 2)}
+        np.savez(out, identity=np.array(json.dumps(identity)), nonfinite=np.zeros(n_pixels, np.int64), **arrays)
+    return out.getvalue()
+
+
+@pytest.mark.parametrize(
+    "damage",
+    ["truncated", "garbage in the arrays", "garbage at the start", "empty", "an .npy array", "arrays of wrong shape"],
+)
+def test_a_damaged_checkpoint_is_one_line_and_kept(scene_file, tmp_path, damage):
+    """A checkpoint cut short, overwritten or emptied (a full disk, a bad copy) is refused in one line that names it
+    and says what to do, and is left as it is: it may be all that is left of hours of rendering.  Before, numpy's
+    zipfile.BadZipFile and EOFError escaped (a traceback, or "interrupted" at the command line)."""
+    scene, _ = load_scene(scene_file)
+    out = tmp_path / "ref.exr"
+    render_reference(scene, RenderSettings(spp=2, seed=3), out, chunk=2, scene_id="s")
+    ckpt = checkpoint_path(out)
+    width, height = scene.camera.resolution
+    damaged = _damaged(ckpt.read_bytes(), damage, width * height)
+    ckpt.write_bytes(damaged)
+    with pytest.raises(LightprobeError) as info:
+        render_reference(scene, RenderSettings(spp=4, seed=3), out, chunk=2, scene_id="s")
+    message = str(info.value)
+    assert message.startswith(f"{ckpt}: damaged checkpoint") and "\n" not in message, message
+    assert "remove it to start over, or choose another -o to keep it" in message, message
+    assert ckpt.read_bytes() == damaged
 
 
 def test_killed_mid_run_then_resumed_is_bit_identical(scene_file, tmp_path):

@@ -346,6 +346,10 @@ def test_a_mesh_takes_one_radiance_per_face_from_a_file_or_its_colours(tmp_path)
         ('face_emission = "bad.npy"', "face_emission must give each face"),
         ('face_emission = "rgb.npy"\nemission = 1.0', "emission or face_emission, not both"),
         ('face_emission = "rgb.txt"', 'must be "colors" or a .npy file'),
+        ('face_emission = "empty.npy"', r"empty\.npy: not a \.npy array \(the file is empty\)"),
+        ('face_emission = "garbage.npy"', r"garbage\.npy: not a \.npy array \(10 bytes"),
+        ('face_emission = "archive.npy"', r"archive\.npy: not a \.npy array"),
+        ('face_emission = "cut.npy"', r"cut\.npy: not a readable \.npy array"),
     ],
 )
 def test_face_emission_mistakes_are_one_error_naming_the_file(tmp_path, extra, message):
@@ -354,6 +358,12 @@ def test_face_emission_mistakes_are_one_error_naming_the_file(tmp_path, extra, m
     np.save(tmp_path / "three.npy", np.ones((3, 3)))
     np.save(tmp_path / "text.npy", np.array(["a", "b"]))
     np.save(tmp_path / "bad.npy", np.array([[1.0, np.nan, 0.0], [1.0, 1.0, 1.0]]))
+    # damaged files: numpy read these as an EOFError, a "pickled data" complaint, an archive and a short read
+    (tmp_path / "empty.npy").write_bytes(b"")
+    (tmp_path / "garbage.npy").write_bytes(b"\xab" * 10)
+    np.savez(tmp_path / "archive.npz", a=np.ones((2, 3)))
+    (tmp_path / "archive.npz").rename(tmp_path / "archive.npy")
+    (tmp_path / "cut.npy").write_bytes((tmp_path / "rgb.npy").read_bytes()[:100])
     with pytest.raises(SceneError, match=message) as info:
         load_scene(_mesh_scene(tmp_path, extra))
     assert "\n" not in str(info.value) and ("m.toml" in str(info.value) or "panels" in str(info.value))

@@ -181,6 +181,70 @@ def test_missing_buffers_and_corrupt_files(tmp_path):
         load_gltf(tmp_path / "i.gltf")
 
 
+def _set(doc: dict, where: str, value) -> None:
+    """Set the item at ``where`` (``meshes[0].primitives[0].attributes.POSITION``) of a glTF document."""
+    import re
+
+    steps = [int(k) if k.isdigit() else k for k in re.findall(r"[^.\[\]]+", where)]
+    holder = doc
+    for step in steps[:-1]:
+        holder = holder[step]
+    holder[steps[-1]] = value
+
+
+@pytest.mark.parametrize(
+    ("where", "value", "said"),
+    [
+        ("meshes[0].primitives[0].attributes.POSITION", 9, "accessor 9 does not exist"),
+        ("meshes[0].primitives[0].indices", 3, "accessor 3 does not exist"),
+        ("meshes[0].primitives[0].material", 1, "material 1 does not exist"),
+        ("accessors[1].bufferView", 9, "bufferView 9 does not exist"),
+        ("bufferViews[2].buffer", 4, "buffer 4 does not exist"),
+        ("nodes[1].mesh", 2, "mesh 2 does not exist"),
+        ("nodes[0].children[0]", 6, "node 6 does not exist"),
+        ("nodes[2].camera", 1, "camera 1 does not exist"),
+        ("nodes[3].extensions.KHR_lights_punctual.light", 3, "light 3 does not exist"),
+        ("scenes[0].nodes[4]", 17, "node 17 does not exist"),
+        ("scene", 1, "scene 1 does not exist"),
+        ("nodes[1].mesh", -1, "-1 is not an index (a whole number from 0)"),
+        ("nodes[1].mesh", "0", "'0' is not an index (a whole number from 0)"),
+        ("nodes[1].mesh", 0.0, "0.0 is not an index (a whole number from 0)"),
+        ("nodes[1].mesh", True, "True is not an index (a whole number from 0)"),
+        ("nodes[0].children", 1, "not a list"),
+        ("nodes[5]", 5, "not an object"),
+        ("meshes[0].primitives[0].attributes", [0, 1], "not an object"),
+        ("accessors", {}, "not a list"),
+        ("materials[0].normalTexture", {"scale": 2.0}, "missing"),
+    ],
+)
+@pytest.mark.parametrize("glb", [False, True])
+def test_every_index_is_checked_at_load(tmp_path, where, value, said, glb):
+    """An index that names nothing (or is not an index) is one error naming the file and the item, found when the
+    file is read: before, an accessor's buffer view, a node's mesh, children or camera, the default scene and a
+    scene's nodes were looked up as they were met (an IndexError, a traceback), and the others named their item in
+    words of their own."""
+    path = tmp_path / ("bad.glb" if glb else "bad.gltf")
+    write_gltf(path, glb=glb)
+    doc = json.loads(path.read_text()) if not glb else None
+    if glb:  # rewrite the JSON chunk
+        raw = path.read_bytes()
+        size = int.from_bytes(raw[12:16], "little")
+        doc = json.loads(raw[20 : 20 + size])
+    _set(doc, where, value)
+    if glb:
+        text = json.dumps(doc).encode()
+        text += b" " * (-len(text) % 4)
+        rest = raw[20 + size :]
+        body = struct_chunk(text, 0x4E4F534A) + rest
+        path.write_bytes(b"glTF" + (2).to_bytes(4, "little") + (12 + len(body)).to_bytes(4, "little") + body)
+    else:
+        path.write_text(json.dumps(doc))
+    with pytest.raises(SceneError) as info:
+        load_gltf(path)
+    expected = f"{path}: {where}: {said}" if said != "missing" else f"{path}: {where}.index: missing"
+    assert str(info.value) == expected
+
+
 def _png(path: Path, pixels: np.ndarray) -> bytes:
     import OpenImageIO as oiio
 
@@ -286,9 +350,10 @@ def test_texture_inputs_refused_or_warned_in_one_line(tmp_path):
         load_gltf(path)
     (tmp_path / "normal.png").write_bytes((tmp_path / "base.png").read_bytes())
     for change, message in (
-        (lambda d: d["textures"][0].update(source=9), "texture 0 has no image"),
+        (lambda d: d["textures"][0].update(source=9), r"textures\[0\]\.source: image 9 does not exist"),
         (lambda d: d["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"].update(index=7),
-         "material 'paint' baseColorTexture: texture 7 does not exist"),
+         r"materials\[0\]\.pbrMetallicRoughness\.baseColorTexture\.index: texture 7 does not exist"),
+        (lambda d: d["textures"][0].pop("source"), "texture 0 has no image"),
         (lambda d: d["meshes"][0]["primitives"][0]["attributes"].pop("TEXCOORD_0"), "has textures but it has no "
          "TEXCOORD_0"),
     ):  # fmt: skip

@@ -56,6 +56,42 @@ def test_errors(tmp_path):
         write_image(tmp_path / "x.tiff", np.zeros((2, 2, 3)))
 
 
+@pytest.mark.parametrize("damage", ["truncated", "garbage in its chunks", "garbage at the start"])
+def test_a_corrupt_png_is_one_line_and_nothing_else_is_printed(tmp_path, capfd, damage):
+    """libpng printed its own 'libpng error: ...' line on the process's stderr before lightprobe's error, and
+    OpenImageIO's message ran over three lines; read as a map or as a texture, the error is one line, alone."""
+    from lightprobe.textures import ImageTexture
+
+    codes = np.random.default_rng(3).integers(0, 256, (16, 16, 3))
+    good = _write_8bit(tmp_path / "good.png", codes).read_bytes()
+    bad = tmp_path / "bad.png"
+    bad.write_bytes({"truncated": good[: len(good) // 2], "garbage in its chunks": good[:60] + b"\0" * 60 + good[120:],
+                     "garbage at the start": b"\xab" * 16 + good[16:]}[damage])  # fmt: skip
+    capfd.readouterr()
+    for read in (read_image, ImageTexture.read):
+        with pytest.raises(ImageError) as info:
+            read(bad)
+        message = str(info.value)
+        assert message.startswith(f"{bad}: cannot read image") and "\n" not in message, message
+    assert capfd.readouterr() == ("", "")
+
+
+def test_a_librarys_output_is_held_and_written_out_only_after_a_read_that_succeeded(capfd):
+    """What a library prints during a read that fails is in the error; after one that succeeds (a libpng warning)
+    it is written out as before."""
+    import os
+
+    from lightprobe.errors import library_output_held
+
+    with library_output_held() as succeeded:
+        os.write(2, b"libpng warning: kept\n")
+        succeeded.append(True)
+    with pytest.raises(ImageError), library_output_held():
+        os.write(2, b"libpng error: dropped\n")
+        raise ImageError("bad.png: cannot read image")
+    assert capfd.readouterr() == ("", "libpng warning: kept\n")
+
+
 def _write_8bit(path, codes):
     import OpenImageIO as oiio
 

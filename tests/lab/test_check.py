@@ -66,6 +66,7 @@ def test_consistent_but_wrong_distribution_fails_only_chi_square():
     ("name", "words"),
     [
         ("Raises", ["Raises.sample raised ValueError: my bug", "user_techniques.py", "check: sample runs", "u = "]),
+        ("Exits", ["Exits.sample raised SystemExit: 0", "line ", "check: sample runs"]),
         ("ReturnsNaN", ["pdf is not finite at sample 3", "check: finite values"]),
         ("NegativePdf", ["negative pdf -1 at sample 0", "check: pdf >= 0"]),
         ("WrongShape", ["wi has shape (100000, 2), expected (100000, 3)"]),

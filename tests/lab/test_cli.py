@@ -3,7 +3,12 @@ strategy (exit statuses, files written, one-line errors)."""
 
 import json
 import shutil
+import subprocess
+import sys
+import time
 from pathlib import Path
+
+import pytest
 
 from lightprobe.cli import main
 
@@ -76,6 +81,8 @@ def test_compare_with_user_strategies_writes_the_report(tmp_path, capsys):
     assert main(args) == 2
     err = capsys.readouterr().err
     assert "ran out of luck" in err and report.exists() and "stopped early" in report.read_text()
+    # one count, said once: the first round's sample is what the strategy kept (it said "0 ... kept" here)
+    assert "stopped at 1 spp" in err and "(during sample 1; 1 sample(s) per pixel kept)" in err, err
     args[3] = f"mis:{SOLUTIONS}:PhongLobes/bogus=1"
     assert main(args) == 2
     assert "'bogus=1' is not key=value with a key among" in capsys.readouterr().err
@@ -120,3 +127,60 @@ def test_render_with_njit_techniques_announces_their_compile(tmp_path, capsys):
         args[3] = token
         assert main([*args, "-q"]) == 0
         assert "compiling" not in capsys.readouterr().err
+
+
+COSINE = (
+    "import numpy as np\n\nclass Cosine:\n    kind = 'bsdf'\n\n    def sample(self, u, ctx):\n"
+    "        r, phi = np.sqrt(u[:, 0]), 2 * np.pi * u[:, 1]\n        z = np.sqrt(1 - u[:, 0])\n"
+    "        return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1), z / np.pi\n\n"
+    "    def pdf(self, wi, ctx):\n        return np.maximum(wi[:, 2], 0) / np.pi\n"
+)
+
+
+@pytest.mark.parametrize(
+    ("ending", "said"),
+    [
+        ("import sys\nsys.exit(0)\n", "line 14: importing it ended the program (sys.exit(0))"),
+        ("raise SystemExit('bye')\n", "line 13: importing it ended the program (sys.exit('bye'))"),
+        ("import os\nos._exit(0)\n", "importing it ended the whole process (exit status 0, as os._exit does)"),
+        ("import os\nos._exit(7)\n", "importing it ended the whole process (exit status 7, as os._exit does)"),
+        ("import os, signal\nos.kill(os.getpid(), signal.SIGKILL)\n", "importing it killed the process (SIGKILL)"),
+    ],
+)
+def test_a_technique_file_that_ends_the_program_at_import_is_one_line(tmp_path, ending, said):
+    """A file that calls sys.exit() or os._exit() when imported ended `check` with status 0 and nothing printed, which
+    a student reads as a pass. Run as a user runs it (a process of its own): os._exit would end a test's process."""
+    file = tmp_path / "mine.py"
+    file.write_text(COSINE + ending)
+    out = subprocess.run([sys.executable, "-m", "lightprobe", "check", f"{file}:Cosine", "--samples", "2000",
+                          "-o", str(tmp_path / "c.html")], capture_output=True, text=True, timeout=300)  # fmt: skip
+    lines = out.stderr.strip().splitlines()
+    assert out.returncode == 2 and len(lines) == 1 and not out.stdout, (out.returncode, out.stdout, out.stderr)
+    assert lines[0].startswith(f"lightprobe: error: {file}: ") and said in lines[0], lines
+    assert not (tmp_path / "c.html").exists()
+
+
+def test_the_time_limit_stops_a_slow_technique_and_keeps_its_passes(tmp_path, capsys):
+    """--time-limit bounds a render with user techniques as it bounds the core's: a technique's call in flight at
+    the limit is stopped and the passes before it written. Before, the limit was looked at between passes only, and
+    a call ran on to the technique's own 60-s limit (an error)."""
+    target = tmp_path / "ex"
+    main(["exercise", "init", str(target)])
+    out = tmp_path / "slow.exr"
+    args = ["render", str(target / "scene.toml"), "--techniques", f"{TECHNIQUES}:SlowLater", "--spp", "8",
+            "--width", "24", "--time-limit", "4", "-o", str(out), "-q"]  # fmt: skip
+    capsys.readouterr()
+    start = time.perf_counter()
+    assert main(args) == 0, capsys.readouterr().err
+    assert time.perf_counter() - start < 30.0  # the fourth call sleeps 100 s
+    sidecar = json.loads((tmp_path / "slow.exr.json").read_text())
+    assert sidecar["stopped_by_time_limit"] is True and sidecar["spp_done"] == 1
+    assert "(stopped by the time limit)" in capsys.readouterr().err
+    # a technique too slow for a single pass (5 s a call): nothing to write, and the command says so in one line
+    args[3], args[9] = f"{TECHNIQUES}:Slow", "1"
+    out.unlink()
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip().splitlines()  # the scene's summary, then the error
+    assert err[1:] == [f"lightprobe: error: the time limit (1 s) ran out before the first pass was finished; {out} "
+                       "was not written"], err  # fmt: skip
+    assert not out.exists()

@@ -80,3 +80,10 @@ def test_errors_name_the_directory(tmp_path):
     (tmp_path / "sampling.py").write_text("import numpy as np\nraise RuntimeError('half written')\n")
     with pytest.raises(LightprobeError, match=r"sampling\.py: line 2: importing it raised RuntimeError"):
         grade(tmp_path)
+
+
+def test_a_heuristic_that_exits_fails_step_5(exercise):
+    """A sys.exit() in the student's heuristic ended `exercise check` with the student's status and no verdict."""
+    _with(exercise, "    a = n_f * np.asarray(p_f, dtype=np.float64)", "    raise SystemExit(0)")
+    step = grade(exercise, samples=20_000).steps[4]
+    assert step.passed is False and "balance_heuristic(1, p_f, 1, p_g) raised SystemExit: 0" in step.message, step

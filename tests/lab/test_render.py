@@ -8,6 +8,7 @@ import pytest
 
 from lightprobe.analysis.metrics import block_z_test
 from lightprobe.bsdfs import Lambert
+from lightprobe.errors import LightprobeError
 from lightprobe.experiments.compare import compare
 from lightprobe.integrators.settings import RenderSettings
 from lightprobe.integrators.wavefront import render
@@ -79,6 +80,23 @@ def test_the_test_sees_a_biased_heuristic(exercise_scene):
     assert _z(result, reference)["pooled_z"] > 4.0
 
 
+@pytest.mark.parametrize("ending", ["raise", "exit"])
+def test_a_heuristic_that_raises_or_exits_is_a_technique_error(exercise_scene, ending):
+    """A user's NumPy heuristic is the user's code like a technique: a raise was a traceback and a sys.exit() ended
+    the program; both are one error naming it, with what was rendered before it."""
+    import sys
+
+    scene, _ = exercise_scene
+
+    def broken(n_f, p_f, n_g, p_g):
+        if ending == "exit":
+            sys.exit(3)
+        raise ZeroDivisionError("my weights")
+
+    with pytest.raises(LabRenderError, match=r"broken raised (SystemExit: 3|ZeroDivisionError: my weights)"):
+        render_lab(scene, LabStrategy((builtin("bsdf"), builtin("light")), broken), RenderSettings(spp=2, seed=1))
+
+
 def test_deterministic_and_resumable(exercise_scene):
     scene, _ = exercise_scene
     strategy, _ = parse_lab_token(f"mis:{SOLUTIONS}:PhongLobes")
@@ -100,6 +118,21 @@ def test_a_failing_technique_keeps_what_was_rendered(exercise_scene):
     kept = info.value.result
     assert kept is not None and kept.counts.min() == 1 and np.isfinite(kept.image).all()
     assert "1 sample(s) per pixel kept" in str(info.value)
+
+
+def test_a_technique_failing_in_a_continued_render_counts_what_the_render_holds(exercise_scene):
+    """A render that continues another (compare's rounds do) and fails in its first pass holds the samples it
+    continued: the error counts them and carries them. Before, it said "0 sample(s) per pixel kept" (and carried
+    nothing), which compare put beside "stopped at 1 spp"."""
+    scene, _ = exercise_scene
+    strategy, _ = parse_lab_token(f"{TECHNIQUES}:FailsLater")
+    first = render_lab(scene, strategy, RenderSettings(spp=1, seed=1))
+    with pytest.raises(LabRenderError) as info:
+        render_lab(scene, strategy, RenderSettings(spp=2, seed=1, first_sample=1), resume=first.accumulator)
+    assert "(during sample 1; 1 sample(s) per pixel kept)" in str(info.value), str(info.value)
+    kept = info.value.result
+    assert kept is not None and kept.counts.min() == kept.counts.max() == 1
+    assert np.array_equal(kept.image, first.image)
 
 
 def test_strategy_tokens_and_scene_checks(exercise_scene):
@@ -140,3 +173,33 @@ def test_compare_takes_user_strategies(exercise_scene):
     assert runs[0].label == "mis" and runs[0].error is None
     assert runs[1].spp == 4 and runs[1].error is None and runs[1].metrics["relmse"] > 0
     assert runs[2].error is not None and "ran out of luck" in runs[2].error and runs[2].rounds
+
+
+def test_the_render_clock_does_not_count_compiling():
+    """A render's time limit is the render's, not Numba's: a compile (or a load from the cache) on a kernel's first
+    use, in the first pass, is not counted, as the render core warms up its stages before its clock starts."""
+    import time
+
+    import numba
+
+    from lightprobe.lab.techniques import RenderClock
+
+    @numba.njit
+    def fresh(x):  # compiled at its first call, under Numba's compiler lock
+        return x + 1.0
+
+    with RenderClock(1000.0) as clock:
+        fresh(1.0)
+        wall = time.perf_counter() - clock.start
+        spent = clock.seconds_spent()
+    assert 0.0 <= spent < wall - 0.01, (spent, wall)
+    assert RenderClock(None).seconds_left() is None
+
+
+def test_a_technique_too_slow_for_a_pass_at_equal_time_is_one_error(exercise_scene):
+    """At equal time a user technique slower than the whole budget (5 s a call, 0.5 s given) is stopped by the time
+    limit; with nothing rendered there is nothing to measure, and the error says so (before, it ran its first pass
+    to the end, 10-15 s, and was measured)."""
+    scene, reference = exercise_scene
+    with pytest.raises(LightprobeError, match=r"Slow': the 0.5 s ran out before its first pass was finished"):
+        compare(scene, [f"{TECHNIQUES}:Slow"], reference.image, reference.variance, equal="time", seconds=0.5)

@@ -1,5 +1,6 @@
 """Techniques as users write them, right and wrong, for the laboratory's tests (loaded as FILE.py:NAME)."""
 
+import sys
 import time
 
 import numpy as np
@@ -132,6 +133,11 @@ class Raises(Cosine):
         raise ValueError("my bug")
 
 
+class Exits(Cosine):
+    def sample(self, u, ctx):
+        sys.exit(0)
+
+
 class ReturnsNaN(Cosine):
     def sample(self, u, ctx):
         wi, p = _cosine(u)
@@ -180,4 +186,15 @@ class FailsLater(Cosine):
         self.calls += 1
         if self.calls > 3:
             raise RuntimeError("ran out of luck")
+        return _cosine(u)
+
+
+class SlowLater(FailsLater):
+    """Right and quick for its first 3 calls (the first pass of the exercise's scene), then 100 s a call: longer
+    than its own 60-s limit, so only a render's time limit ends it in time."""
+
+    def sample(self, u, ctx):
+        self.calls += 1
+        if self.calls > 3:
+            time.sleep(100.0)
         return _cosine(u)

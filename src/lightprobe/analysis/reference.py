@@ -20,6 +20,8 @@ import hashlib
 import json
 import os
 import time
+import zipfile
+import zlib
 from collections.abc import Callable
 from pathlib import Path
 
@@ -77,15 +79,51 @@ def _older_compensation(meta: dict, scene: Scene) -> bool | str:
     return DIFFUSE if settings.get("strategy") == "mis" and lit_by_the_map_alone(scene) and one_pick else False
 
 
-def _load(path: Path, identity: dict, n_pixels: int, scene: Scene) -> Accumulator | None:
-    if not path.exists():
-        return None
+def _damaged(path: Path, why: str) -> LightprobeError:
+    """The error for a checkpoint that cannot be used as it is; the file is left alone (it may hold hours of
+    samples that another tool can still rescue)."""
+    why = " ".join(why.split())  # one line, whatever the library's message held
+    return LightprobeError(
+        f"{path}: damaged checkpoint ({why}); remove it to start over, or choose another -o to keep it"
+    )
+
+
+#: what reading a damaged .npz can raise: numpy's parsers (ValueError, EOFError), zipfile's checks (a bad CRC, a
+#: cut-short member), a compression method or a member name it does not know, the disk itself
+_DAMAGE = (OSError, EOFError, ValueError, KeyError, NotImplementedError, zipfile.BadZipFile, zlib.error)
+
+
+def _read_checkpoint(path: Path) -> tuple[dict, Accumulator]:
+    """A checkpoint's identity and accumulator, or a :func:`_damaged` error naming what is wrong with the file: cut
+    short, overwritten, empty, not an .npz archive, or arrays of the wrong shapes."""
     try:
+        with open(path, "rb") as fh:
+            head = fh.read(4)
+        if not head:
+            raise _damaged(path, "the file is empty")
+        # numpy takes a file that does not start as a zip archive for a pickle and says so, which misleads
+        if head != b"PK\x03\x04" or not zipfile.is_zipfile(path):
+            size = path.stat().st_size
+            raise _damaged(path, f"{size} bytes that are not an .npz archive: cut short or overwritten")
         with np.load(path, allow_pickle=False) as data:
             meta = json.loads(str(data["identity"]))
             acc = Accumulator.from_arrays(data)
-    except (OSError, ValueError, KeyError) as exc:
-        raise LightprobeError(f"{path}: not a readable checkpoint ({exc}); move it away to start afresh") from None
+    except _DAMAGE as exc:
+        why = f"no {exc.args[0]!r} array" if isinstance(exc, KeyError) else str(exc) or type(exc).__name__
+        raise _damaged(path, why) from None
+    if not isinstance(meta, dict) or not isinstance(meta.get("settings", {}), dict):
+        raise _damaged(path, "its identity is not a table of settings")
+    n = acc.count.shape[0] if acc.count.ndim == 1 else -1
+    if n < 0 or acc.mean.shape != (n, 3) or acc.m2.shape != (n, 3) or acc.nonfinite.shape != (n,):
+        shapes = ", ".join(f"{k} {v.shape}" for k, v in acc.to_arrays().items() if k != "adaptive")
+        raise _damaged(path, f"arrays of mismatched shapes: {shapes}")
+    return meta, acc
+
+
+def _load(path: Path, identity: dict, n_pixels: int, scene: Scene) -> Accumulator | None:
+    if not path.exists():
+        return None
+    meta, acc = _read_checkpoint(path)
     if "counts" not in meta:  # written before checkpoints recorded their settings as resolved
         left = sorted(k for k in RESOLVED_PER_SCENE if meta.get("settings", {}).get(k, 0) is None)
         if left:
@@ -113,7 +151,7 @@ def _load(path: Path, identity: dict, n_pixels: int, scene: Scene) -> Accumulato
             "use the same settings, or move it away to start afresh"
         )
     if acc.count.size != n_pixels or acc.count.min() != acc.count.max():
-        raise LightprobeError(f"{path}: damaged checkpoint (pixel counts); move it away to start afresh")
+        raise _damaged(path, f"{acc.count.size} pixels' counts, {n_pixels} pixels of even counts expected")
     return acc
 
 

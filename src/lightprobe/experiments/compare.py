@@ -211,6 +211,8 @@ def run_strategy(
                 final = result_from(acc, width, height)
                 run.image, run.variance = final.image, final.variance
             break
+        if acc is None and not result.accumulator.count.any():  # a user technique's call outlasted the budget
+            raise LightprobeError(f"strategy {label!r}: the {seconds:g} s ran out before its first pass was finished")
         acc = result.accumulator
         spent += result.stats["seconds"]
         done = int(acc.count.min())

@@ -31,8 +31,12 @@ What becomes what:
 
 Refused, each in one line naming the file and the item: a missing or short buffer, a data URI that is not base64,
 ``extensionsRequired`` outside what is read here (Draco: ``KHR_draco_mesh_compression``, by name), primitives that
-are not triangles (points, lines, strips and fans), sparse accessors, indices out of range, a missing or corrupt
-image, a texture or image index that does not exist, a textured primitive without ``TEXCOORD_0``.
+are not triangles (points, lines, strips and fans), sparse accessors, vertex indices out of range, a missing or
+corrupt image, a textured primitive without ``TEXCOORD_0``; and, checked for the whole file when it is read, any index
+of the file (a scene's nodes, a node's mesh, camera, children or light, a primitive's accessors and material, an
+accessor's buffer view, a view's buffer, a material's textures, a texture's image and sampler, ...) that is not a
+whole number or names an item that does not exist (``meshes[2].primitives[0].attributes.POSITION: accessor 9 does
+not exist``).
 """
 
 from __future__ import annotations
@@ -95,6 +99,118 @@ class GltfAsset:
         return Camera(origin, target, up, fov=fov, resolution=resolution)
 
 
+#: every index a glTF 2.0 file holds: (top-level array, the path of the index in each of its items, the array it
+#: indexes). In a path, ``name[]`` is each item of a list, ``*`` each value of an object, and a trailing ``!`` an
+#: index the specification requires wherever its object is present.
+_REFERENCES = (
+    ("scenes", "nodes[]", "nodes"),
+    ("nodes", "children[]", "nodes"),
+    ("nodes", "mesh", "meshes"),
+    ("nodes", "camera", "cameras"),
+    ("nodes", "skin", "skins"),
+    ("nodes", "extensions.KHR_lights_punctual.light!", "lights"),
+    ("meshes", "primitives[].attributes.*", "accessors"),
+    ("meshes", "primitives[].indices", "accessors"),
+    ("meshes", "primitives[].material", "materials"),
+    ("meshes", "primitives[].targets[].*", "accessors"),
+    ("accessors", "bufferView", "bufferViews"),
+    ("accessors", "sparse.indices.bufferView!", "bufferViews"),
+    ("accessors", "sparse.values.bufferView!", "bufferViews"),
+    ("bufferViews", "buffer!", "buffers"),
+    ("images", "bufferView", "bufferViews"),
+    ("textures", "source", "images"),
+    ("textures", "sampler", "samplers"),
+    ("materials", "pbrMetallicRoughness.baseColorTexture.index!", "textures"),
+    ("materials", "pbrMetallicRoughness.metallicRoughnessTexture.index!", "textures"),
+    ("materials", "normalTexture.index!", "textures"),
+    ("materials", "occlusionTexture.index!", "textures"),
+    ("materials", "emissiveTexture.index!", "textures"),
+    ("skins", "inverseBindMatrices", "accessors"),
+    ("skins", "skeleton", "nodes"),
+    ("skins", "joints[]", "nodes"),
+    ("animations", "channels[].target.node", "nodes"),
+    ("animations", "samplers[].input!", "accessors"),
+    ("animations", "samplers[].output!", "accessors"),
+)
+#: what one item of each array is called in a message
+_ITEM = {"scenes": "scene", "nodes": "node", "meshes": "mesh", "cameras": "camera", "skins": "skin",
+         "lights": "light", "accessors": "accessor", "materials": "material", "bufferViews": "bufferView",
+         "buffers": "buffer", "images": "image", "textures": "texture", "samplers": "sampler",
+         "animations": "animation"}  # fmt: skip
+
+
+def _check_indices(doc: dict, path: Path) -> None:
+    """Every index of the file names an item that exists, and every array and object on the way to one is one: a
+    :class:`SceneError` naming the file and the item otherwise (``meshes[2].primitives[0].attributes.POSITION:
+    accessor 9 does not exist``), so that nothing after the load meets an index out of range."""
+
+    def fail(where: str, what: str):
+        raise SceneError(f"{path}: {where}: {what}")
+
+    def array(holder: dict, key: str, where: str) -> list:
+        value = holder.get(key, [])
+        if not isinstance(value, list):
+            fail(where, "not a list")
+        for i, item in enumerate(value):
+            if not isinstance(item, dict):
+                fail(f"{where}[{i}]", "not an object")
+        return value
+
+    def table(holder: dict, key: str, where: str) -> dict:
+        value = holder.get(key, {})
+        if not isinstance(value, dict):
+            fail(where, "not an object")
+        return value
+
+    lights = table(table(doc, "extensions", "extensions"), "KHR_lights_punctual", "extensions.KHR_lights_punctual")
+    arrays = {name: array(doc, name, name) for name in _ITEM if name != "lights"}
+    arrays["lights"] = array(lights, "lights", "extensions.KHR_lights_punctual.lights")
+
+    def check(value, where: str, target: str, count: int) -> None:
+        if not isinstance(value, int) or isinstance(value, bool) or value < 0:
+            fail(where, f"{value!r} is not an index (a whole number from 0)")
+        if value >= count:
+            fail(where, f"{_ITEM[target]} {value} does not exist")
+
+    def follow(value, steps: list[str], where: str, target: str, count: int) -> None:
+        """The indices at ``steps`` below ``value`` (found at ``where``)."""
+        if not steps:
+            check(value, where, target, count)
+            return
+        step, rest = steps[0], steps[1:]
+        if step == "*":
+            if not isinstance(value, dict):
+                fail(where, "not an object")
+            for key, item in value.items():
+                follow(item, rest, f"{where}.{key}", target, count)
+            return
+        if not isinstance(value, dict):
+            fail(where, "not an object")
+        key, required = step.removesuffix("[]").removesuffix("!"), step.endswith("!")
+        if key not in value:
+            if required:
+                fail(f"{where}.{key}", "missing")
+            return
+        if step.endswith("[]"):
+            items = value[key]
+            if not isinstance(items, list):
+                fail(f"{where}.{key}", "not a list")
+            for i, item in enumerate(items):
+                follow(item, rest, f"{where}.{key}[{i}]", target, count)
+        else:
+            follow(value[key], rest, f"{where}.{key}", target, count)
+
+    for name, reference, target in _REFERENCES:
+        for i, item in enumerate(arrays[name]):
+            follow(item, reference.split("."), f"{name}[{i}]", target, len(arrays[target]))
+    for i, animation in enumerate(arrays["animations"]):  # a channel's sampler is one of its animation's
+        samplers = animation.get("samplers", [])
+        for j, channel in enumerate(animation.get("channels", [])):
+            follow(channel, ["sampler!"], f"animations[{i}].channels[{j}]", "samplers", len(samplers))
+    if "scene" in doc:
+        check(doc["scene"], "scene", "scenes", len(arrays["scenes"]))
+
+
 class _Reader:
     def __init__(self, path: Path):
         self.path = path
@@ -112,7 +228,7 @@ class _Reader:
                 self.doc = json.loads(raw.decode("utf-8"))
             except (UnicodeDecodeError, json.JSONDecodeError) as exc:
                 raise SceneError(f"{path}: not glTF (neither a GLB file nor JSON: {exc})") from None
-        if not isinstance(self.doc, dict) or "asset" not in self.doc:
+        if not isinstance(self.doc, dict) or not isinstance(self.doc.get("asset"), dict):
             raise SceneError(f"{path}: not glTF (no 'asset' object)")
         version = str(self.doc["asset"].get("version", ""))
         if not version.startswith("2."):
@@ -124,6 +240,7 @@ class _Reader:
         unsupported = sorted(required - SUPPORTED_REQUIRED)
         if unsupported:
             raise SceneError(f"{path}: requires unsupported extension(s) {', '.join(unsupported)}")
+        _check_indices(self.doc, path)  # once, here: every lookup below may trust the file's indices
         self._buffers: dict[int, bytes] = {}
         self._textures: dict[int, object] = {}
 
@@ -156,10 +273,7 @@ class _Reader:
     def buffer(self, index: int) -> bytes:
         if index in self._buffers:
             return self._buffers[index]
-        buffers = self.doc.get("buffers", [])
-        if not 0 <= index < len(buffers):
-            raise SceneError(f"{self.path}: buffer {index} does not exist")
-        spec = buffers[index]
+        spec = self.doc["buffers"][index]  # an index that _check_indices has seen
         uri = spec.get("uri")
         if uri is None:
             if self.blob is None:
@@ -182,10 +296,7 @@ class _Reader:
 
     def accessor(self, index: int, what: str) -> np.ndarray:
         """Accessor ``index`` as an (count, width) float64 or int64 array."""
-        accessors = self.doc.get("accessors", [])
-        if not 0 <= index < len(accessors):
-            raise SceneError(f"{self.path}: {what}: accessor {index} does not exist")
-        acc = accessors[index]
+        acc = self.doc["accessors"][index]  # an index that _check_indices has seen
         if "sparse" in acc:
             raise SceneError(f"{self.path}: {what}: sparse accessors are not supported")
         dtype = _COMPONENTS.get(acc.get("componentType"))
@@ -220,30 +331,21 @@ class _Reader:
         texture."""
         from ..textures import ImageTexture
 
-        index = info.get("index")
-        textures = self.doc.get("textures", [])
-        if not isinstance(index, int) or not 0 <= index < len(textures):
-            raise SceneError(f"{self.path}: {what}: texture {index} does not exist")
+        index = info["index"]  # an index that _check_indices has seen, as every index below
         if info.get("texCoord", 0) != 0:
             warn_once(f"{self.path}: {what}: texCoord {info['texCoord']} is read as TEXCOORD_0")
         if "KHR_texture_transform" in info.get("extensions", {}):
             warn_once(f"{self.path}: {what}: KHR_texture_transform is ignored")
         if index in self._textures:
             return self._textures[index]
-        spec = textures[index]
+        spec = self.doc["textures"][index]
         source = spec.get("source")
-        images = self.doc.get("images", [])
-        if not isinstance(source, int) or not 0 <= source < len(images):
-            raise SceneError(f"{self.path}: {what}: texture {index} has no image (source {source})")
-        sampler = {}
-        if "sampler" in spec:
-            samplers = self.doc.get("samplers", [])
-            if not 0 <= spec["sampler"] < len(samplers):
-                raise SceneError(f"{self.path}: {what}: sampler {spec['sampler']} does not exist")
-            sampler = samplers[spec["sampler"]]
+        if source is None:  # an image only an extension gives (KHR_texture_basisu ...)
+            raise SceneError(f"{self.path}: {what}: texture {index} has no image (no source)")
+        sampler = self.doc["samplers"][spec["sampler"]] if "sampler" in spec else {}
         wrap = tuple(_WRAPS.get(sampler.get(key, 10497), "repeat") for key in ("wrapS", "wrapT"))
         filter = "nearest" if sampler.get("magFilter") == 9728 else "linear"
-        image = images[source]
+        image = self.doc["images"][source]
         label = f"{self.path}: image {source}" + (f" ({image['name']})" if image.get("name") else "")
         try:
             if "uri" in image and not image["uri"].startswith("data:"):
@@ -269,10 +371,9 @@ class _Reader:
     def _image_bytes(self, image: dict, source: int) -> tuple[bytes, str]:
         if "uri" in image:
             return self._data_uri(image["uri"], f"image {source}")
-        views = self.doc.get("bufferViews", [])
-        if not isinstance(image.get("bufferView"), int) or not 0 <= image["bufferView"] < len(views):
+        if "bufferView" not in image:
             raise SceneError(f"{self.path}: image {source} has neither a uri nor a buffer view")
-        view = views[image["bufferView"]]
+        view = self.doc["bufferViews"][image["bufferView"]]
         data = self.buffer(view["buffer"])
         start = view.get("byteOffset", 0)
         return data[start : start + view["byteLength"]], image.get("mimeType", "image/png")
@@ -329,10 +430,7 @@ def _material(reader: _Reader, index: int | None, where: str):
     doc, path = reader.doc, reader.path
     if index is None:
         return MetallicRoughness(1.0, 1.0, 1.0), None, False
-    materials = doc.get("materials", [])
-    if not isinstance(index, int) or not 0 <= index < len(materials):
-        raise SceneError(f"{path}: {where}: material {index} does not exist")
-    spec = materials[index]
+    spec = doc["materials"][index]  # an index that _check_indices has seen
     name = spec.get("name") or f"material {index}"
     what = f"material {name!r}"
     pbr = spec.get("pbrMetallicRoughness", {})
@@ -462,9 +560,7 @@ def _light(lights: list, index: int, matrix: np.ndarray, path: Path):
     from ..emitters.directional import DirectionalLight
     from ..emitters.punctual import PointLight, SpotLight
 
-    if not 0 <= index < len(lights):
-        raise SceneError(f"{path}: KHR_lights_punctual light {index} does not exist")
-    spec = lights[index]
+    spec = lights[index]  # an index that _check_indices has seen
     name = spec.get("name") or f"light {index}"
     color = np.asarray(spec.get("color", [1.0, 1.0, 1.0]), dtype=np.float64)
     power = color * float(spec.get("intensity", 1.0))

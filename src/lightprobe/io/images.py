@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..color import linear_to_srgb, srgb_to_linear
-from ..errors import ImageError, ParameterError, warn_once
+from ..errors import ImageError, ParameterError, library_message, library_output_held, warn_once
 
 __all__ = [
     "LINEAR_FORMATS",
@@ -95,20 +95,21 @@ def _read(p: Path) -> tuple[np.ndarray, str]:
     if p.suffix.lower() == ".pfm":
         return _read_pfm(p), "linear"
     oiio = _oiio()
-    inp = oiio.ImageInput.open(str(p))
-    if inp is None:
-        msg = oiio.geterror().strip().splitlines()
-        raise ImageError(f"{p}: cannot read image ({msg[-1] if msg else 'unknown format'})")
-    try:
-        spec = inp.spec()
-        stored = str(spec.format)
-        encoding = _encoding(str(spec.getattribute("oiio:ColorSpace") or ""), stored.startswith(("uint", "int")))
-        pixels = inp.read_image(oiio.FLOAT)
-        err = inp.geterror()
-    finally:
-        inp.close()
-    if pixels is None or not isinstance(pixels, np.ndarray) or pixels.size == 0:
-        raise ImageError(f"{p}: cannot read image data ({err.strip() or 'corrupt or truncated file'})")
+    with library_output_held() as succeeded:
+        inp = oiio.ImageInput.open(str(p))
+        if inp is None:
+            raise ImageError(f"{p}: cannot read image ({library_message(oiio.geterror(), 'unknown format')})")
+        try:
+            spec = inp.spec()
+            stored = str(spec.format)
+            encoding = _encoding(str(spec.getattribute("oiio:ColorSpace") or ""), stored.startswith(("uint", "int")))
+            pixels = inp.read_image(oiio.FLOAT)
+            err = inp.geterror()
+        finally:
+            inp.close()
+        if pixels is None or not isinstance(pixels, np.ndarray) or pixels.size == 0:
+            raise ImageError(f"{p}: cannot read image data ({library_message(err, 'corrupt or truncated file')})")
+        succeeded.append(True)
     if pixels.ndim == 2:
         pixels = pixels[:, :, None]
     return np.ascontiguousarray(pixels, dtype=np.float32), encoding
@@ -202,14 +203,14 @@ def _write_oiio(p: Path, spec, pixels: np.ndarray) -> None:
     with _replaced_atomically(p) as tmp:
         out = oiio.ImageOutput.create(str(tmp))
         if out is None or not out.open(str(tmp), spec):
-            raise ImageError(f"{p}: cannot write ({oiio.geterror().strip() or 'open failed'})")
+            raise ImageError(f"{p}: cannot write ({library_message(oiio.geterror(), 'open failed')})")
         try:
             ok = out.write_image(pixels)
             err = out.geterror()
         finally:
             out.close()
         if not ok:
-            raise ImageError(f"{p}: cannot write ({err.strip() or 'write failed'})")
+            raise ImageError(f"{p}: cannot write ({library_message(err, 'write failed')})")
 
 
 def write_png(path: str | os.PathLike, linear_rgb: np.ndarray, *, exposure: float = 0.0) -> Path:

@@ -367,10 +367,17 @@ def _face_emission(t: _Table, base: Path):
         raise SceneError(f'{t.where}: face_emission must be "colors" or a .npy file, got {value!r}')
     path = _path(base, value, t.where)
     try:
+        with open(path, "rb") as fh:
+            head = fh.read(6)
+        # numpy takes a file without the .npy magic for a pickle (or an .npz archive) and says so, which misleads
+        if head != b"\x93NUMPY":
+            size = path.stat().st_size
+            raise SceneError(f"{path}: not a .npy array ({size} bytes of something else)" if size else
+                             f"{path}: not a .npy array (the file is empty)")  # fmt: skip
         array = np.load(path, allow_pickle=False)
     except FileNotFoundError:
         raise SceneError(f"{path}: no such file") from None
-    except (OSError, ValueError) as exc:
+    except (OSError, EOFError, ValueError) as exc:
         raise SceneError(f"{path}: not a readable .npy array ({exc})") from None
     if array.dtype.kind not in "iuf" or array.ndim not in (1, 2) or (array.ndim == 2 and array.shape[1] != 3):
         raise SceneError(f"{path}: face_emission must be (F,) or (F, 3) numbers, got {array.dtype} {array.shape}")

@@ -55,7 +55,8 @@ from .jit_techniques import (
     user_inline,
 )
 from .jit_techniques import user_serial as _user_serial
-from .techniques import UNIT_TOLERANCE, Context, GuardedTechnique, Heuristic, TechniqueError
+from .technique_errors import _RenderTimeUp
+from .techniques import UNIT_TOLERANCE, Context, GuardedTechnique, Heuristic, RenderClock, TechniqueError
 
 __all__ = ["LabRenderError", "LabStrategy", "render_lab"]
 
@@ -111,7 +112,10 @@ def _weight(heuristic, n_f, p_f, n_g, p_g) -> np.ndarray:
         except Exception as exc:  # the user's code
             raise TechniqueError(f"{name} raised {type(exc).__name__}: {exc} (check: MIS weights)") from None
     else:
-        w = np.asarray(heuristic(n_f, p_f, n_g, p_g), dtype=np.float64)
+        try:
+            w = np.asarray(heuristic(n_f, p_f, n_g, p_g), dtype=np.float64)
+        except (Exception, SystemExit) as exc:  # the user's code; a sys.exit() in it must not end lightprobe
+            raise TechniqueError(f"{name} raised {type(exc).__name__}: {exc} (check: MIS weights)") from None
     if w.shape != np.shape(p_f) or not np.all(np.isfinite(w)) or np.any(w < 0) or np.any(w > 1 + 1e-9):
         raise TechniqueError(f"{name}: returned weights outside [0, 1], not finite or of shape {w.shape} (expected "
                              f"{np.shape(p_f)}) (check: MIS weights)")  # fmt: skip
@@ -334,6 +338,8 @@ class _Shader:
         self.dims = [t.dimensions for t in strategy.techniques]
         self.sampler = SAMPLERS[settings.sampler]
         self.rays = 0  # shadow rays traced
+        #: the render's clock, for its time limit (set by render_lab)
+        self.clock = RenderClock(None)
         # every technique an njit function (or lightprobe's own) and the heuristic a name or an njit function: the
         # compiled estimator (_shade_compiled); otherwise the NumPy one (_shade)
         self.compiled = all(t.jit is not None for t in strategy.techniques) and (
@@ -420,6 +426,9 @@ class _Shader:
                 self.rays = rays_before
                 return self._shade(ctx, numbers, gnormal, error)
             elapsed_check(tech.label, "sample", start, max(t.time_limit for t in techniques), m)
+            # compiled code cannot be stopped from outside (and a signal must not land in Numba's compiler, which
+            # the first call runs): the render's time limit, like the technique's own, is looked at after the batch
+            self.clock.seconds_left()
             f, scale, d, origin = np.empty((m, 3)), np.zeros(m), np.zeros((m, 3)), np.zeros((m, 3))
             live = np.zeros(m, dtype=np.bool_)
             _shadow_rays(material.kind, material.params, count, wo, gnormal, error, position, local, world, pdf,
@@ -478,9 +487,10 @@ def render_lab(
     scene, strategy: LabStrategy, settings: RenderSettings | None = None, *, resume=None, progress=None
 ) -> RenderResult:
     """Render ``settings.spp`` samples per pixel from ``settings.first_sample`` (continuing ``resume``, an
-    :class:`Accumulator` at that count) with the techniques of ``strategy``; ``settings.time_limit`` stops between
-    passes, Ctrl-C keeps the passes done; ``progress(stats)`` after each pass (the render core's stats keys). See
-    the module docstring."""
+    :class:`Accumulator` at that count) with the techniques of ``strategy``; ``settings.time_limit`` stops the
+    render between passes, or stops a technique's call in flight at the limit (a compiled batch: after it) and drops
+    its pass (Numba's compiling not counted); Ctrl-C keeps the passes done; ``progress(stats)`` after each pass (the
+    render core's stats keys). See the module docstring."""
     from ..integrators.wavefront import settings_for
 
     _check_scene(scene)
@@ -498,32 +508,44 @@ def render_lab(
     pixels_all = np.arange(width * height, dtype=np.int64)
     done = 0
     pass_seconds = 0.0
+    # the time limit bounds the whole render, not only the passes after the one in flight: a technique's call is
+    # stopped at the limit however long its own limit (GuardedTechnique.clock), and the pass it was in is dropped
+    clock = shader.clock = RenderClock(settings.time_limit)
+    for technique in strategy.techniques:
+        technique.clock = clock
     try:
-        for sample in range(first, first + settings.spp):
-            spent = time.perf_counter() - start
-            if settings.time_limit is not None and done > 0 and spent + pass_seconds > settings.time_limit:
-                stopped = True
-                break
-            t0 = time.perf_counter()
-            values = np.empty((width * height, 3))
-            for lo in range(0, pixels_all.size, BATCH):
-                block = pixels_all[lo : lo + BATCH]
-                values[lo : lo + BATCH] = shader.values(block, sample)
-            acc.add(values)
-            done += 1
-            pass_seconds = time.perf_counter() - t0
-            if progress is not None:
-                progress(_stats(settings, strategy, start, done, False, False, shader, acc))
+        with clock:  # lightprobe's and Numba's compiling is not the render's time
+            for sample in range(first, first + settings.spp):
+                spent = clock.seconds_spent()
+                if settings.time_limit is not None and done > 0 and spent + pass_seconds > settings.time_limit:
+                    stopped = True
+                    break
+                values = np.empty((width * height, 3))
+                for lo in range(0, pixels_all.size, BATCH):
+                    block = pixels_all[lo : lo + BATCH]
+                    values[lo : lo + BATCH] = shader.values(block, sample)
+                acc.add(values)
+                done += 1
+                pass_seconds = clock.seconds_spent() - spent
+                if progress is not None:
+                    progress(_stats(settings, strategy, start, done, False, False, shader, acc))
     except KeyboardInterrupt:
         interrupted = True
+    except _RenderTimeUp:  # the pass in flight is dropped (its pixels would have uneven counts)
+        stopped = True
     except TechniqueError as exc:
         stats = _stats(settings, strategy, start, done, False, False, shader, acc)
-        partial = result_from(acc, width, height, stats) if done else None
+        # what the render holds: the samples it continued and the passes it finished (compare's rounds continue
+        # each other, and its message counts them all)
+        kept = int(acc.count.min())
+        partial = result_from(acc, width, height, stats) if kept else None
         raise LabRenderError(
-            f"{exc} (during sample {first + done}; {done} sample(s) per pixel kept)", partial
+            f"{exc} (during sample {first + done}; {kept} sample(s) per pixel kept)", partial
         ) from None
     finally:
         shader.close()
+        for technique in strategy.techniques:
+            technique.clock = None
     stats = _stats(settings, strategy, start, done, stopped, interrupted, shader, acc)
     return result_from(acc, width, height, stats)
 

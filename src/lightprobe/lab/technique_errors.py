@@ -20,6 +20,11 @@ class _TooLong(Exception):
     """A technique's call ran past its time limit (raised by ``techniques._time_limit``'s signal handler)."""
 
 
+class _RenderTimeUp(Exception):
+    """The render's time limit ran out during (or before) a technique's call: the render stops and keeps the passes
+    it finished, as the render core stops at its time limit."""
+
+
 def _row(a: np.ndarray, i: int) -> str:
     return np.array2string(np.asarray(a[i]), precision=6, separator=", ", suppress_small=False)
 

@@ -30,11 +30,14 @@ takes too long) into one :class:`TechniqueError` naming the function, the check 
 
 from __future__ import annotations
 
+import contextlib
 import importlib.util
 import inspect
+import os
 import signal
 import sys
 import threading
+import time
 from collections.abc import Callable
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -44,7 +47,7 @@ import numpy as np
 
 from . import jit_techniques as jt
 from .jit_techniques import JitTechnique, jit_functions, technique_data
-from .technique_errors import TechniqueError, _row, _TooLong, _user_line
+from .technique_errors import TechniqueError, _RenderTimeUp, _row, _TooLong, _user_line
 
 __all__ = [
     "KINDS",
@@ -151,7 +154,8 @@ def _module_techniques(module) -> dict[str, object]:
 
 
 def load_module(path: str | Path, *, what: str = "technique file"):
-    """Import a user's Python file; a missing file or an error while importing it is one line naming the file."""
+    """Import a user's Python file; a missing file, an error while importing it or an import that would end the
+    program (``sys.exit``, ``os._exit``, a crash) is one line naming the file."""
     file = Path(path)
     if not file.is_file():
         raise TechniqueError(f"{file}: no such {what}")
@@ -159,17 +163,70 @@ def load_module(path: str | Path, *, what: str = "technique file"):
     spec = importlib.util.spec_from_file_location(name, file)
     if spec is None or spec.loader is None:
         raise TechniqueError(f"{file}: not a Python file")
+    ended = _ends_the_process(spec)
+    if ended is not None:
+        raise TechniqueError(f"{file}: importing it {ended}; a {what} must not end the program")
     module = importlib.util.module_from_spec(spec)
     sys.modules[name] = module
     try:
         spec.loader.exec_module(module)
     except SyntaxError as exc:
         raise TechniqueError(f"{file}: line {exc.lineno}: syntax error: {exc.msg}") from None
+    except SystemExit as exc:  # sys.exit(), exit(): it would end lightprobe with the file's status, silently
+        raise TechniqueError(
+            f"{file}{_user_line(exc, file)}: importing it ended the program (sys.exit({exc.code!r})); a {what} "
+            "must not end the program"
+        ) from None
     except Exception as exc:  # the user's code: any error it raises on import is reported, not a traceback
         raise TechniqueError(
             f"{file}{_user_line(exc, file)}: importing it raised {type(exc).__name__}: {exc}"
         ) from None
     return module
+
+
+def _ends_the_process(spec) -> str | None:
+    """Import the file of ``spec`` in a forked child first: how the import ended the child's whole process, which
+    no ``except`` can catch (``os._exit``, a fatal signal, a crash in a C extension), or None when it returned or
+    raised (the caller's own import then reports the raise). The child's output goes nowhere: the caller's import
+    prints what the file prints, once. A fork of this process costs 10-20 ms (decisions.md 102); where there is no
+    fork, the caller's import is the only one."""
+    if not hasattr(os, "fork"):
+        return None
+    read, write = os.pipe()
+    try:
+        pid = os.fork()
+    except OSError:  # no room for another process: import in this one only
+        os.close(read)
+        os.close(write)
+        return None
+    if pid == 0:  # the child: never return into the caller's code, never run its exit handlers
+        try:
+            os.close(read)
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, 1)
+            os.dup2(devnull, 2)
+            try:
+                spec.loader.exec_module(importlib.util.module_from_spec(spec))
+            except BaseException:  # a raise or sys.exit: the caller's own import reports it
+                pass
+            os.write(write, b"returned")
+        finally:
+            os._exit(0)
+    os.close(write)
+    try:
+        with os.fdopen(read, "rb") as said:
+            returned = said.read() == b"returned"
+        _, status = os.waitpid(pid, 0)
+    except BaseException:  # Ctrl-C while the child imports: end it too
+        with contextlib.suppress(OSError):
+            os.kill(pid, signal.SIGKILL)
+            os.waitpid(pid, 0)
+        raise
+    if returned:
+        return None
+    if os.WIFSIGNALED(status):
+        return f"killed the process ({signal.Signals(os.WTERMSIG(status)).name})"
+    return f"ended the whole process (exit status {os.waitstatus_to_exitcode(status)}, as os._exit does)"
 
 
 def load_technique(spec: str, *, time_limit: float = DEFAULT_TIME_LIMIT) -> GuardedTechnique:
@@ -193,7 +250,7 @@ def load_technique(spec: str, *, time_limit: float = DEFAULT_TIME_LIMIT) -> Guar
     if inspect.isclass(obj):
         try:
             obj = obj()
-        except Exception as exc:
+        except (Exception, SystemExit) as exc:  # a sys.exit() in the user's code must not end lightprobe
             raise TechniqueError(f"{file}:{name}: creating it raised {type(exc).__name__}: {exc}") from None
     return GuardedTechnique(obj, f"{Path(file).name}:{name}", time_limit=time_limit)
 
@@ -218,8 +275,50 @@ def _time_limit(seconds: float):
         signal.signal(signal.SIGALRM, previous)
 
 
+class RenderClock:
+    """A render's time limit as the user techniques it calls see it: the seconds left, not counting what Numba
+    spends compiling or loading machine code meanwhile (lightprobe's kernels on their first use, the loops around
+    njit techniques), as the render core starts its clock only after warming up its stages. Use it as a context
+    manager: the compile timer listens while it is open."""
+
+    def __init__(self, time_limit: float | None):
+        from numba.core import event
+
+        self.time_limit = time_limit
+        self.start = time.perf_counter()
+        # Numba takes its global compiler lock around every compile and every load from its cache
+        self._compiling = event.TimingListener()
+        self._listening = event.install_listener("numba:compiler_lock", self._compiling)
+
+    def __enter__(self) -> RenderClock:
+        self._listening.__enter__()
+        self.start = time.perf_counter()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._listening.__exit__(*exc)
+
+    def seconds_spent(self) -> float:
+        """Seconds since the render started, Numba's compiling and loading not counted."""
+        compiling = self._compiling.duration if self._compiling.done else 0.0
+        return time.perf_counter() - self.start - compiling
+
+    def seconds_left(self) -> float | None:
+        """Seconds before the limit (None without one); a :class:`_RenderTimeUp` once it has passed."""
+        if self.time_limit is None:
+            return None
+        left = self.time_limit - self.seconds_spent()
+        if left <= 0.0:
+            raise _RenderTimeUp
+        return left
+
+
 class GuardedTechnique:
     """A technique whose every call is checked: see the module docstring."""
+
+    #: the clock of the render that calls the technique (set by ``render_lab`` for a render), or None: a call is
+    #: stopped at the earlier of the render's time limit and the technique's own ``time_limit``
+    clock: RenderClock | None = None
 
     def __init__(self, technique, label: str, *, time_limit: float = DEFAULT_TIME_LIMIT):
         self.user = technique
@@ -254,19 +353,25 @@ class GuardedTechnique:
 
     def _call(self, method: str, check: str, args, first_input: np.ndarray, input_name: str):
         fn = getattr(self.technique, method)
+        render_ends_first = False
         try:
             if self._compiled_loops and method in ("sample", "pdf"):
                 self.technique.compile(method, *args)  # before the time limit: compiling is not the technique's time
-            with _time_limit(self.time_limit):
+            limit, left = self.time_limit, None if self.clock is None else self.clock.seconds_left()
+            if left is not None and not (limit and 0 < limit <= left):
+                limit, render_ends_first = left, True
+            with _time_limit(limit):
                 return fn(*args)
         except _TooLong:
+            if render_ends_first:  # the render's time is up, not the technique's: the render stops, no error
+                raise _RenderTimeUp from None
             raise TechniqueError(
                 f"{self.label}.{method}: took longer than {self.time_limit:g} s on a batch of {len(first_input)} "
                 f"(check: time limit; first sample {input_name} = {_row(first_input, 0)})"
             ) from None
-        except TechniqueError:
+        except (TechniqueError, _RenderTimeUp):
             raise
-        except Exception as exc:
+        except (Exception, SystemExit) as exc:  # a sys.exit() in the user's code must not end lightprobe
             line = _user_line(exc).lstrip(": ") or "no line"
             raise TechniqueError(
                 f"{self.label}.{method} raised {type(exc).__name__}: {exc} ({line}; "

@@ -30,7 +30,7 @@ import numpy as np
 
 from .._numba import jit, jit_alloc, jit_inline
 from ..color import srgb_to_linear
-from ..errors import ImageError, ParameterError
+from ..errors import ImageError, ParameterError, library_message, library_output_held
 
 __all__ = [
     "CLAMP",
@@ -149,19 +149,20 @@ def _decode(path: Path, label: str) -> np.ndarray:
     """An image file's pixels: uint8 for 8-bit files, float32 otherwise (16-bit: code / 65535)."""
     import OpenImageIO as oiio
 
-    inp = oiio.ImageInput.open(os.fspath(path))
-    if inp is None:
-        msg = oiio.geterror().strip().splitlines()
-        raise ImageError(f"{label}: cannot read image ({msg[-1] if msg else 'unknown format'})")
-    try:
-        stored = str(inp.spec().format)
-        eight_bit = stored in ("uint8", "int8")
-        pixels = inp.read_image(oiio.UINT8 if eight_bit else oiio.FLOAT)
-        err = inp.geterror()
-    finally:
-        inp.close()
-    if pixels is None or not isinstance(pixels, np.ndarray) or pixels.size == 0:
-        raise ImageError(f"{label}: cannot read image data ({(err or '').strip() or 'corrupt or truncated file'})")
+    with library_output_held() as succeeded:  # libpng's own 'libpng error' lines: the error below says it
+        inp = oiio.ImageInput.open(os.fspath(path))
+        if inp is None:
+            raise ImageError(f"{label}: cannot read image ({library_message(oiio.geterror(), 'unknown format')})")
+        try:
+            stored = str(inp.spec().format)
+            eight_bit = stored in ("uint8", "int8")
+            pixels = inp.read_image(oiio.UINT8 if eight_bit else oiio.FLOAT)
+            err = inp.geterror()
+        finally:
+            inp.close()
+        if pixels is None or not isinstance(pixels, np.ndarray) or pixels.size == 0:
+            raise ImageError(f"{label}: cannot read image data ({library_message(err, 'corrupt or truncated file')})")
+        succeeded.append(True)
     if not eight_bit and not np.all(np.isfinite(pixels)):
         raise ImageError(f"{label}: the image holds NaN or infinite values")
     return pixels

@@ -169,7 +169,7 @@ def _heuristic_step(module) -> Step:
             got = np.asarray(fn(n_f, p_f.copy(), n_g, p_g.copy()), dtype=np.float64)
         except NotImplementedError:
             return Step(5, name, False, "balance_heuristic is not written yet (it raises NotImplementedError)")
-        except Exception as exc:
+        except (Exception, SystemExit) as exc:  # a sys.exit() in the student's code must not end lightprobe
             return Step(5, name, False, f"balance_heuristic({n_f}, p_f, {n_g}, p_g) raised {type(exc).__name__}: {exc}")
         if got.shape != p_f.shape:
             return Step(5, name, False, f"balance_heuristic returned shape {got.shape}, expected {p_f.shape}")
