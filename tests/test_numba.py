@@ -88,7 +88,7 @@ def test_nested_inlined_helpers_compute_what_python_computes():
     np.testing.assert_array_equal(_outer(xs, 6), expected)
 
 
-# --- the cache: kernels stamped by their modules' import closure (decisions.md 102) ---------------------------------
+# --- the cache: kernels stamped by their modules' import closure (decisions.md 104) ---------------------------------
 def _package(root, files: dict[str, str]):
     package = root / "pkg"
     for name, text in files.items():

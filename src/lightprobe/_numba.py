@@ -5,7 +5,7 @@ recompiling.  Numba invalidates a cached function only when *its own* source fil
 calls (and inlines) changes in another file; a stale kernel would then silently run old code.  So a kernel of this
 package is stamped with a hash of its module and of every module of the package that it imports, transitively (the
 top-level imports: a jitted function can only call what its module imports): an edit recompiles the kernels whose
-modules reach the edited one, and no others (decisions.md 102; before, any edit started a fresh cache for all).
+modules reach the edited one, and no others (decisions.md 104; before, any edit started a fresh cache for all).
 The cache lives in ``$XDG_CACHE_HOME/lightprobe/numba/kernels`` (or ``~/.cache/...``); set ``NUMBA_CACHE_DIR`` to
 choose the location yourself.
 

@@ -87,7 +87,7 @@ def test_each_plan_has_its_own_group_of_stages():
 def test_a_group_compiles_its_own_stages_and_no_others(tmp_path):
     """In a fresh process with an empty kernel cache, running the accumulation stage compiles its body and its item
     count and no other stage's (the loop over every stage compiled all 22 bodies at a first render: decisions.md
-    102)."""
+    104)."""
     import json
     import os
     import subprocess

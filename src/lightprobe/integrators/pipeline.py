@@ -157,7 +157,7 @@ def run_stage(group, position, s, env, lights, sel, c, cams, slots, acc, counter
     :data:`GROUPS`): chunks of the stage's items claimed from ``counter`` until none is left.  ``group`` is a
     compile-time constant (``literally``): each group, a plan's stages, compiles one loop whose table is its own
     stages' bodies and item counts, unrolled (the table is the dispatch), so a render compiles the stages its plan
-    runs and no others (decisions.md 102)."""
+    runs and no others (decisions.md 104)."""
     literally(group)
     _run_group(group, position, s, env, lights, sel, c, cams, slots, acc, counter, worker)
 

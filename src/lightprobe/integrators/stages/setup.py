@@ -77,7 +77,7 @@ def camera_samples(c, cams, slots):
 def _textures_if(textured, s, cams, k, dx, dy, dz):
     """Camera sample k's textures (``textured_hits.apply_textures``) where its material has them, in the stage of a
     scene with textured materials (``textured`` a compile-time True); nothing, and no texture code compiled, in the
-    other's (decisions.md 102: the texture lookups were 7 of the demo's 70 s of compiling)."""
+    other's (decisions.md 104: the texture lookups were 7 of the demo's 70 s of compiling)."""
 
 
 @overload(_textures_if, prefer_literal=True)
