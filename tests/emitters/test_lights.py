@@ -144,3 +144,34 @@ def test_rays_that_escape_see_the_environment_and_the_suns_disc():
 def test_bad_directional_lights_are_one_clear_error(make, message):
     with pytest.raises(ParameterError, match=message):
         make()
+
+
+def test_the_sidecar_counts_every_kind_of_light_by_its_flags():
+    """A scene with two rectangle lights, a sphere light, an emissive mesh of three faces, two point lights, a spot
+    light, a directional light and a map: the render's statistics count 6 area lights (the rows rays can hit), 2
+    point, 1 spot and 1 directional light, the environment, 11 rows in all (point and spot lights were counted as
+    area lights by their codes' order)."""
+    from lightprobe.bsdfs import Lambert
+    from lightprobe.geometry.camera import Camera
+    from lightprobe.geometry.mesh import TriangleMesh
+    from lightprobe.geometry.scene import Scene
+    from lightprobe.geometry.shapes import Rectangle, Sphere
+    from lightprobe.integrators.wavefront import RenderSettings, render
+
+    image = sky_with_sun(32, 16, sun_elevation_deg=40.0, sun_azimuth_deg=30.0, sun_diameter_deg=5.0)
+    scene = Scene(Camera([0, 1, 4], [0, 0, 0], resolution=(8, 6)), EnvironmentMap.from_array(image))
+    scene.add(Rectangle([-4, 0, -4], [0, 0, 8], [8, 0, 0]), Lambert(0.5))
+    for x in (-1.0, 1.0):
+        scene.add(Rectangle([x, 2, -0.5], [0, 0, 0.4], [0.4, 0, 0]), emission=3.0)
+    scene.add(Sphere([0, 2, 0], 0.1), emission=5.0)
+    faces = np.array([[0, 1, 2], [0, 2, 3], [1, 4, 2]])
+    vertices = np.array([[0, 3, 0], [1, 3, 0], [1, 3, 1], [0, 3, 1], [2, 3, 0.5]], np.float64)
+    scene.add(TriangleMesh.from_arrays(vertices, faces), emission=2.0, two_sided=True)
+    scene.add_light(PointLight([0.5, 1.5, 0.5], 2.0))
+    scene.add_light(PointLight([-0.5, 1.5, 0.5], 2.0))
+    scene.add_light(SpotLight([0, 2.5, 1], [0, 0, 0], 4.0))
+    scene.add_light(DirectionalLight([0.3, 1.0, 0.2], 1.0))
+    stats = render(scene, RenderSettings(spp=1, seed=0)).stats
+    counts = {key: stats[key] for key in ("lights", "area_lights", "point_lights", "spot_lights", "directional_lights")}
+    assert counts == {"lights": 11, "area_lights": 6, "point_lights": 2, "spot_lights": 1, "directional_lights": 1}
+    assert stats["environment"] is True

@@ -35,6 +35,7 @@ __all__ = [
     "LightArrays",
     "LightSample",
     "concatenate",
+    "light_counts",
 ]
 
 # columns of a geometry row: the widest kind's, a parallelogram's (geometry.intersect.rectangle_rows)
@@ -95,6 +96,21 @@ class LightSample(NamedTuple):
     b: float
     pdf: float  # per steradian; 1 for a delta light; 0: no sample
     delta: bool  # no other technique produces this direction: MIS weight 1
+
+
+def light_counts(kinds: np.ndarray) -> dict:
+    """How many rows of a light table's ``kind`` column are of each kind, by the kinds' flags and names: ``lights``
+    (every row, the environment's included), ``area_lights`` (surfaces rays can hit), ``point_lights``,
+    ``spot_lights``, ``directional_lights``, and whether there is an ``environment``."""
+    by_code = {kind.code: kind for kind in KINDS.values()}
+    counts = {"lights": int(kinds.shape[0]), "area_lights": 0}
+    counts.update({f"{kind.name}_lights": 0 for kind in KINDS.values() if not kind.area and kind.name != "environment"})
+    for code, n in zip(*np.unique(kinds, return_counts=True), strict=True):
+        kind = by_code[int(code)]
+        key = "area_lights" if kind.area else f"{kind.name}_lights"
+        counts[key] = counts.get(key, 0) + int(n)
+    counts["environment"] = bool(counts.pop("environment_lights", 0))
+    return counts
 
 
 def concatenate(parts) -> LightArrays:

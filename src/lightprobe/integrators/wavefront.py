@@ -35,7 +35,7 @@ from ..bsdfs.lambert import LAMBERT
 from ..bsdfs.phong import PHONG
 from ..emitters.area import STRATEGIES as LIGHT_STRATEGIES
 from ..emitters.envmap import BILINEAR, placeholder_environment
-from ..emitters.kinds import LIGHT_DIRECTIONAL, LIGHT_ENVIRONMENT
+from ..emitters.kinds import light_counts
 from ..emitters.lights import is_delta, light_arrays
 from ..emitters.selection import build_selector
 from ..errors import LightprobeWarning, ParameterError
@@ -351,10 +351,7 @@ def render(
         "mis_compensation": work.compensated,
         # pixels where the outline control variate knows an emitter's share (integrators/outlines.py)
         "outline_pixels": int(np.count_nonzero(np.diff(work.constants.outline_start))),
-        "area_lights": int(np.count_nonzero(kinds < LIGHT_DIRECTIONAL)),
-        "lights": int(kinds.shape[0]),
-        "directional_lights": int(np.count_nonzero(kinds == LIGHT_DIRECTIONAL)),
-        "environment": bool(np.any(kinds == LIGHT_ENVIRONMENT)),
+        **light_counts(kinds),
         "stages": list(plan.stages()),
         "threads": threads,
         "spp_per_pass": spp_pass,
