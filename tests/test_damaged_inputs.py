@@ -181,7 +181,7 @@ def test_a_damaged_input_is_one_line_and_loses_nothing(damaged, capfd, monkeypat
 
 
 #: commands that read no file of the user's (their inputs are numbers and names)
-READ_NO_FILES = {"experiment lecture-area-sampling", "experiment lecture-many-lights"}
+READ_NO_FILES = {"doctor", "experiment lecture-area-sampling", "experiment lecture-many-lights"}
 
 
 def test_every_command_that_reads_a_file_has_a_case():
