@@ -1,5 +1,5 @@
-"""The README's promise for bad input, checked command by command: every command of `lightprobe --help` given a
-damaged file (a reference checkpoint cut short, overwritten or empty; a technique file that raises, exits, ends the
+"""The user guide's promise for bad input, checked command by command: every command of `lightprobe --help` given
+a damaged file (a reference checkpoint cut short, overwritten or empty; a technique file that raises, exits, ends the
 process or does not parse; a glTF file whose indices name nothing; a corrupt PNG as a texture or a map; a scene file
 with a bad key; an exercise folder that is a file) exits with status 2 and one line, `lightprobe: error: ...`,
 naming the file or the key; no traceback and no library's own error line anywhere; and no file of the user's
