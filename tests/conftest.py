@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import warnings
 
 import numpy as np
@@ -11,6 +12,9 @@ from lightprobe.data import data_dir
 from lightprobe.errors import LightprobeWarning
 
 DATA = data_dir()
+
+# the suite's workers are one per core already: no compile helpers beside their renders (integrators/precompile.py)
+os.environ["LIGHTPROBE_COMPILE_HELPERS"] = "0"
 
 requires_data = pytest.mark.skipif(DATA is None, reason="../shared/data is absent (set LIGHTPROBE_DATA)")
 

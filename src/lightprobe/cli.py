@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import os
 import sys
 import time
 import warnings
@@ -333,7 +334,6 @@ def render_command(
 def doctor_command() -> None:
     """What this machine gives lightprobe: versions, cores, the vector kernels, and the compiled-kernel cache (where
     it is, its size, and whether the demo's kernels are ready or its first render will compile them)."""
-    import os
     import platform
 
     import numba
@@ -1146,6 +1146,8 @@ def _format_warning(message, category, filename, lineno, line=None) -> str:
 def main(argv: list[str] | None = None) -> int:
     """Entry point: runs the Typer app, turning user errors into one line and exit status 2."""
     warnings.formatwarning = _format_warning
+    # a first render compiles some of its stages in a helper process per spare core (integrators/precompile.py)
+    os.environ.setdefault("LIGHTPROBE_COMPILE_HELPERS", "auto")
     try:
         # outside standalone mode Typer turns Ctrl-C into a returned 130 (and typer.Exit into its code) instead of
         # raising: a Ctrl-C while a scene loads came back as a silent success before this was read

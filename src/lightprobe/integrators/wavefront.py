@@ -46,7 +46,7 @@ from ..geometry.shape_bvh import SHAPES_FOR_BVH
 from ..geometry.shapes import Rectangle, Sphere
 from ..sampling.rng import SAMPLERS
 from ..simd import LANES
-from . import adaptive, outlines, pipeline
+from . import adaptive, outlines, pipeline, precompile
 from .accumulation import Accumulator, RenderResult, result_from
 from .pass_state import PassConstants, camera_buffers, slot_buffers, views
 from .schedule import pass_pixels
@@ -284,12 +284,16 @@ class _Pass:
             bsdf_hits=self.plan.emissive_surfaces,
         )
 
-    def run(self, acc: Accumulator, pixels: np.ndarray, spp_now: int, sample_start: int) -> int:
-        """One pass over ``pixels`` x ``spp_now`` samples into ``acc``; returns the number of shadow rays traced."""
+    def records(self, acc: Accumulator, pixels: np.ndarray, spp_now: int, sample_start: int) -> tuple:
+        """The stages' records for a pass over ``pixels`` x ``spp_now`` samples into ``acc``."""
         n = pixels.size * spp_now
         cams, slots = views(self.cams, n), views(self.slots, n * self.m)
         c = self.constants._replace(pixels=pixels, spp_pass=spp_now, sample_start=sample_start)
-        records = (self.scene, self.env, self.lights, self.sel, c, cams, slots, acc.arrays())
+        return self.scene, self.env, self.lights, self.sel, c, cams, slots, acc.arrays()
+
+    def run(self, acc: Accumulator, pixels: np.ndarray, spp_now: int, sample_start: int) -> int:
+        """One pass over ``pixels`` x ``spp_now`` samples into ``acc``; returns the number of shadow rays traced."""
+        records = self.records(acc, pixels, spp_now, sample_start)
         for stage, name in zip(self.stages, self.names, strict=True):
             if PROFILE is None:
                 self.launcher.run(stage, records)
@@ -297,7 +301,7 @@ class _Pass:
             start = time.perf_counter()
             self.launcher.run(stage, records)
             PROFILE[name] = PROFILE.get(name, 0.0) + time.perf_counter() - start
-        return int(np.count_nonzero(slots.flags))
+        return int(np.count_nonzero(records[6].flags))  # the slots'
 
 
 def render(
@@ -322,6 +326,16 @@ def render(
     t_setup = time.perf_counter()
     settings = _resolved_and_checked(scene, settings, resumed=resume is not None)
     _warn_of_unreached_delta_lights(scene, settings)
+    helpers = []  # processes compiling some of the stages of a first render of this kind (precompile.py)
+    try:
+        return _render_resolved(scene, settings, helpers, progress, tracer, resume, threads, t_setup)
+    finally:
+        precompile.stop(helpers)
+
+
+def _render_resolved(scene, settings, helpers, progress, tracer, resume, threads, t_setup) -> RenderResult:
+    """:func:`render` once its settings are resolved; ``helpers`` (empty): where it puts the processes it starts to
+    compile some of its stages, which it stops once its own warm-up has compiled (or loaded) them all."""
     arrays = scene.compile()
     own_tracer = tracer is None
     tracer = tracer or RayTracer(arrays, threads=threads)
@@ -446,8 +460,11 @@ def render(
             # made under the Ctrl-C handler: populating their pages can take a second or more per GB on this VM,
             # and a Ctrl-C meanwhile waits for the first pass like any other
             work.make_buffers()
+            if not _group_cached(plan):
+                helpers += precompile.start(plan.stages(), work.records(Accumulator(n_pixels), pass_pixels(0, 1), 1, 0))
             # warm up every stage on one pixel (loads cached machine code) before the clock starts
             work.run(Accumulator(n_pixels), pass_pixels(0, 1), 1, 0)
+            precompile.stop(helpers)
             if settings.adaptive:
                 adaptive.warm_up()
             if PROFILE is not None:
@@ -485,13 +502,17 @@ def kernels_cached(scene: Scene | None = None, settings: RenderSettings | None =
     """Whether the stage loop of a render of ``scene`` with ``settings`` (the demo's, by default) is in the on-disk
     cache; else that render compiles it first.  Each plan compiles its own loop and the stages it runs
     (:func:`pipeline.run_stage`); the pass records have the same types whatever they hold (``pass_state.py``)."""
-    from .._numba import cached_signatures
-
     if scene is None:
         from ..demo import demo_scene
 
         scene = demo_scene((8, 5))
-    plan = plan_for(scene, settings or RenderSettings())
+    return _group_cached(plan_for(scene, settings or RenderSettings()))
+
+
+def _group_cached(plan: pipeline.Plan) -> bool:
+    """Whether the stage loop of ``plan``'s group is in the on-disk cache."""
+    from .._numba import cached_signatures
+
     group = numba.types.literal(pipeline.group_id(tuple(pipeline.stage_id(name) for name in plan.stages())))
     return any(signature[0] == group for signature in cached_signatures(pipeline.run_stage))
 

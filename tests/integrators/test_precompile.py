@@ -1,0 +1,60 @@
+"""Stages compiled in a helper process (integrators/precompile.py): what a helper saves is what the render loads."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+from lightprobe.integrators import precompile
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_a_helper_compiles_the_stage_the_render_then_loads(tmp_path):
+    """In a fresh process with an empty kernel cache: a helper compiles the accumulation stage for the signature the
+    render sends it, and the render's own compile of that stage then loads it from the cache (a cache hit, no miss):
+    the types a helper is sent are the render's."""
+    script = """
+import json
+import numpy as np
+from lightprobe.integrators import pipeline, precompile
+from lightprobe.integrators.accumulation import Accumulator
+from lightprobe.integrators.schedule import pass_pixels
+from lightprobe.integrators.wavefront import RenderSettings, _Pass, _resolved_and_checked, plan_for
+from lightprobe.geometry.raytracer import RayTracer
+from lightprobe.demo import demo_scene
+scene = demo_scene((8, 5))
+settings = _resolved_and_checked(scene, RenderSettings(spp=1, adaptive=False), resumed=False)
+arrays = scene.compile()
+work = _Pass(scene, settings, plan_for(scene, settings), arrays, RayTracer(arrays), 40, 1)
+work.make_buffers()
+records = work.records(Accumulator(40), pass_pixels(0, 1), 1, 0)
+helpers = precompile.start(("accumulate",), records)
+codes = [helper.wait(timeout=600) for helper in helpers]
+body = pipeline.STAGES[pipeline.stage_id("accumulate")].body
+body.compile(precompile.record_signature(records))
+print(json.dumps({"helpers": len(helpers), "codes": codes, "hits": sum(body._cache_hits.values()),
+                  "misses": sum(body._cache_misses.values())}))
+"""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path), precompile.ENVIRONMENT: "1"}
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True, cwd=ROOT, env=env)
+    found = json.loads(out.stdout.strip().splitlines()[-1])
+    assert found == {"helpers": 1, "codes": [0], "hits": 1, "misses": 0}
+
+
+def test_how_many_helpers(monkeypatch):
+    """Unset or 0: none (the Python API's default); a number, at most one per stage; auto: one per spare core, at
+    most one per two stages; anything else: none."""
+    monkeypatch.delenv(precompile.ENVIRONMENT, raising=False)
+    assert precompile.helpers_wanted(9) == 0
+    for given, stages, wanted in (("0", 9, 0), ("3", 9, 3), ("3", 2, 2), ("many", 9, 0)):
+        monkeypatch.setenv(precompile.ENVIRONMENT, given)
+        assert precompile.helpers_wanted(stages) == wanted
+    monkeypatch.setenv(precompile.ENVIRONMENT, "auto")
+    monkeypatch.setattr(os, "cpu_count", lambda: 8)
+    assert precompile.helpers_wanted(9) == 4 and precompile.helpers_wanted(20) == 7
+    monkeypatch.setattr(os, "cpu_count", lambda: 1)
+    assert precompile.helpers_wanted(9) == 0
