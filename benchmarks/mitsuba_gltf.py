@@ -157,7 +157,8 @@ def register(mi, dr) -> None:
     class GltfMetallicRoughness(mi.BSDF):
         def __init__(self, props):
             mi.BSDF.__init__(self, props)
-            self.factor = props.get("base_color_factor")
+            factor = props.get("base_color_factor")  # an RGB given as {"type": "rgb"} arrives as a colour
+            self.factor = mi.Color3f(factor[0], factor[1], factor[2])
             self.base = props.get("base_color") if props.has_property("base_color") else None
             self.mr = props.get("metallic_roughness") if props.has_property("metallic_roughness") else None
             self.metallic_factor = props.get("metallic_factor", 1.0)
@@ -169,7 +170,7 @@ def register(mi, dr) -> None:
 
         def _params(self, si, active):
             """(base colour, metallic, alpha) at the hit."""
-            base = self.factor.eval(si, active)
+            base = mi.Color3f(self.factor)
             if self.base is not None:
                 base = base * self.base.eval(si, active)
             metallic = mi.Float(self.metallic_factor)
