@@ -17,9 +17,10 @@ References: Mitsuba's ``direct`` integrator (:data:`REFERENCE`: ``multijitter``,
 power-weighted emitters on the many-light scenes; 4 + 4 on the peer scene, as its kit's reference), in independent
 passes of 64 spp, kept as running sums (so a reference can be extended) in ``--cache`` (default
 ``~/.cache/lightprobe-suite``), outside the repository.  The rule: the reference's relMSE floor,
-mean(var_ref / (ref^2 + 0.01)) with var_ref the variance of its mean, must be at most a tenth of the smallest error
-it judges, lightprobe's at the highest spp of the run.  Before a reference is made, lightprobe renders a pilot image
-at that spp (one seed), and passes are added until the floor is below 0.07 x the pilot's relMSE against the
+mean(var_ref / (ref^2 + 0.01)) with var_ref the variance of its mean (never below the emitters' outline variance
+L^2 a (1 - a) / spp, :func:`outline_variance`), must be at most a tenth of the smallest error it judges,
+lightprobe's at the highest spp of the run.  Before a reference is made, lightprobe renders a pilot image at that
+spp (one seed), and passes are added until the floor is below 0.07 x the pilot's relMSE against the
 reference so far (or ``--reference-minutes`` run out; a later run with more minutes adds passes).  The table prints
 the floor and the ratio floor / lightprobe's measured error; a scene whose ratio is above 0.1 is reported as refused,
 with no ratio.
@@ -87,13 +88,41 @@ def reference_file(cache: Path, scene: str, resolution) -> Path:
     return cache / f"{scene}_{w}x{h}_{sampler}_{n}+{n}{'_power' if power else ''}.npz"
 
 
+def outline_variance(scene) -> np.ndarray:
+    """(H, W, 3) a lower bound on one camera sample's variance from the emitters seen directly: where an emitter of
+    radiance L covers a share a of a pixel, a sample meets it with probability a, so its variance is at least
+    L^2 a (1 - a).  A reference's own estimate misses it where none of its samples met a sliver of a bright light
+    (the glossy scene's 5,000-radiance sphere covering 0.2 % of a pixel: 0 hits in 1,024 spp, a mean of 0.01 where
+    the truth is 9.9), and lightprobe's outline control variate knows the exact L a there: the reference's noise,
+    not lightprobe's, would then be most of lightprobe's measured error (decision 99).  From lightprobe's outline
+    table (integrators/outlines.py: the exact coverage of each pixel by each emitter), as
+    tests/integrators/test_references.py does."""
+    from lightprobe.integrators import outlines
+
+    w, h = scene.camera.resolution
+    floor = np.zeros((w * h, 3))
+    lights = scene.light_table()
+    if lights.kind.size == 0:
+        return floor.reshape(h, w, 3)
+    table = outlines.table(scene.camera, lights)
+    if table.start.size == 0:
+        return floor.reshape(h, w, 3)
+    pixels = np.repeat(np.arange(w * h), np.diff(table.start))
+    radiance = table.radiance[table.shape]
+    np.add.at(floor, pixels, radiance**2 * (table.cover * (1.0 - table.cover))[:, None])
+    return floor.reshape(h, w, 3)
+
+
 def load_reference(path: Path) -> dict:
-    """mean (H, W, 3), variance of the mean, spp, passes, seconds, floor of a reference's running sums."""
+    """mean (H, W, 3), variance of the mean (never below the emitters' outline variance / spp), spp, passes,
+    seconds and floor of a reference's running sums."""
     with np.load(path) as f:
         total, total2, passes = f["total"], f["total2"], int(f["passes"])
         seconds, pass_spp = float(f["seconds"]), int(f["pass_spp"])
+        outline = f["outline"] if "outline" in f else 0.0
     mean = total / passes
     variance = np.maximum(total2 / passes - mean**2, 0.0) * passes / (passes - 1) / passes
+    variance = np.maximum(variance, outline / (passes * pass_spp))
     floor = float(np.mean(variance / (mean**2 + 0.01)))
     return {"mean": mean, "variance": variance, "spp": passes * pass_spp, "passes": passes, "seconds": seconds,
             "floor": floor}  # fmt: skip
@@ -300,6 +329,7 @@ def mitsuba_reference(args) -> None:
         d["sensor"]["sampler"] = {"type": sampler, "sample_count": PASS_SPP}
         scene = mi.load_dict(d)
         load = time.perf_counter() - start
+        outline = outline_variance(_lightprobe_build(args))
         if out.exists():
             with np.load(out) as f:
                 total, total2, passes, seconds = f["total"], f["total2"], int(f["passes"]), float(f["seconds"])
@@ -312,17 +342,18 @@ def mitsuba_reference(args) -> None:
             if passes >= 16 and passes % 8 == 0:
                 mean = total / passes
                 var = np.maximum(total2 / passes - mean**2, 0.0) / (passes - 1)
+                var = np.maximum(var, outline / (passes * PASS_SPP))
                 floor = float(np.mean(var / (mean**2 + 0.01)))
                 error = relmse(pilot, mean) if pilot is not None else 0.0
                 elapsed = time.perf_counter() - start
                 np.savez(out, total=total, total2=total2, passes=passes, pass_spp=PASS_SPP,
-                         seconds=seconds + elapsed)  # fmt: skip
+                         seconds=seconds + elapsed, outline=outline)  # fmt: skip
                 if floor <= REFERENCE_MARGIN * error or elapsed > 60 * args.reference_minutes:
                     break
             x = np.array(mi.render(scene, spp=PASS_SPP, seed=1_000_003 * (passes + 1)), dtype=np.float64)
             total, total2, passes = total + x, total2 + x * x, passes + 1
         seconds += time.perf_counter() - start
-        np.savez(out, total=total, total2=total2, passes=passes, pass_spp=PASS_SPP, seconds=seconds)
+        np.savez(out, total=total, total2=total2, passes=passes, pass_spp=PASS_SPP, seconds=seconds, outline=outline)
     print(json.dumps({"reference": args.scene, "spp": passes * PASS_SPP, "seconds": round(seconds, 1),
                       "floor": floor, "pilot_relmse": error, "load_s": round(load, 2),
                       "config": f"{sampler} {n}+{n}{' power' if power else ''}"}), flush=True)  # fmt: skip
@@ -444,6 +475,8 @@ def main() -> int:
     parser.add_argument("--write-docs", action="store_true", help="write the table into docs/performance.md")
     parser.add_argument("--quick", action="store_true", help="16 spp, one seed, references of at most a minute")
     parser.add_argument("--json", help="also write every row to this file")
+    parser.add_argument("--table-from", metavar="LOG",
+                        help="no renders: the table (and --write-docs) from a run's printed output")  # fmt: skip
     parser.add_argument("--worker", choices=["mitsuba", "reference", "lightprobe", "pilot", "occlusion"],
                         help=argparse.SUPPRESS)  # fmt: skip
     parser.add_argument("--scene", help=argparse.SUPPRESS)
@@ -458,6 +491,8 @@ def main() -> int:
          "pilot": lightprobe_pilot, "occlusion": occlusion}[args.worker](args)  # fmt: skip
         return 0
 
+    if args.table_from:
+        return _table_from(args)
     cache = Path(args.cache)
     cache.mkdir(parents=True, exist_ok=True)
     os.environ["LIGHTPROBE_SUITE_CACHE"] = str(cache)  # the workers' (the peer kit's assets)
@@ -491,6 +526,40 @@ def main() -> int:
             print(f"{scene}: failed: {exc}", flush=True)
             notes[scene] = "failed (see the run's output)"
         references.setdefault(scene, {})["run_minutes"] = (time.perf_counter() - scene_start) / 60
+    minutes = (time.perf_counter() - started) / 60
+    _report(args, header, rows, references, notes, minutes)
+    return 0
+
+
+def _table_from(args) -> int:
+    """The table of an earlier run from its printed output (one JSON object per line; a run cut short gives the
+    rows it finished)."""
+    rows, references, notes, header = [], {}, {}, None
+    for line in Path(args.table_from).read_text().splitlines():
+        if line.endswith(": skipped") or ": skipped: " in line or ": failed: " in line:
+            scene, _, note = line.partition(": ")
+            notes[scene] = note
+        if not line.startswith("{"):
+            continue
+        item = json.loads(line)
+        if "cores" in item:
+            header = item
+        elif "renderer" in item:
+            rows.append(item)
+        elif "reference" in item:
+            references.setdefault(item["reference"], {}).update(item)
+        elif "occlusion" in item and item.get("unoccluded") is not None:
+            references.setdefault(item["occlusion"], {})["unoccluded"] = item["unoccluded"]
+    if header is None:
+        raise SystemExit(f"{args.table_from}: no run header")
+    args.resolution, args.seeds, args.spp = header["resolution"], header["seeds"], header["spp"]
+    args.lightprobe_option = [f"{k}={json.dumps(v)}" for k, v in header["lightprobe_options"].items()]
+    _report(args, header, rows, references, notes, None)
+    return 0
+
+
+def _report(args, header: dict, rows: list[dict], references: dict, notes: dict, minutes: float | None) -> None:
+    """Print the tables (and write them into docs/performance.md with ``--write-docs``)."""
     summary = summarise(rows, references)
     pixels = args.resolution[0] * args.resolution[1]
     text = table(summary, pixels)
@@ -499,9 +568,10 @@ def main() -> int:
     print(peer_table(summary))
     print()
     for scene, ref in references.items():
-        print(f"{scene}: " + json.dumps({k: v for k, v in ref.items() if k != "total"}))
-    minutes = (time.perf_counter() - started) / 60
-    print(f"suite: {len(args.scenes)} scenes in {minutes:.1f} minutes")
+        print(f"{scene}: " + json.dumps(ref))
+    took = "" if minutes is None else f"; the run took {minutes:.0f} minutes"
+    if minutes is not None:
+        print(f"suite: {len(references)} scenes in {minutes:.1f} minutes")
     if args.json:
         Path(args.json).write_text(json.dumps({"header": header, "rows": rows, "references": references,
                                                "notes": notes}, indent=1))  # fmt: skip
@@ -511,11 +581,11 @@ def main() -> int:
             f"Measured {datetime.date.today().isoformat()} on {os.cpu_count()} cores (a shared machine: timings are "
             f"indicative), commit {commit.stdout.strip() or 'unknown'}, {args.resolution[0]} x {args.resolution[1]}, "
             f"{args.seeds} seed(s), spp {', '.join(map(str, args.spp))}; lightprobe options: "
-            f"{header['lightprobe_options'] or 'defaults'}; the run took {minutes:.0f} minutes.",
+            f"{header['lightprobe_options'] or 'defaults'}{took}.",
             "",
             text,
             "",
-            "References (Mitsuba ``direct``; floor = mean(var_ref / (ref^2 + 0.01))):",
+            "References (Mitsuba `direct`; floor = mean(var_ref / (ref^2 + 0.01))):",
             "",
             "| scene | reference | spp | seconds | floor | Mitsuba load s | unoccluded light power |",
             "|---|---|---|---|---|---|---|",
@@ -529,7 +599,6 @@ def main() -> int:
         lines += ["", "Efficiency of every configuration:", "", peer_table(summary)]
         write_docs("\n".join(lines))
         print("wrote docs/performance.md", flush=True)
-    return 0
 
 
 if __name__ == "__main__":
