@@ -96,7 +96,11 @@ def outline_variance(scene) -> np.ndarray:
     the truth is 9.9), and lightprobe's outline control variate knows the exact L a there: the reference's noise,
     not lightprobe's, would then be most of lightprobe's measured error (decision 99).  From lightprobe's outline
     table (integrators/outlines.py: the exact coverage of each pixel by each emitter), as
-    tests/integrators/test_references.py does."""
+    tests/integrators/test_references.py does; an emitter counts in a pixel only if its nearest point is nearer
+    than what the ray through the pixel's centre meets (the table ignores occlusion: a light behind a wall would
+    count in every pixel of the wall)."""
+    from lightprobe.emitters.kinds import LIGHT_RECT, LIGHT_SPHERE, LIGHT_TRIANGLE
+    from lightprobe.geometry.raytracer import RayTracer
     from lightprobe.integrators import outlines
 
     w, h = scene.camera.resolution
@@ -105,11 +109,37 @@ def outline_variance(scene) -> np.ndarray:
     if lights.kind.size == 0:
         return floor.reshape(h, w, 3)
     table = outlines.table(scene.camera, lights)
-    if table.start.size == 0:
+    if table.start.size == 0 or table.shape.size == 0:
         return floor.reshape(h, w, 3)
-    pixels = np.repeat(np.arange(w * h), np.diff(table.start))
+    # each light's centre and the radius of a ball around it that holds it
+    g = lights.geom
+    centre, radius = np.zeros((g.shape[0], 3)), np.zeros(g.shape[0])
+    rect, sphere, tri = lights.kind == LIGHT_RECT, lights.kind == LIGHT_SPHERE, lights.kind == LIGHT_TRIANGLE
+    centre[rect] = g[rect, 0:3] + (g[rect, 3:6] + g[rect, 6:9]) / 2
+    radius[rect] = (
+        np.linalg.norm(g[rect, 3:6] + g[rect, 6:9], axis=1) / 2
+        + np.linalg.norm(g[rect, 3:6] - g[rect, 6:9], axis=1) / 2
+    )
+    centre[sphere], radius[sphere] = g[sphere, 0:3], g[sphere, 3]
+    corners = g[tri, 0:9].reshape(-1, 3, 3)
+    centre[tri] = corners.mean(axis=1)
+    radius[tri] = np.linalg.norm(corners - centre[tri][:, None, :], axis=2).max(axis=1)
+    pixels_all = np.arange(w * h)
+    origins, dirs = scene.camera.rays(pixels_all, np.full((pixels_all.size, 2), 0.5))
+    tracer = RayTracer(scene.compile())
+    try:
+        t, *_ = tracer.intersect(origins, dirs)
+    finally:
+        tracer.close()
+    pixels = np.repeat(pixels_all, np.diff(table.start))
+    # the table names its shapes by their outline geometry: find each one's row of the light table
+    found = outlines._shapes(outlines._Film(scene.camera), lights)
+    row_of = {r.tobytes(): int(found.light[i]) for i, r in enumerate(found.rows)}
+    light = np.array([row_of[r.tobytes()] for r in table.geom], np.int64)[table.shape]
+    nearest = np.linalg.norm(centre[light] - origins[pixels], axis=1) - radius[light]
+    seen = nearest <= t[pixels] * (1.0 + 1e-6) + 1e-6
     radiance = table.radiance[table.shape]
-    np.add.at(floor, pixels, radiance**2 * (table.cover * (1.0 - table.cover))[:, None])
+    np.add.at(floor, pixels[seen], (radiance**2 * (table.cover * (1.0 - table.cover))[:, None])[seen])
     return floor.reshape(h, w, 3)
 
 

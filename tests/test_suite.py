@@ -158,3 +158,18 @@ def test_write_docs_replaces_the_text_between_the_markers(tmp_path):
         "light_sampler": "power",
         "spp": 4,
     }
+
+
+def test_outline_variance_is_zero_off_and_inside_an_emitter_and_at_most_a_quarter_l2_on_its_edge():
+    """The reference's variance floor at emitters' outlines: L^2 a (1 - a) per camera sample, a the share of the
+    pixel the emitter covers; 0 where it covers all or none of a pixel."""
+    suite = _suite_module()
+    camera = Camera([0.0, 0.0, 5.0], [0.0, 0.0, 0.0], fov=20.0, fov_axis="x", resolution=(16, 12))
+    scene = Scene(camera)
+    # a square light facing the camera (+Z), covering part of the view
+    scene.add(Rectangle([-0.33, -0.27, 0.0], [0.61, 0.0, 0.0], [0.0, 0.5, 0.0]), emission=3.0, name="light")
+    floor = suite.outline_variance(scene)
+    assert floor.shape == (12, 16, 3)
+    assert np.all(floor >= 0.0) and np.all(floor <= 9.0 / 4 + 1e-9)
+    assert floor[0, 0, 0] == 0.0 and floor[6, 8, 0] == 0.0  # a corner sees nothing; the centre is inside the light
+    assert (floor > 0.0).sum() >= 3 * 10  # the outline crosses pixels all around the light
