@@ -76,16 +76,99 @@ def _power(o: dict) -> float:
     return float(np.pi * area * luminance(np.asarray(o["emission"], np.float64)))
 
 
-def scene_dict(mi, desc: dict, env_file: str | None, spp: int, folder: str, *, power_weights: bool = False) -> dict:
+def _ply(mi, folder: str, name: str, vertices, faces, normals=None, uvs=None) -> str:
+    """A triangle mesh written as a PLY file in ``folder`` (Mitsuba's mesh emitters and BSDFs are attached when a
+    shape is loaded, so meshes go through files)."""
+    vertices, faces = np.asarray(vertices, np.float32), np.asarray(faces, np.uint32)
+    mesh = mi.Mesh(
+        name,
+        vertices.shape[0],
+        faces.shape[0],
+        has_vertex_normals=normals is not None,
+        has_vertex_texcoords=uvs is not None,
+    )
+    params = mi.traverse(mesh)
+    params["vertex_positions"] = mi.Float(vertices.ravel())
+    params["faces"] = mi.UInt32(faces.ravel())
+    if normals is not None:
+        params["vertex_normals"] = mi.Float(np.asarray(normals, np.float32).ravel())
+    if uvs is not None:
+        params["vertex_texcoords"] = mi.Float(np.asarray(uvs, np.float32).ravel())
+    params.update()
+    ply = str(Path(folder) / f"{name}.ply")
+    mesh.write_ply(ply)
+    return ply
+
+
+def _quads(origins, edges_u, edges_v) -> tuple[np.ndarray, np.ndarray]:
+    """(vertices, faces) of rectangles as two triangles each, wound so that the normal is edge_u x edge_v."""
+    o, u, v = (np.asarray(x, np.float64) for x in (origins, edges_u, edges_v))
+    vertices = np.stack([o, o + u, o + u + v, o + v], axis=1).reshape(-1, 3)
+    base = 4 * np.arange(o.shape[0])[:, None]
+    return vertices, (base + np.array([0, 1, 2, 0, 2, 3])).reshape(-1, 3)
+
+
+def _window_groups(mi, batch: dict, folder: str, index: int, power_weights: bool) -> dict:
+    """A ``rectangles`` batch (the city's windows) as one mesh per radiance level, each with an ``area`` emitter:
+    100,000 shape dicts would take Mitsuba minutes to load.  With ``power_weights`` each mesh's sampling weight is
+    its power (Mitsuba then samples a point on it by area, which within one level is by power)."""
+    from lightprobe.color import luminance
+
+    shapes = {}
+    areas = np.linalg.norm(np.cross(batch["edges_u"], batch["edges_v"]), axis=1)
+    for k, radiance in enumerate(batch["levels"]):
+        mine = batch["level"] == k
+        if not mine.any():
+            continue
+        vertices, faces = _quads(batch["origins"][mine], batch["edges_u"][mine], batch["edges_v"][mine])
+        ply = _ply(mi, folder, f"windows{index}_{k}", vertices, faces)
+        shape = {"type": "ply", "filename": ply, "bsdf": _black(), "face_normals": True}
+        shape["emitter"] = {"type": "area", "radiance": _rgb(radiance)}
+        if power_weights:
+            shape["emitter"]["sampling_weight"] = float(np.pi * areas[mine].sum() * luminance(np.asarray(radiance)))
+        shapes[f"object{index}_level{k}"] = shape
+    return shapes
+
+
+def _gltf_shapes(mi, path: str, folder: str, index: int) -> dict:
+    """The primitives of a GLB file as PLY meshes with the glTF metallic-roughness BSDF (mitsuba_gltf.py, which
+    must have been registered: ``mitsuba_gltf.register``)."""
+    import mitsuba_gltf
+
+    primitives, doc, blob = mitsuba_gltf.glb_primitives(path)
+    shapes = {}
+    for j, prim in enumerate(primitives):
+        name = f"gltf{index}_{j}"
+        ply = _ply(mi, folder, name, prim["vertices"], prim["faces"], prim["normals"], prim["uvs"])
+        bsdf = mitsuba_gltf.material_dict(doc, blob, prim["material"], Path(folder))
+        shapes[f"object{index}_{j}"] = {"type": "ply", "filename": ply, "bsdf": bsdf,
+                                        "face_normals": prim["normals"] is None}  # fmt: skip
+    return shapes
+
+
+def scene_dict(
+    mi,
+    desc: dict,
+    env_file: str | None,
+    spp: int,
+    folder: str,
+    *,
+    power_weights: bool = False,
+    resolution: tuple[int, int] | None = None,
+) -> dict:
     """Mitsuba's scene dictionary for a description of lightprobe.reference_scenes (meshes written to ``folder``).
     ``power_weights``: each area emitter's ``sampling_weight`` is its power, pi A L (of the luminance), so that
     ``direct`` picks emitters in proportion to power, as lightprobe's ``power`` selector does (Mitsuba picks them
-    uniformly by default)."""
+    uniformly by default).  ``env_file``: the environment image written as a file (an environment given by a
+    ``file`` in the description is read from there); ``resolution``: default the test references' 64 x 48.
+    A surface with ``two_sided`` gets Mitsuba's ``twosided`` BSDF (non-emitters only: a shape blocks rays from
+    both sides either way); a ``rectangles`` batch becomes one emitting mesh per radiance level; a ``gltf`` object
+    its primitives with the glTF metallic-roughness BSDF of mitsuba_gltf.py."""
     from lightprobe.reference_scenes import RESOLUTION
 
     transform = mi.ScalarTransform4f
     cam = desc["camera"]
-    width, height = RESOLUTION
+    width, height = resolution or RESOLUTION
     d = {
         "type": "scene",
         "integrator": {"type": "direct", "emitter_samples": 1, "bsdf_samples": 1},
@@ -105,10 +188,21 @@ def scene_dict(mi, desc: dict, env_file: str | None, spp: int, folder: str, *, p
             },
         },
     }
-    if env_file is not None:
+    env = desc["environment"]
+    if env is not None and "file" in env:
+        d["environment"] = {"type": "envmap", "filename": env["file"]}
+    elif env_file is not None:
         d["environment"] = {"type": "envmap", "filename": env_file}
     for i, o in enumerate(desc["objects"]):
+        if o["shape"] == "rectangles":
+            d |= _window_groups(mi, o, folder, i, power_weights)
+            continue
+        if o["shape"] == "gltf":
+            d |= _gltf_shapes(mi, o["file"], folder, i)
+            continue
         bsdf = _bsdf(desc["materials"][o["material"]]) if "material" in o else _black()
+        if o.get("two_sided"):
+            bsdf = {"type": "twosided", "bsdf": bsdf}
         if o["shape"] == "rectangle":
             origin, u, v = (np.asarray(o[k], dtype=np.float64) for k in ("origin", "edge_u", "edge_v"))
             n = np.cross(u, v)
@@ -125,23 +219,7 @@ def scene_dict(mi, desc: dict, env_file: str | None, spp: int, folder: str, *, p
                 "bsdf": bsdf,
             }
         else:
-            # a triangle mesh goes through a PLY file (Mitsuba's mesh emitters are attached when a shape is loaded)
-            vertices, faces = np.asarray(o["vertices"], np.float32), np.asarray(o["faces"], np.uint32)
-            mesh = mi.Mesh(
-                f"mesh{i}",
-                vertices.shape[0],
-                faces.shape[0],
-                has_vertex_normals="normals" in o,
-                has_vertex_texcoords=False,
-            )
-            params = mi.traverse(mesh)
-            params["vertex_positions"] = mi.Float(vertices.ravel())
-            params["faces"] = mi.UInt32(faces.ravel())
-            if "normals" in o:
-                params["vertex_normals"] = mi.Float(np.asarray(o["normals"], np.float32).ravel())
-            params.update()
-            ply = str(Path(folder) / f"mesh{i}.ply")
-            mesh.write_ply(ply)
+            ply = _ply(mi, folder, f"mesh{i}", o["vertices"], o["faces"], o.get("normals"))
             shape = {"type": "ply", "filename": ply, "bsdf": bsdf, "face_normals": "normals" not in o}
         if "emission" in o:
             shape["emitter"] = {"type": "area", "radiance": _rgb(o["emission"])}

@@ -1,0 +1,635 @@
+#!/usr/bin/env python3
+"""Benchmark suite: lightprobe's defaults against Mitsuba 3's configurations on nine varied scenes (issue 57).
+
+    pip install -e '.[peers]'                      # Mitsuba 3.9.1 (Debian: apt-get install libllvm19)
+    python benchmarks/suite.py                     # every scene of reference_scenes.SUITE at 16, 64 and 256 spp
+    python benchmarks/suite.py --scenes building window --spp 16 64 --seeds 2
+    python benchmarks/suite.py --lightprobe-option outline_control_variate=false   # judge a setting on the suite
+    python benchmarks/suite.py --quick             # a cheap smoke run: 16 spp, one seed, small references
+    python benchmarks/suite.py --write-docs        # and write the table into docs/performance.md
+
+Scenes: :data:`lightprobe.reference_scenes.SUITE`, each described once (``reference_scenes.describe``) and built by
+lightprobe (``reference_scenes.build``) and by Mitsuba (``mitsuba_references.scene_dict``; the peer scene by the peer
+kit's own ``render.py``), 320 x 240.  A scene that cannot be built here (``gltf`` without ``../shared/data``) is
+skipped with one line saying why.
+
+References: Mitsuba's ``direct`` integrator (:data:`REFERENCE`: ``multijitter``, 1 + 1 emitter + BSDF samples, with
+power-weighted emitters on the many-light scenes; 4 + 4 on the peer scene, as its kit's reference), in independent
+passes of 64 spp, kept as running sums (so a reference can be extended) in ``--cache`` (default
+``~/.cache/lightprobe-suite``), outside the repository.  The rule: the reference's relMSE floor,
+mean(var_ref / (ref^2 + 0.01)) with var_ref the variance of its mean (never below the emitters' outline variance
+L^2 a (1 - a) / spp, :func:`outline_variance`), must be at most a tenth of the smallest error it judges,
+lightprobe's at the highest spp of the run.  Before a reference is made, lightprobe renders a pilot image at that
+spp (one seed), and passes are added until the floor is below 0.07 x the pilot's relMSE against the
+reference so far (or ``--reference-minutes`` run out; a later run with more minutes adds passes).  The table prints
+the floor and the ratio floor / lightprobe's measured error; a scene whose ratio is above 0.1 is reported as refused,
+with no ratio.
+
+Runs: per scene and spp, Mitsuba renders every sampler (independent, stratified, multijitter, ldsampler) at 1 + 1
+and 4 + 4 (``direct``'s ``emitter_samples`` / ``bsdf_samples``; on many-light scenes also with each emitter's
+``sampling_weight`` = its power, "power"), lightprobe its defaults (with ``--lightprobe-option`` settings), in
+alternating subprocesses (Mitsuba, lightprobe, Mitsuba, ... as lights_vs_mitsuba.py does), ``--seeds`` images each:
+relMSE is the mean over the seeds, seconds the median of each renderer's own render time (kernels compiled first:
+Mitsuba renders once with another seed, lightprobe renders the scene once at 4 spp).  Efficiency = 1 / (relMSE x
+seconds); the ratio is lightprobe's over the best peer configuration's; time per camera sample = seconds /
+(pixels x spp).  Pooled z (lightprobe's seeds averaged against the reference): per pixel and channel
+z = (lp - ref) / sqrt(var_lp + var_ref), var_lp never below the reference's per-sample variance at lightprobe's
+count (a rare bright event none of lightprobe's samples met leaves its own estimate too low; as
+tests/integrators/test_references.py; plus (2e-4 ref)^2 for float32 round-off and 1e-4^2 absolute, a thousandth of
+the relMSE's scale), pooled as sum(lp - ref) / sqrt(sum(var)) over the image (per channel: the largest |z|) and
+over 8 x 8-pixel blocks (the largest |z| and the share of blocks beyond |z| = 4, about 6e-5 for an unbiased image).
+Then the minimum and the geometric mean of the ratios.  Benchmarks print figures; they never assert speed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import math
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+MITSUBA_SAMPLERS = ("independent", "stratified", "multijitter", "ldsampler")
+MANY_LIGHTS = ("ceiling", "dome", "building", "city")  # Mitsuba also with power-weighted emitters
+PASS_SPP = 64  # a reference pass (Mitsuba's llvm variant keeps one wavefront of pixels x spp lanes in memory)
+# scene -> (sampler, emitter + BSDF samples each, power-weighted emitters) of its reference
+REFERENCE = {
+    "peer": ("multijitter", 4, False),
+    **{name: ("multijitter", 1, name in MANY_LIGHTS) for name in
+       ("area", "ceiling", "dome", "window", "building", "gltf", "glossy", "city")},
+}  # fmt: skip
+FLOOR_RULE = 0.1  # the reference's floor at most this share of the smallest error it judges
+REFERENCE_MARGIN = 0.07  # a reference grows until its floor is this share of the pilot's error (one seed's)
+BLOCK = 8
+ABSOLUTE = 1e-4  # the pooled z's absolute tolerance per pixel and channel
+DOCS_BEGIN, DOCS_END = "<!-- suite:begin -->", "<!-- suite:end -->"
+
+
+# ----------------------------------------------------------------------------------------------- shared helpers
+
+
+def relmse(image, ref) -> float:
+    """mean over pixels and channels of (x - ref)^2 / (ref^2 + 0.01): the project's metric."""
+    x, r = np.asarray(image, np.float64), np.asarray(ref, np.float64)
+    return float(np.mean((x - r) ** 2 / (r**2 + 0.01)))
+
+
+def reference_file(cache: Path, scene: str, resolution) -> Path:
+    w, h = resolution
+    sampler, n, power = REFERENCE[scene]
+    return cache / f"{scene}_{w}x{h}_{sampler}_{n}+{n}{'_power' if power else ''}.npz"
+
+
+def outline_variance(scene) -> np.ndarray:
+    """(H, W, 3) a lower bound on one camera sample's variance from the emitters seen directly: where an emitter of
+    radiance L covers a share a of a pixel, a sample meets it with probability a, so its variance is at least
+    L^2 a (1 - a).  A reference's own estimate misses it where none of its samples met a sliver of a bright light
+    (the glossy scene's 5,000-radiance sphere covering 0.2 % of a pixel: 0 hits in 1,024 spp, a mean of 0.01 where
+    the truth is 9.9), and lightprobe's outline control variate knows the exact L a there: the reference's noise,
+    not lightprobe's, would then be most of lightprobe's measured error (decision 99).  From lightprobe's outline
+    table (integrators/outlines.py: the exact coverage of each pixel by each emitter), as
+    tests/integrators/test_references.py does; an emitter counts in a pixel only if its nearest point is nearer
+    than what the ray through the pixel's centre meets (the table ignores occlusion: a light behind a wall would
+    count in every pixel of the wall)."""
+    from lightprobe.emitters.kinds import LIGHT_RECT, LIGHT_SPHERE, LIGHT_TRIANGLE
+    from lightprobe.geometry.raytracer import RayTracer
+    from lightprobe.integrators import outlines
+
+    w, h = scene.camera.resolution
+    floor = np.zeros((w * h, 3))
+    lights = scene.light_table()
+    if lights.kind.size == 0:
+        return floor.reshape(h, w, 3)
+    table = outlines.table(scene.camera, lights)
+    if table.start.size == 0 or table.shape.size == 0:
+        return floor.reshape(h, w, 3)
+    # each light's centre and the radius of a ball around it that holds it
+    g = lights.geom
+    centre, radius = np.zeros((g.shape[0], 3)), np.zeros(g.shape[0])
+    rect, sphere, tri = lights.kind == LIGHT_RECT, lights.kind == LIGHT_SPHERE, lights.kind == LIGHT_TRIANGLE
+    centre[rect] = g[rect, 0:3] + (g[rect, 3:6] + g[rect, 6:9]) / 2
+    radius[rect] = (
+        np.linalg.norm(g[rect, 3:6] + g[rect, 6:9], axis=1) / 2
+        + np.linalg.norm(g[rect, 3:6] - g[rect, 6:9], axis=1) / 2
+    )
+    centre[sphere], radius[sphere] = g[sphere, 0:3], g[sphere, 3]
+    corners = g[tri, 0:9].reshape(-1, 3, 3)
+    centre[tri] = corners.mean(axis=1)
+    radius[tri] = np.linalg.norm(corners - centre[tri][:, None, :], axis=2).max(axis=1)
+    pixels_all = np.arange(w * h)
+    origins, dirs = scene.camera.rays(pixels_all, np.full((pixels_all.size, 2), 0.5))
+    tracer = RayTracer(scene.compile())
+    try:
+        t, *_ = tracer.intersect(origins, dirs)
+    finally:
+        tracer.close()
+    pixels = np.repeat(pixels_all, np.diff(table.start))
+    # the table names its shapes by their outline geometry: find each one's row of the light table
+    found = outlines._shapes(outlines._Film(scene.camera), lights)
+    row_of = {r.tobytes(): int(found.light[i]) for i, r in enumerate(found.rows)}
+    light = np.array([row_of[r.tobytes()] for r in table.geom], np.int64)[table.shape]
+    nearest = np.linalg.norm(centre[light] - origins[pixels], axis=1) - radius[light]
+    seen = nearest <= t[pixels] * (1.0 + 1e-6) + 1e-6
+    radiance = table.radiance[table.shape]
+    np.add.at(floor, pixels[seen], (radiance**2 * (table.cover * (1.0 - table.cover))[:, None])[seen])
+    return floor.reshape(h, w, 3)
+
+
+def load_reference(path: Path) -> dict:
+    """mean (H, W, 3), variance of the mean (never below the emitters' outline variance / spp), spp, passes,
+    seconds and floor of a reference's running sums."""
+    with np.load(path) as f:
+        total, total2, passes = f["total"], f["total2"], int(f["passes"])
+        seconds, pass_spp = float(f["seconds"]), int(f["pass_spp"])
+        outline = f["outline"] if "outline" in f else 0.0
+    mean = total / passes
+    variance = np.maximum(total2 / passes - mean**2, 0.0) * passes / (passes - 1) / passes
+    variance = np.maximum(variance, outline / (passes * pass_spp))
+    floor = float(np.mean(variance / (mean**2 + 0.01)))
+    return {"mean": mean, "variance": variance, "spp": passes * pass_spp, "passes": passes, "seconds": seconds,
+            "floor": floor}  # fmt: skip
+
+
+def pooled_z(images: list[np.ndarray], variances: list[np.ndarray], spp: int, ref: dict) -> dict:
+    """The pooled z of lightprobe's seeds (averaged) against the reference: the image's (largest |z| of the three
+    channels), and over 8 x 8 blocks the largest |z| and the share beyond 4.  See the module docstring."""
+    k = len(images)
+    mean = np.mean(images, axis=0).astype(np.float64)
+    var = np.sum(variances, axis=0).astype(np.float64) / k**2
+    var_ref = ref["variance"]
+    var = np.maximum(var, var_ref * ref["spp"] / (spp * k))  # never below the reference's per-sample variance
+    # 2e-4 relative: float32 round-off where neither image has noise (a constant sky seen directly); 1e-4 absolute,
+    # a thousandth of the relMSE's scale (0.1): in pixels darker than that (a sky's sliver in a shadow) a rare event
+    # none of lightprobe's samples met leaves both variance estimates far too small, and a block of them a false z
+    diff = mean - ref["mean"]
+    total = var + var_ref + (2e-4 * ref["mean"]) ** 2 + ABSOLUTE**2
+    image_z = diff.sum(axis=(0, 1)) / np.sqrt(total.sum(axis=(0, 1)))
+    h, w = diff.shape[:2]
+    hb, wb = h // BLOCK, w // BLOCK
+    d = diff[: hb * BLOCK, : wb * BLOCK].reshape(hb, BLOCK, wb, BLOCK, 3).sum(axis=(1, 3, 4))
+    v = total[: hb * BLOCK, : wb * BLOCK].reshape(hb, BLOCK, wb, BLOCK, 3).sum(axis=(1, 3, 4))
+    block_z = d / np.sqrt(v)
+    return {
+        "z_image": float(image_z[np.argmax(np.abs(image_z))]),
+        "z_blocks_max": float(np.abs(block_z).max()),
+        "z_blocks_over4": float(np.mean(np.abs(block_z) > 4.0)),
+    }
+
+
+def parse_options(pairs: list[str]) -> dict:
+    """``KEY=VALUE`` settings of lightprobe's RenderSettings, the values read as JSON (true, 2, 0.5, "power") or
+    else as strings."""
+    options = {}
+    for pair in pairs or []:
+        key, sep, value = pair.partition("=")
+        if not sep:
+            raise SystemExit(f"--lightprobe-option {pair!r}: expected KEY=VALUE")
+        try:
+            options[key.strip()] = json.loads(value)
+        except json.JSONDecodeError:
+            options[key.strip()] = value
+    return options
+
+
+# ---------------------------------------------------------------------------------------------- the table code
+
+
+def summarise(rows: list[dict], references: dict) -> list[dict]:
+    """Per (scene, spp): lightprobe's row, the best peer configuration, the ratio of efficiencies, and the floor
+    rule (``refused`` when the reference's floor exceeds a tenth of lightprobe's error)."""
+    out = []
+    keys = sorted({(r["scene"], r["spp"]) for r in rows}, key=lambda k: (k[0], k[1]))
+    for scene, spp in keys:
+        mine = [r for r in rows if r["scene"] == scene and r["spp"] == spp]
+        ours = next((r for r in mine if r["renderer"] == "lightprobe"), None)
+        peers = [r for r in mine if r["renderer"] == "mitsuba"]
+        if ours is None or not peers:
+            continue
+        best = max(peers, key=lambda r: r["efficiency"])
+        floor = references.get(scene, {}).get("floor")
+        floor_ratio = floor / ours["relmse"] if floor is not None and ours["relmse"] > 0 else None
+        refused = floor_ratio is not None and floor_ratio > FLOOR_RULE
+        out.append({
+            "scene": scene, "spp": spp, "lightprobe": ours, "best": best, "peers": peers,
+            "ratio": None if refused else ours["efficiency"] / best["efficiency"],
+            "floor": floor, "floor_ratio": floor_ratio, "refused": refused,
+        })  # fmt: skip
+    return out
+
+
+def ratio_stats(ratios) -> tuple[float | None, float | None]:
+    """(minimum, geometric mean) of the ratios that are numbers; (None, None) without any."""
+    values = [r for r in ratios if r is not None and r > 0 and math.isfinite(r)]
+    if not values:
+        return None, None
+    return min(values), math.exp(sum(math.log(r) for r in values) / len(values))
+
+
+def _f(x, fmt: str) -> str:
+    return "-" if x is None else format(x, fmt)
+
+
+def table(summary: list[dict], pixels: int) -> str:
+    """The suite's table (Markdown)."""
+    lines = [
+        "| scene | spp | lightprobe s | relMSE | efficiency | best Mitsuba configuration | s | relMSE | efficiency "
+        "| ratio | ns per camera sample, lp / Mitsuba | M samples/s, lp / Mitsuba | pooled z (image; blocks max, "
+        "share > 4) | reference floor (/ lp error) |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for s in summary:
+        lp, best = s["lightprobe"], s["best"]
+        n = pixels * s["spp"]
+        z = (f"{lp['z_image']:+.1f}; {lp['z_blocks_max']:.1f}, {lp['z_blocks_over4']:.3f}"
+             if "z_image" in lp else "-")  # fmt: skip
+        ratio = "refused (floor)" if s["refused"] else f"**{s['ratio']:.2f}x**"
+        lines.append(
+            f"| {s['scene']} | {s['spp']} | {lp['seconds']:.2f} | {lp['relmse']:.3g} | {lp['efficiency']:.3g} | "
+            f"{best['config']} | {best['seconds']:.2f} | {best['relmse']:.3g} | {best['efficiency']:.3g} | {ratio} | "
+            f"{1e9 * lp['seconds'] / n:.0f} / {1e9 * best['seconds'] / n:.0f} | "
+            f"{n / lp['seconds'] / 1e6:.2f} / {n / best['seconds'] / 1e6:.2f} | {z} | "
+            f"{_f(s['floor'], '.2g')} ({_f(s['floor_ratio'], '.3f')}) |"
+        )
+    lo, geo = ratio_stats([s["ratio"] for s in summary])
+    lines.append("")
+    lines.append(f"Ratio of efficiencies, lightprobe / best Mitsuba configuration: minimum {_f(lo, '.2f')}x, "
+                 f"geometric mean {_f(geo, '.2f')}x over {sum(s['ratio'] is not None for s in summary)} "
+                 "scene x spp rows.")  # fmt: skip
+    return "\n".join(lines)
+
+
+def peer_table(summary: list[dict]) -> str:
+    """Every configuration's efficiency per (scene, spp), Mitsuba's and lightprobe's (Markdown)."""
+    configs = sorted({r["config"] for s in summary for r in s["peers"]}, key=lambda c: (c.count("power"), c))
+    lines = ["| scene | spp | lightprobe | " + " | ".join(configs) + " |", "|---" * (3 + len(configs)) + "|"]
+    for s in summary:
+        eff = {r["config"]: r["efficiency"] for r in s["peers"]}
+        cells = [_f(eff.get(c), ".3g") for c in configs]
+        lines.append(f"| {s['scene']} | {s['spp']} | {s['lightprobe']['efficiency']:.3g} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def write_docs(text: str, path: Path = ROOT / "docs" / "performance.md") -> None:
+    """Put ``text`` between the suite's markers in docs/performance.md (replacing what was there)."""
+    doc = path.read_text()
+    if DOCS_BEGIN not in doc or DOCS_END not in doc:
+        raise SystemExit(f"{path}: no {DOCS_BEGIN} / {DOCS_END} markers")
+    head, rest = doc.split(DOCS_BEGIN, 1)
+    _, tail = rest.split(DOCS_END, 1)
+    path.write_text(f"{head}{DOCS_BEGIN}\n{text}\n{DOCS_END}{tail}")
+
+
+# ----------------------------------------------------------------------------------------------------- workers
+
+
+def _mitsuba():
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    import mitsuba_references as mr
+
+    mr._prefer_llvm19()
+    import drjit as dr
+    import mitsuba as mi
+
+    mi.set_variant("llvm_ad_rgb")
+    import mitsuba_gltf
+
+    mitsuba_gltf.register(mi, dr)
+    return mi, mr
+
+
+def _mitsuba_scene(mi, mr, scene: str, resolution, tmp: str, *, power: bool, spp: int) -> dict:
+    """Mitsuba's scene dict of a suite scene (integrator and sampler set by the caller)."""
+    if scene == "peer":
+        from lightprobe.peer import find_peers
+
+        kit = find_peers()
+        sys.path.insert(0, str(kit / "mitsuba"))
+        import render as kit_render
+
+        assets = Path(os.environ["LIGHTPROBE_SUITE_CACHE"]) / "peer_assets"
+        if not (assets / "env.exr").exists():  # the kit's deterministic assets, made once into the cache
+            subprocess.run([sys.executable, str(kit / "mitsuba" / "scene_assets.py"), str(assets)], check=True,
+                           capture_output=True)  # fmt: skip
+        spec = kit_render.load_spec()
+        d = kit_render.scene_dict(mi, spec, str(assets), "direct_mis", resolution[0], spp)
+        d["sensor"]["film"]["width"], d["sensor"]["film"]["height"] = resolution
+        return d
+    import lightprobe.reference_scenes as rs
+    from lightprobe.io.images import write_image
+
+    desc = rs.describe(scene)
+    env_file = None
+    image = rs.environment_image(desc)
+    if image is not None:
+        env_file = str(Path(tmp) / "env.exr")
+        write_image(env_file, image)
+    return mr.scene_dict(mi, desc, env_file, spp, tmp, power_weights=power, resolution=tuple(resolution))
+
+
+def _sensor(mi, d: dict, sampler: str, spp: int):
+    sensor = dict(d["sensor"])
+    sensor["sampler"] = {"type": sampler, "sample_count": spp}
+    return mi.load_dict(sensor)
+
+
+def _integrator(mi, n: int):
+    return mi.load_dict({"type": "direct", "emitter_samples": n, "bsdf_samples": n})
+
+
+def mitsuba_reference(args) -> None:
+    """Add passes to the scene's reference until its floor is at most :data:`REFERENCE_MARGIN` x the relMSE of
+    lightprobe's pilot image against it (``--pilot``; at least 16 passes), or ``--reference-minutes`` have passed;
+    print one JSON line."""
+    mi, mr = _mitsuba()
+    out = reference_file(Path(args.cache), args.scene, args.resolution)
+    pilot = np.load(args.pilot) if args.pilot else None
+    sampler, n, power = REFERENCE[args.scene]
+    with tempfile.TemporaryDirectory() as tmp:
+        start = time.perf_counter()
+        d = _mitsuba_scene(mi, mr, args.scene, args.resolution, tmp, power=power, spp=PASS_SPP)
+        d["integrator"] = {"type": "direct", "emitter_samples": n, "bsdf_samples": n}
+        d["sensor"]["sampler"] = {"type": sampler, "sample_count": PASS_SPP}
+        scene = mi.load_dict(d)
+        load = time.perf_counter() - start
+        outline = outline_variance(_lightprobe_build(args))
+        if out.exists():
+            with np.load(out) as f:
+                total, total2, passes, seconds = f["total"], f["total2"], int(f["passes"]), float(f["seconds"])
+        else:
+            total = total2 = 0.0
+            passes, seconds = 0, 0.0
+        start = time.perf_counter()
+        floor = error = math.inf
+        while True:
+            if passes >= 16 and passes % 8 == 0:
+                mean = total / passes
+                var = np.maximum(total2 / passes - mean**2, 0.0) / (passes - 1)
+                var = np.maximum(var, outline / (passes * PASS_SPP))
+                floor = float(np.mean(var / (mean**2 + 0.01)))
+                error = relmse(pilot, mean) if pilot is not None else 0.0
+                elapsed = time.perf_counter() - start
+                np.savez(out, total=total, total2=total2, passes=passes, pass_spp=PASS_SPP,
+                         seconds=seconds + elapsed, outline=outline)  # fmt: skip
+                if floor <= REFERENCE_MARGIN * error or elapsed > 60 * args.reference_minutes:
+                    break
+            x = np.array(mi.render(scene, spp=PASS_SPP, seed=1_000_003 * (passes + 1)), dtype=np.float64)
+            total, total2, passes = total + x, total2 + x * x, passes + 1
+        seconds += time.perf_counter() - start
+        np.savez(out, total=total, total2=total2, passes=passes, pass_spp=PASS_SPP, seconds=seconds, outline=outline)
+    print(json.dumps({"reference": args.scene, "spp": passes * PASS_SPP, "seconds": round(seconds, 1),
+                      "floor": floor, "pilot_relmse": error, "load_s": round(load, 2),
+                      "config": f"{sampler} {n}+{n}{' power' if power else ''}"}), flush=True)  # fmt: skip
+
+
+def mitsuba_runs(args) -> None:
+    """Every Mitsuba configuration at ``--spp``, ``--seeds`` images each: one JSON line per configuration."""
+    mi, mr = _mitsuba()
+    ref = load_reference(reference_file(Path(args.cache), args.scene, args.resolution))
+    weightings = (False, True) if args.scene in MANY_LIGHTS else (False,)
+    with tempfile.TemporaryDirectory() as tmp:
+        for power in weightings:
+            start = time.perf_counter()
+            d = _mitsuba_scene(mi, mr, args.scene, args.resolution, tmp, power=power, spp=args.spp)
+            scene = mi.load_dict(d)
+            load = time.perf_counter() - start
+            for sampler in MITSUBA_SAMPLERS:
+                sensor = _sensor(mi, d, sampler, args.spp)
+                for n in (1, 4):
+                    integrator = _integrator(mi, n)
+                    mi.render(scene, sensor=sensor, integrator=integrator, spp=args.spp, seed=10_000)  # compile
+                    errors, seconds = [], []
+                    for s in range(args.seeds):
+                        begin = time.perf_counter()
+                        image = mi.render(scene, sensor=sensor, integrator=integrator, spp=args.spp, seed=s + 1)
+                        x = np.array(image, dtype=np.float64)
+                        seconds.append(time.perf_counter() - begin)
+                        errors.append(relmse(x, ref["mean"]))
+                    e, t = float(np.mean(errors)), float(np.median(seconds))
+                    config = f"{sampler} {n}+{n}" + (" power" if power else "")
+                    print(json.dumps({"renderer": "mitsuba", "scene": args.scene, "spp": args.spp, "config": config,
+                                      "relmse": e, "seconds": t, "efficiency": 1.0 / (e * t),
+                                      "load_s": round(load, 2)}), flush=True)  # fmt: skip
+
+
+def _lightprobe_build(args):
+    sys.path.insert(0, str(ROOT / "src"))
+    from lightprobe.reference_scenes import build
+
+    return build(args.scene, resolution=tuple(args.resolution))
+
+
+def lightprobe_pilot(args) -> None:
+    """lightprobe's defaults at ``--spp`` once (seed 999), its image saved for the reference's rule."""
+    from lightprobe.integrators.wavefront import RenderSettings, render
+
+    scene = _lightprobe_build(args)
+    r = render(scene, RenderSettings(spp=args.spp, seed=999, **parse_options(args.lightprobe_option)))
+    np.save(args.pilot, r.image.astype(np.float64))
+    print(json.dumps({"pilot": args.scene, "spp": args.spp, "seconds": r.stats["seconds"]}), flush=True)
+
+
+def lightprobe_runs(args) -> None:
+    """lightprobe's defaults (and ``--lightprobe-option``) at ``--spp``, ``--seeds`` images: one JSON line."""
+    from lightprobe.integrators.wavefront import RenderSettings, render
+
+    options = parse_options(args.lightprobe_option)
+    ref = load_reference(reference_file(Path(args.cache), args.scene, args.resolution))
+    scene = _lightprobe_build(args)
+    render(scene, RenderSettings(spp=4, seed=10_000, **options))  # compile
+    errors, seconds, images, variances = [], [], [], []
+    for s in range(args.seeds):
+        r = render(_lightprobe_build(args), RenderSettings(spp=args.spp, seed=s + 20, **options))
+        images.append(r.image.astype(np.float64))
+        variances.append(r.variance.astype(np.float64))
+        errors.append(relmse(images[-1], ref["mean"]))
+        seconds.append(r.stats["seconds"])
+    e, t = float(np.mean(errors)), float(np.median(seconds))
+    row = {"renderer": "lightprobe", "scene": args.scene, "spp": args.spp, "config": "defaults", "relmse": e,
+           "seconds": t, "efficiency": 1.0 / (e * t), "options": options}  # fmt: skip
+    row |= pooled_z(images, variances, args.spp, ref)
+    print(json.dumps(row), flush=True)
+
+
+def occlusion(args) -> None:
+    """The unoccluded share of the light power from the camera's visible points (scenes with < 5,000 lights)."""
+    from lightprobe.reference_scenes import unoccluded_power_fraction
+
+    scene = _lightprobe_build(args)
+    if len(scene.emitters) == 0 or len(scene.emitters) > 5000:
+        print(json.dumps({"occlusion": args.scene, "unoccluded": None}), flush=True)
+        return
+    start = time.perf_counter()
+    share = unoccluded_power_fraction(scene)
+    print(json.dumps({"occlusion": args.scene, "unoccluded": share, "lights": len(scene.emitters),
+                      "seconds": round(time.perf_counter() - start, 1)}), flush=True)  # fmt: skip
+
+
+# -------------------------------------------------------------------------------------------------------- main
+
+
+def _run(args, worker: str, scene: str, *extra: str) -> list[dict]:
+    cmd = [sys.executable, __file__, "--worker", worker, "--scene", scene, "--seeds", str(args.seeds),
+           "--resolution", *map(str, args.resolution), "--cache", str(args.cache),
+           *[x for o in args.lightprobe_option for x in ("--lightprobe-option", o)], *extra]  # fmt: skip
+    out = subprocess.run(cmd, capture_output=True, text=True, env=os.environ.copy())
+    rows = [json.loads(line) for line in out.stdout.splitlines() if line.startswith("{")]
+    if out.returncode != 0:
+        raise RuntimeError(f"{worker} worker on {scene} failed:\n{out.stderr[-3000:]}")
+    for row in rows:
+        print(json.dumps(row), flush=True)
+    return rows
+
+
+def main() -> int:
+    sys.path.insert(0, str(ROOT / "src"))
+    from lightprobe.reference_scenes import SUITE, unavailable
+
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--scenes", nargs="*", default=list(SUITE), choices=SUITE)
+    parser.add_argument("--spp", type=int, nargs="*", default=[16, 64, 256])
+    parser.add_argument("--seeds", type=int, default=2, help="images per configuration and spp [2]")
+    parser.add_argument("--resolution", type=int, nargs=2, default=[320, 240])
+    parser.add_argument("--cache", default=str(Path.home() / ".cache" / "lightprobe-suite"))
+    parser.add_argument("--lightprobe-option", action="append", default=[], metavar="KEY=VALUE",
+                        help="a RenderSettings field for lightprobe's renders (repeatable)")  # fmt: skip
+    parser.add_argument("--reference-minutes", type=float, default=8.0,
+                        help="the most a reference may run in one call, per scene [8]")  # fmt: skip
+    parser.add_argument("--write-docs", action="store_true", help="write the table into docs/performance.md")
+    parser.add_argument("--quick", action="store_true", help="16 spp, one seed, references of at most a minute")
+    parser.add_argument("--json", help="also write every row to this file")
+    parser.add_argument("--table-from", metavar="LOG",
+                        help="no renders: the table (and --write-docs) from a run's printed output")  # fmt: skip
+    parser.add_argument("--worker", choices=["mitsuba", "reference", "lightprobe", "pilot", "occlusion"],
+                        help=argparse.SUPPRESS)  # fmt: skip
+    parser.add_argument("--scene", help=argparse.SUPPRESS)
+    parser.add_argument("--pilot", help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.quick:
+        args.spp, args.seeds, args.reference_minutes = [16], 1, 1.0
+    if args.worker:
+        os.environ.setdefault("LIGHTPROBE_SUITE_CACHE", args.cache)
+        args.spp = args.spp[0]
+        {"mitsuba": mitsuba_runs, "reference": mitsuba_reference, "lightprobe": lightprobe_runs,
+         "pilot": lightprobe_pilot, "occlusion": occlusion}[args.worker](args)  # fmt: skip
+        return 0
+
+    if args.table_from:
+        return _table_from(args)
+    cache = Path(args.cache)
+    cache.mkdir(parents=True, exist_ok=True)
+    os.environ["LIGHTPROBE_SUITE_CACHE"] = str(cache)  # the workers' (the peer kit's assets)
+    started = time.perf_counter()
+    header = {"cores": os.cpu_count(), "spp": args.spp, "seeds": args.seeds, "resolution": args.resolution,
+              "lightprobe_options": parse_options(args.lightprobe_option)}  # fmt: skip
+    print(json.dumps(header), flush=True)
+    rows, references, notes = [], {}, {}
+    for scene in args.scenes:
+        reason = unavailable(scene)
+        if reason is not None:
+            print(f"{scene}: skipped: {reason}", flush=True)
+            notes[scene] = f"skipped: {reason}"
+            continue
+        scene_start = time.perf_counter()
+        try:
+            top = str(max(args.spp))
+            pilot = str(cache / f"{scene}_pilot_{top}spp.npy")
+            _run(args, "pilot", scene, "--spp", top, "--pilot", pilot)
+            made = _run(args, "reference", scene, "--spp", top, "--pilot", pilot,
+                        "--reference-minutes", str(args.reference_minutes))[0]  # fmt: skip
+            references[scene] = {**load_reference(reference_file(cache, scene, args.resolution)), **made}
+            del references[scene]["mean"], references[scene]["variance"]
+            shown = _run(args, "occlusion", scene)[0]
+            if shown.get("unoccluded") is not None:
+                references[scene]["unoccluded"] = shown["unoccluded"]
+            for spp in args.spp:
+                rows += _run(args, "mitsuba", scene, "--spp", str(spp))
+                rows += _run(args, "lightprobe", scene, "--spp", str(spp))
+        except RuntimeError as exc:
+            print(f"{scene}: failed: {exc}", flush=True)
+            notes[scene] = "failed (see the run's output)"
+        references.setdefault(scene, {})["run_minutes"] = (time.perf_counter() - scene_start) / 60
+    minutes = (time.perf_counter() - started) / 60
+    _report(args, header, rows, references, notes, minutes)
+    return 0
+
+
+def _table_from(args) -> int:
+    """The table of an earlier run from its printed output (one JSON object per line; a run cut short gives the
+    rows it finished)."""
+    rows, references, notes, header = [], {}, {}, None
+    for line in Path(args.table_from).read_text().splitlines():
+        if line.endswith(": skipped") or ": skipped: " in line or ": failed: " in line:
+            scene, _, note = line.partition(": ")
+            notes[scene] = note
+        if not line.startswith("{"):
+            continue
+        item = json.loads(line)
+        if "cores" in item:
+            header = item
+        elif "renderer" in item:
+            rows.append(item)
+        elif "reference" in item:
+            references.setdefault(item["reference"], {}).update(item)
+        elif "occlusion" in item and item.get("unoccluded") is not None:
+            references.setdefault(item["occlusion"], {})["unoccluded"] = item["unoccluded"]
+    if header is None:
+        raise SystemExit(f"{args.table_from}: no run header")
+    args.resolution, args.seeds, args.spp = header["resolution"], header["seeds"], header["spp"]
+    args.lightprobe_option = [f"{k}={json.dumps(v)}" for k, v in header["lightprobe_options"].items()]
+    _report(args, header, rows, references, notes, None)
+    return 0
+
+
+def _report(args, header: dict, rows: list[dict], references: dict, notes: dict, minutes: float | None) -> None:
+    """Print the tables (and write them into docs/performance.md with ``--write-docs``)."""
+    summary = summarise(rows, references)
+    pixels = args.resolution[0] * args.resolution[1]
+    text = table(summary, pixels)
+    print(text)
+    print()
+    print(peer_table(summary))
+    print()
+    for scene, ref in references.items():
+        print(f"{scene}: " + json.dumps(ref))
+    took = "" if minutes is None else f"; the run took {minutes:.0f} minutes"
+    if minutes is not None:
+        print(f"suite: {len(references)} scenes in {minutes:.1f} minutes")
+    if args.json:
+        Path(args.json).write_text(json.dumps({"header": header, "rows": rows, "references": references,
+                                               "notes": notes}, indent=1))  # fmt: skip
+    if args.write_docs:
+        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=ROOT)
+        lines = [
+            f"Measured {datetime.date.today().isoformat()} on {os.cpu_count()} cores (a shared machine: timings are "
+            f"indicative), commit {commit.stdout.strip() or 'unknown'}, {args.resolution[0]} x {args.resolution[1]}, "
+            f"{args.seeds} seed(s), spp {', '.join(map(str, args.spp))}; lightprobe options: "
+            f"{header['lightprobe_options'] or 'defaults'}{took}.",
+            "",
+            text,
+            "",
+            "References (Mitsuba `direct`; floor = mean(var_ref / (ref^2 + 0.01))):",
+            "",
+            "| scene | reference | spp | seconds | floor | Mitsuba load s | unoccluded light power |",
+            "|---|---|---|---|---|---|---|",
+        ]
+        for scene, ref in references.items():
+            lines.append(f"| {scene} | {ref.get('config', '-')} | {ref.get('spp', '-')} | "
+                         f"{_f(ref.get('seconds'), '.0f')} | {_f(ref.get('floor'), '.2g')} | "
+                         f"{_f(ref.get('load_s'), '.2f')} | {_f(ref.get('unoccluded'), '.3f')} |")  # fmt: skip
+        for scene, note in notes.items():
+            lines.append(f"\n{scene}: {note}")
+        lines += ["", "Efficiency of every configuration:", "", peer_table(summary)]
+        write_docs("\n".join(lines))
+        print("wrote docs/performance.md", flush=True)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
