@@ -108,7 +108,7 @@ def outline_variance(scene) -> np.ndarray:
     lights = scene.light_table()
     if lights.kind.size == 0:
         return floor.reshape(h, w, 3)
-    table = outlines.table(scene.camera, lights)
+    table = outlines.table(scene.camera, lights, None)  # the geometry alone: occlusion is judged below
     if table.start.size == 0 or table.shape.size == 0:
         return floor.reshape(h, w, 3)
     # each light's centre and the radius of a ball around it that holds it

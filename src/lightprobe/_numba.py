@@ -143,10 +143,14 @@ def _install_cache_rules() -> bool:
     """The package's kernels stamped by their import closure (the module docstring); and Numba's index of a
     function's cached versions updated under a file lock, so that processes compiling into one cache at once
     (pytest-xdist's workers) cannot give two versions the same data file."""
-    import fcntl
     import threading
 
     from numba.core import caching
+
+    try:
+        import fcntl
+    except ImportError:  # not a POSIX system: no lock (one process compiling at a time is then the user's care)
+        fcntl = None
 
     impl = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl", None)
     if impl is None or not hasattr(caching, "UserProvidedCacheLocator") or not hasattr(caching, "IndexDataCacheFile"):
@@ -172,7 +176,7 @@ def _install_cache_rules() -> bool:
         impl._locator_classes.insert(0, PackageLocator)
 
     save = caching.IndexDataCacheFile.save
-    if getattr(save, "_lightprobe", False):
+    if fcntl is None or getattr(save, "_lightprobe", False):
         return True
 
     def locked_save(self, key, data):

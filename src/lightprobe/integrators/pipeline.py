@@ -9,13 +9,15 @@ is the only light, the light-sample stage samples it without a selector (8 sampl
 density allows), BSDF rays need only their lat-long coordinates and the radiance lookups get a stage of their own;
 with emissive surfaces a BSDF ray finds its nearest hit (analytic shapes, then Embree) to see what it meets.  The
 camera, BSDF and shadow rays meet the analytic shapes 8 at a time (vector IR) wherever the scene has no shape
-hierarchy.  :data:`STAGES` is the one registry: each stage's body, what it
-counts (camera samples, slots, blocks of 8), and the scalar twin of a vector stage.
+hierarchy (with one, the BSDF and shadow rays walk it in the scalar stages); the setup stage carries texture code
+only for scenes with textured materials.  :data:`STAGES` is the one registry: each stage's body, what it counts
+(camera samples, slots, blocks of 8), and the scalar twin of a vector stage.
 
 :func:`run_stage` is the loop over a stage's items, written once (pbrt-v4's ``ForAllQueued``): a worker claims chunks
 of the items from a shared counter (``_worksharing.py``) and calls the stage's body on each; :class:`Launcher` runs
-one worker per thread.  The loop and every body compile once, whatever the scene (about 95 s on the 2-core
-machine, then loaded from the cache: decisions.md 77).
+one worker per thread.  The loop is compiled per group of stages (:data:`GROUPS`: each plan's, and each stage
+alone), so a render compiles its plan's stages and no others; a body compiles once for every plan that runs it
+(decisions.md 77, 104).
 """
 
 from __future__ import annotations
