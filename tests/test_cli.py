@@ -436,7 +436,8 @@ def test_render_adds_point_and_spot_lights(tmp_path, capsys):
     assert main([*args, "--light", "point:0,1,0:4", "--light", "spot:1,2,0:0,0,0:5,5,4:25:20"]) == 0
     assert "1 point light + 1 spot light" in capsys.readouterr().err
     meta = json.loads((tmp_path / "lamp.pfm.json").read_text())
-    assert meta["area_lights"] == 2  # rows of the light table
+    # counted by kind: no surface light, one of each delta light
+    assert (meta["area_lights"], meta["point_lights"], meta["spot_lights"], meta["lights"]) == (0, 1, 1, 2)
     assert read_image(out).min() > 0  # the point light reaches every visible point of the ground
 
 
