@@ -528,7 +528,8 @@ def main() -> int:
     os.environ["LIGHTPROBE_SUITE_CACHE"] = str(cache)  # the workers' (the peer kit's assets)
     started = time.perf_counter()
     header = {"cores": os.cpu_count(), "spp": args.spp, "seeds": args.seeds, "resolution": args.resolution,
-              "lightprobe_options": parse_options(args.lightprobe_option)}  # fmt: skip
+              "lightprobe_options": parse_options(args.lightprobe_option), "commit": _commit(),
+              "date": datetime.date.today().isoformat()}  # fmt: skip
     print(json.dumps(header), flush=True)
     rows, references, notes = [], {}, {}
     for scene in args.scenes:
@@ -559,6 +560,16 @@ def main() -> int:
     minutes = (time.perf_counter() - started) / 60
     _report(args, header, rows, references, notes, minutes)
     return 0
+
+
+def _commit() -> str:
+    """The checkout's short commit, marked when files differ from it (what a table says it measured)."""
+    def git(*words):
+        return subprocess.run(["git", *words], capture_output=True, text=True, cwd=ROOT).stdout.strip()
+    head = git("rev-parse", "--short", "HEAD")
+    if not head:
+        return "unknown (not a git checkout)"
+    return head + (" with uncommitted changes" if git("status", "--porcelain", "--untracked-files=no") else "")
 
 
 def _table_from(args) -> int:
@@ -606,10 +617,12 @@ def _report(args, header: dict, rows: list[dict], references: dict, notes: dict,
         Path(args.json).write_text(json.dumps({"header": header, "rows": rows, "references": references,
                                                "notes": notes}, indent=1))  # fmt: skip
     if args.write_docs:
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=ROOT)
+        # the run's own commit and date (a table written later from its log says when it was measured, not now)
+        commit = header.get("commit") or "unknown (a log without one)"
+        day = header.get("date") or "on a date the log does not give"
         lines = [
-            f"Measured {datetime.date.today().isoformat()} on {os.cpu_count()} cores (a shared machine: timings are "
-            f"indicative), commit {commit.stdout.strip() or 'unknown'}, {args.resolution[0]} x {args.resolution[1]}, "
+            f"Measured {day} on {header['cores']} cores (a shared machine: timings are "
+            f"indicative), commit {commit}, {args.resolution[0]} x {args.resolution[1]}, "
             f"{args.seeds} seed(s), spp {', '.join(map(str, args.spp))}; lightprobe options: "
             f"{header['lightprobe_options'] or 'defaults'}{took}.",
             "",
