@@ -564,8 +564,10 @@ def main() -> int:
 
 def _commit() -> str:
     """The checkout's short commit, marked when files differ from it (what a table says it measured)."""
+
     def git(*words):
         return subprocess.run(["git", *words], capture_output=True, text=True, cwd=ROOT).stdout.strip()
+
     head = git("rev-parse", "--short", "HEAD")
     if not head:
         return "unknown (not a git checkout)"
