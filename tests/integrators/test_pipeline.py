@@ -4,8 +4,11 @@ picks each concern's stage once, in the estimator's order."""
 import itertools
 from dataclasses import fields
 
+import numpy as np
 import pytest
+from numba import types
 
+from lightprobe.errors import ParameterError
 from lightprobe.integrators import pipeline
 
 NAMES = [stage.name for stage in pipeline.STAGES]
@@ -123,3 +126,33 @@ def test_the_setup_stage_of_a_scene_without_textures_has_no_texture_code():
     with_textures = setup._textures_if_overload(types.literal(True), *args)
     assert "apply_textures" not in without.__code__.co_names
     assert "apply_textures" in with_textures.__code__.co_names
+
+
+@pytest.mark.parametrize("name", ["demo", "many"])
+def test_a_plans_loop_and_a_loop_per_stage_render_the_same_bits(name, monkeypatch):
+    """A render runs its plan's stages in one loop (the default, what a user's render does) or each stage in a loop
+    of its own (``LIGHTPROBE_STAGE_LOOPS=stage``, what the rest of the test suite does): the same bodies on the same
+    items, so the same image and variance, bit for bit; and the plan's loop is what a default render compiles."""
+    from lightprobe.demo import demo_scene
+    from lightprobe.integrators import wavefront
+    from lightprobe.reference_scenes import build
+
+    scene = demo_scene((16, 10)) if name == "demo" else build("many", resolution=(16, 10), lights=200)
+    settings = wavefront.RenderSettings(spp=4, threads=2)
+    results = {}
+    for loops in ("stage", "plan"):
+        monkeypatch.setenv(pipeline.LOOPS_ENVIRONMENT, loops)
+        results[loops] = wavefront.render(scene, settings)
+        assert wavefront.kernels_cached(scene, settings)  # this mode's loops, now compiled
+    plan = wavefront.plan_for(scene, settings)
+    group = types.literal(pipeline.group_id(tuple(pipeline.stage_id(n) for n in plan.stages())))
+    assert any(signature[0] == group for signature in pipeline.run_stage.overloads)  # the plan's loop ran
+    np.testing.assert_array_equal(results["plan"].image, results["stage"].image)
+    np.testing.assert_array_equal(results["plan"].variance, results["stage"].variance)
+    assert results["plan"].image.max() > 0
+
+
+def test_a_loop_mode_not_understood_is_refused_in_one_line(monkeypatch):
+    monkeypatch.setenv(pipeline.LOOPS_ENVIRONMENT, "stages")
+    with pytest.raises(ParameterError, match="LIGHTPROBE_STAGE_LOOPS='stages': expected 'plan' or 'stage'"):
+        pipeline.loop_per_stage()

@@ -23,6 +23,7 @@ alone), so a render compiles its plan's stages and no others; a body compiles on
 from __future__ import annotations
 
 import itertools
+import os
 import warnings
 from concurrent.futures import ThreadPoolExecutor, wait
 from dataclasses import dataclass, fields
@@ -33,6 +34,7 @@ from numba.extending import overload
 
 from .._numba import FASTMATH
 from .._worksharing import claim_range, new_counter
+from ..errors import ParameterError
 from .accumulation import accumulate, pass_pixels_count
 from .stages.bsdf_rays import (
     environment_coords,
@@ -63,7 +65,34 @@ from .stages.shadows import (
     mesh_shadows_single,
 )
 
-__all__ = ["GROUPS", "STAGES", "Launcher", "Plan", "Stage", "group_id", "run_stage", "stage_id"]
+__all__ = [
+    "GROUPS",
+    "LOOPS_ENVIRONMENT",
+    "STAGES",
+    "Launcher",
+    "Plan",
+    "Stage",
+    "group_id",
+    "loop_per_stage",
+    "run_stage",
+    "stage_id",
+]
+
+# "plan" (the default): a render runs its plan's stages in one compiled loop; "stage": each stage in a loop of its own
+LOOPS_ENVIRONMENT = "LIGHTPROBE_STAGE_LOOPS"
+
+
+def loop_per_stage() -> bool:
+    """Whether renders run each stage in a loop of its own (``LIGHTPROBE_STAGE_LOOPS=stage``) rather than their
+    plan's stages in one loop (``plan``, the default).  The same bodies run in the same order on the same items, so
+    the image is the same bits (a test); what differs is the compiling.  A plan's loop is the cheaper to compile for
+    one kind of scene (10 s against 37 s for the demo's nine stages: each loop's wrapper unboxes the pass records),
+    the loops per stage are shared by every plan, so a process that renders many kinds of scene (the test suite,
+    about 34 plans) compiles each stage's loop once instead of every plan's (decisions.md 104)."""
+    given = os.environ.get(LOOPS_ENVIRONMENT, "plan").strip().lower()
+    if given not in ("plan", "stage"):
+        raise ParameterError(f"{LOOPS_ENVIRONMENT}={given!r}: expected 'plan' or 'stage'")
+    return given == "stage"
 
 
 @dataclass(frozen=True)

@@ -238,7 +238,7 @@ class _Pass:
             env_irradiance_compensated=environment.compensated_irradiance_terms if environment is not None else None,
         )
         self.ray_counts = np.zeros((threads_max, 8), np.int64)  # per worker (a row = a cache line)
-        self.launcher = pipeline.Launcher(threads, self.stages)
+        self.launcher = pipeline.Launcher(threads, None if pipeline.loop_per_stage() else self.stages)
         compensated = compensation_for(scene, settings)
         self.compensated = compensated
         self.constants = PassConstants(
@@ -510,11 +510,14 @@ def kernels_cached(scene: Scene | None = None, settings: RenderSettings | None =
 
 
 def _group_cached(plan: pipeline.Plan) -> bool:
-    """Whether the stage loop of ``plan``'s group is in the on-disk cache."""
+    """Whether the stage loop of ``plan``'s group (with ``LIGHTPROBE_STAGE_LOOPS=stage``, each of its stages'
+    loops) is in the on-disk cache."""
     from .._numba import cached_signatures
 
-    group = numba.types.literal(pipeline.group_id(tuple(pipeline.stage_id(name) for name in plan.stages())))
-    return any(signature[0] == group for signature in cached_signatures(pipeline.run_stage))
+    ids = tuple(pipeline.stage_id(name) for name in plan.stages())
+    groups = [(i,) for i in ids] if pipeline.loop_per_stage() else [ids]
+    cached = {signature[0] for signature in cached_signatures(pipeline.run_stage)}
+    return all(numba.types.literal(pipeline.group_id(group)) in cached for group in groups)
 
 
 class _Stop(Exception):
