@@ -731,24 +731,26 @@ def unoccluded_power_fraction(scene, *, stride: int = 4, points_per_light: int =
     behind the surface at x counts as hidden (the segment starts on the camera's side of x).  Small values mean that
     most of the light a renderer samples is behind walls."""
     from .emitters.area import area_power
-    from .emitters.kinds import LIGHT_RECT, LIGHT_SPHERE, LIGHT_TRIANGLE
+    from .emitters.kinds import area_rows, rows_of
     from .geometry.raytracer import RayTracer
 
     lights = scene.light_table()
-    area = np.isin(lights.kind, [LIGHT_RECT, LIGHT_SPHERE, LIGHT_TRIANGLE])
+    area = area_rows(lights.kind)
     if not area.any():
         raise ValueError("the scene has no area lights")
     power = area_power(lights)[area]
-    kinds, geom, two_sided = lights.kind[area], lights.geom[area], lights.two_sided[area]
+    geom, two_sided = lights.geom[area], lights.two_sided[area]
+    rectangle, triangle = rows_of(lights.kind, "rectangle")[area], rows_of(lights.kind, "triangle")[area]
+    sphere = rows_of(lights.kind, "sphere")[area]
     k = points_per_light
     cells = (np.arange(k) + 0.5) / k
     a, b = (x.ravel() for x in np.meshgrid(cells, cells))
     targets, normals, owner, weight = [], [], [], []
-    for i, (kind, g) in enumerate(zip(kinds, geom, strict=True)):
-        if kind == LIGHT_RECT:
+    for i, g in enumerate(geom):
+        if rectangle[i]:
             p = g[0:3] + a[:, None] * g[3:6] + b[:, None] * g[6:9]
             n = np.cross(g[3:6], g[6:9])
-        elif kind == LIGHT_TRIANGLE:
+        elif triangle[i]:
             keep = a + b < 1.0 + 1e-12  # cell centres inside the triangle (the square's lower half)
             aa, bb = a[keep], b[keep]
             p = g[0:3] + aa[:, None] * (g[3:6] - g[0:3]) + bb[:, None] * (g[6:9] - g[0:3])
@@ -761,8 +763,8 @@ def unoccluded_power_fraction(scene, *, stride: int = 4, points_per_light: int =
         weight.append(np.full(p.shape[0], power[i] / p.shape[0]))
     targets, normals = np.concatenate(targets), np.concatenate(normals)
     owner, weight = np.concatenate(owner), np.concatenate(weight)
-    radius = np.where(kinds == LIGHT_SPHERE, geom[:, 3], 0.0)[owner]
-    one_sided = ((kinds != LIGHT_SPHERE) & (two_sided == 0))[owner]
+    radius = np.where(sphere, geom[:, 3], 0.0)[owner]
+    one_sided = (~sphere & (two_sided == 0))[owner]
 
     width, height = scene.camera.resolution
     ys, xs = np.mgrid[0:height:stride, 0:width:stride]

@@ -175,3 +175,34 @@ def test_the_sidecar_counts_every_kind_of_light_by_its_flags():
     counts = {key: stats[key] for key in ("lights", "area_lights", "point_lights", "spot_lights", "directional_lights")}
     assert counts == {"lights": 11, "area_lights": 6, "point_lights": 2, "spot_lights": 1, "directional_lights": 1}
     assert stats["environment"] is True
+    # the same rows asked for by name and by flag, as code outside emitters/ asks
+    from lightprobe.emitters.kinds import area_rows, rows_of
+
+    kinds = scene.light_table().kind
+    by_name = {name: int(rows_of(kinds, name).sum()) for name in ("rectangle", "sphere", "triangle", "point", "spot")}
+    assert by_name == {"rectangle": 2, "sphere": 1, "triangle": 3, "point": 2, "spot": 1}
+    assert area_rows(kinds).tolist() == [True] * 6 + [False] * 5
+
+
+def test_no_kind_is_known_by_its_number_outside_emitters():
+    """Code outside ``emitters/`` asks for a light's kind by name or flag (``rows_of``, ``area_rows``,
+    ``lights.is_delta``, ``lights.is_positional``), never through the ``LIGHT_*`` numbers, so that a new kind is
+    added in one place (issue 58)."""
+    import re
+    from pathlib import Path
+
+    import lightprobe
+    from lightprobe.emitters import kinds
+
+    numbers = [name for name in kinds.__all__ if name.startswith("LIGHT_")]
+    assert len(numbers) == len(KINDS)
+    pattern = re.compile(r"\b(" + "|".join(numbers) + r")\b")
+    package = Path(lightprobe.__file__).parent
+    found = [
+        f"{path.relative_to(package)}:{number + 1}: {line.strip()}"
+        for path in sorted(package.rglob("*.py"))
+        if path.parent.name != "emitters"
+        for number, line in enumerate(path.read_text().splitlines())
+        if pattern.search(line)
+    ]
+    assert found == []

@@ -34,8 +34,10 @@ __all__ = [
     "Kind",
     "LightArrays",
     "LightSample",
+    "area_rows",
     "concatenate",
     "light_counts",
+    "rows_of",
 ]
 
 # columns of a geometry row: the widest kind's, a parallelogram's (geometry.intersect.rectangle_rows)
@@ -96,6 +98,17 @@ class LightSample(NamedTuple):
     b: float
     pdf: float  # per steradian; 1 for a delta light; 0: no sample
     delta: bool  # no other technique produces this direction: MIS weight 1
+
+
+def rows_of(kinds: np.ndarray, name: str) -> np.ndarray:
+    """Which rows of a light table's ``kind`` column are of the kind ``name`` (a :data:`KINDS` key): a boolean mask.
+    Code outside this package asks by name or by flag (:func:`area_rows`), never by a kind's number."""
+    return kinds == KINDS[name].code
+
+
+def area_rows(kinds: np.ndarray) -> np.ndarray:
+    """Which rows of a light table's ``kind`` column are area lights (surfaces rays can hit): a boolean mask."""
+    return np.isin(kinds, [kind.code for kind in KINDS.values() if kind.area])
 
 
 def light_counts(kinds: np.ndarray) -> dict:

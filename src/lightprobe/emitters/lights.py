@@ -51,6 +51,7 @@ __all__ = [
     "escaped_radiance",
     "infinite_radiance",
     "is_delta",
+    "is_positional",
     "light_arrays",
     "light_pdf_of",
     "light_sample_of",
@@ -64,6 +65,13 @@ def is_delta(lights, l):
     """Whether row l is a delta light: a point or spot light, or a directional light of angle 0."""
     kind = lights.kind[l]
     return kind == LIGHT_POINT or kind == LIGHT_SPOT or (kind == LIGHT_DIRECTIONAL and lights.geom[l, 4] <= 0.0)
+
+
+@jit_inline
+def is_positional(lights, l):
+    """Whether row l is a point or spot light: a position with no surface around it (a shadow ray ends at it)."""
+    kind = lights.kind[l]
+    return kind == LIGHT_POINT or kind == LIGHT_SPOT
 
 
 @jit

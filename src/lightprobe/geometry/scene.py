@@ -284,7 +284,7 @@ class Scene:
         """The light table (:class:`~lightprobe.emitters.kinds.LightArrays`, world space): every emissive object --
         spheres, rectangles, then each face of each emissive mesh, in the order :meth:`compile` numbers them --,
         the point and spot lights, then the infinite lights: the directional ones, and the environment last."""
-        from ..emitters.kinds import LIGHT_RECT, LIGHT_SPHERE, LightArrays, concatenate
+        from ..emitters.kinds import KINDS, LightArrays, concatenate
         from ..emitters.lights import light_arrays
 
         emitters = self.emitters
@@ -295,7 +295,7 @@ class Scene:
         rect_geom = _rect_rows([o.shape for o in rects])
         # built as arrays, not one AreaLight each: a scene file with 100,000 rectangle lights (issue 32)
         analytic = LightArrays(
-            np.array([LIGHT_SPHERE] * len(spheres) + [LIGHT_RECT] * len(rects), np.int64),
+            np.array([KINDS["sphere"].code] * len(spheres) + [KINDS["rectangle"].code] * len(rects), np.int64),
             np.ascontiguousarray(np.concatenate([sphere_geom, rect_geom])),
             np.array([o.emission for o in spheres + rects], np.float64).reshape(-1, 3),
             np.array([o.two_sided for o in spheres + rects], np.int64),
@@ -368,14 +368,14 @@ def _emission(value, shape, label: str) -> np.ndarray | None:
 
 def _triangle_lights(mesh: TriangleMesh, emission, two_sided: bool):
     """The light table rows of an emissive mesh, one per face."""
-    from ..emitters.kinds import LIGHT_TRIANGLE, LightArrays
+    from ..emitters.kinds import KINDS, LightArrays
 
     v = mesh.vertices[mesh.faces]  # (F, 3, 3)
     cross = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
     length = np.linalg.norm(cross, axis=1)
     f = v.shape[0]
     return LightArrays(
-        np.full(f, LIGHT_TRIANGLE, np.int64),
+        np.full(f, KINDS["triangle"].code, np.int64),
         np.ascontiguousarray(
             np.concatenate([v.reshape(-1, 9), cross / length[:, None], np.zeros((f, RECT_WIDTH - 12))], axis=1)
         ),

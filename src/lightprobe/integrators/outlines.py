@@ -42,7 +42,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .._numba import jit, jit_alloc, jit_inline
-from ..emitters.kinds import LIGHT_RECT, LIGHT_SPHERE, LIGHT_TRIANGLE
+from ..emitters.kinds import rows_of
 from ..geometry.intersect import MESH, RECT, SPHERE
 
 __all__ = ["CONE", "MAX_PER_PIXEL", "POLYGON", "OutlineTable", "empty", "outline_offset", "pass_fields", "table"]
@@ -424,13 +424,13 @@ def _shapes(film: _Film, lights) -> _Shapes:
     """Every area light the camera sees whole from its emitting side, nearest first."""
     emitting = np.any(lights.radiance != 0.0, axis=1)
     parts = []
-    for kind in (LIGHT_RECT, LIGHT_TRIANGLE, LIGHT_SPHERE):
-        index = np.flatnonzero((lights.kind == kind) & emitting)
+    for name in ("rectangle", "triangle", "sphere"):
+        index = np.flatnonzero(rows_of(lights.kind, name) & emitting)
         g = lights.geom[index]
-        if kind == LIGHT_RECT:
+        if name == "rectangle":
             o, eu, ev = g[:, 0:3], g[:, 3:6], g[:, 6:9]
             parts.append(_polygons(film, lights, index, np.stack([o, o + eu, o + eu + ev, o + ev], axis=1)))
-        elif kind == LIGHT_TRIANGLE:
+        elif name == "triangle":
             parts.append(_polygons(film, lights, index, np.stack([g[:, 0:3], g[:, 3:6], g[:, 6:9]], axis=1)))
         else:
             parts.append(_spheres(film, lights, index))

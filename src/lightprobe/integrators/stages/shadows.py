@@ -25,7 +25,7 @@ import numpy as np
 
 from ..._numba import jit_body, jit_inline
 from ...emitters.area import light_normal, light_point_error
-from ...emitters.kinds import LIGHT_POINT, LIGHT_SPOT
+from ...emitters.lights import is_positional
 from ...geometry.embree import FAR as MESH_FAR
 from ...geometry.embree import PACKET, mesh_occluded, occluded_packet, packet_ray, packet_words
 from ...geometry.intersect import blocked_by_mesh_core, may_hit_mesh, occluded_analytic, ray_offset
@@ -55,8 +55,7 @@ def _ray_to_light(lights, light, px, py, pz, qx, qy, qz, wx, wy, wz, dist):
     x moved toward p by its own error bound along the light's normal: (origin, unit direction, length less
     SHADOW_EPSILON of it).  A point or spot light is its own position, with no surface to offset from."""
     x, y, z = px + dist * wx, py + dist * wy, pz + dist * wz
-    kind = lights.kind[light]
-    if kind == LIGHT_POINT or kind == LIGHT_SPOT:
+    if is_positional(lights, light):
         tx, ty, tz = lights.geom[light, 0] - qx, lights.geom[light, 1] - qy, lights.geom[light, 2] - qz
         length = math.sqrt(tx * tx + ty * ty + tz * tz)
         return qx, qy, qz, tx / length, ty / length, tz / length, length * (1.0 - SHADOW_EPSILON)
