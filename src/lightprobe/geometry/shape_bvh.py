@@ -37,7 +37,7 @@ __all__ = ["LEAF_SIZE", "SHAPES_FOR_BVH", "ShapeTree", "build_shape_tree", "empt
 #: analytic shapes above which a scene takes the hierarchy (the crossover is about 32 on the environment path and
 #: below 6 on the area-light path: decisions.md 70)
 SHAPES_FOR_BVH = 16
-LEAF_SIZE = 2
+LEAF_SIZE = 1  # one shape a leaf: 4-11 % faster than two on the suite's tree scenes, same bits (decisions.md 90)
 MAX_LOOSE = 4  # large shapes kept out of the tree at most
 _PAD = 1e-9  # relative to each box's size and coordinates
 MAX_WIDE_DEPTH = 8  # levels of the eight-wide tree: a ray's walk keeps a byte per level in one int64
