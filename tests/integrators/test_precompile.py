@@ -23,13 +23,12 @@ import numpy as np
 from lightprobe.integrators import pipeline, precompile
 from lightprobe.integrators.accumulation import Accumulator
 from lightprobe.integrators.schedule import pass_pixels
-from lightprobe.integrators.wavefront import RenderSettings, _Pass, _resolved_and_checked, plan_for
+from lightprobe.integrators.wavefront import RenderSettings, _Pass, resolve
 from lightprobe.geometry.raytracer import RayTracer
 from lightprobe.demo import demo_scene
 scene = demo_scene((8, 5))
-settings = _resolved_and_checked(scene, RenderSettings(spp=1, adaptive=False), resumed=False)
 arrays = scene.compile()
-work = _Pass(scene, settings, plan_for(scene, settings), arrays, RayTracer(arrays), 40, 1)
+work = _Pass(scene, resolve(scene, RenderSettings(spp=1, adaptive=False)), arrays, RayTracer(arrays), 40, 1)
 work.make_buffers()
 records = work.records(Accumulator(40), pass_pixels(0, 1), 1, 0)
 helpers = precompile.start(("accumulate",), records)

@@ -574,3 +574,36 @@ def test_peer_scene_matches_mitsubas_reference_means():
     expected = json.loads((peers / "scene.json").read_text())["reference_image_check"]
     result = render(peer_scene(resolution=(128, 128)), RenderSettings(spp=64, seed=1))
     np.testing.assert_allclose(result.image.reshape(-1, 3).mean(axis=0), expected["image_mean_rgb"], rtol=0.01)
+
+
+def test_a_render_reads_one_plan_resolved_once():
+    """``resolve`` works out a render's facts once (issue 58): its settings are ``settings_for``'s, checked; its
+    stages are ``plan_for``'s for them and are what the render ran; its delta lights are the point, spot and
+    angle-0 directional lights (a sun-sized directional light is not one); the compensation is the render's."""
+    from lightprobe.emitters.directional import DirectionalLight
+    from lightprobe.emitters.punctual import PointLight, SpotLight
+
+    scene = Scene(Camera([0, 1, 4], [0, 0, 0], resolution=(8, 6)), EnvironmentMap.from_array(constant(0.5)))
+    scene.add(Rectangle([-4, 0, -4], [0, 0, 8], [8, 0, 0]), Lambert(0.5))
+    for light in (
+        PointLight([0, 2, 0], 3.0),
+        SpotLight([1, 2, 0], [0, 0, 0], 3.0),
+        DirectionalLight([0, 1, 0], 1.0),
+        DirectionalLight([1, 1, 0], 1.0, angle=0.53),
+    ):
+        scene.add_light(light)
+    settings = RenderSettings(spp=2, adaptive=False)
+    plan = wavefront.resolve(scene, settings)
+    assert plan.settings == wavefront.settings_for(scene, settings)
+    assert plan.pipeline == wavefront.plan_for(scene, plan.settings)
+    assert plan.delta_lights == 3 and not plan.environment_alone
+    result = render(scene, settings)
+    assert result.stats["stages"] == list(plan.pipeline.stages())
+    assert result.stats["mis_compensation"] == plan.compensated
+    # the map alone: no selector, one pick a sample, and the stages that sample the map without one
+    alone = Scene(Camera([0, 1, 4], [0, 0, 0], resolution=(8, 6)), EnvironmentMap.from_array(constant(0.5)))
+    alone.add(Rectangle([-4, 0, -4], [0, 0, 8], [8, 0, 0]), Lambert(0.5))
+    plan = wavefront.resolve(alone, settings)
+    assert plan.environment_alone and plan.delta_lights == 0 and plan.pipeline.environment_alone
+    with pytest.raises(ParameterError, match="env_candidates applies to scenes lit by an environment map alone"):
+        wavefront.resolve(scene, RenderSettings(env_candidates=4))

@@ -27,6 +27,7 @@ from __future__ import annotations
 import time
 import warnings
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numba
 import numpy as np
@@ -58,11 +59,13 @@ from .techniques import STRATEGIES
 __all__ = [
     "STRATEGIES",
     "Accumulator",
+    "RenderPlan",
     "RenderResult",
     "RenderSettings",
     "kernels_cached",
     "plan_for",
     "render",
+    "resolve",
     "result_from",
     "settings_for",
 ]
@@ -105,20 +108,19 @@ def _delta_lights(scene: Scene) -> int:
     return sum(bool(is_delta.py_func(table, i)) for i in range(table.kind.shape[0]))
 
 
-def _one_delta_light(scene: Scene) -> bool:
-    """The scene's only light is a point or spot light or a delta directional light: every sample of it is the
-    same direction, so a second pick adds nothing."""
-    if scene.environment is not None or scene.emitters or len(scene.lights) != 1:
-        return False
-    return _delta_lights(scene) == 1
-
-
 def settings_for(scene: Scene, settings: RenderSettings, resumed: bool = False) -> RenderSettings:
     """``settings`` with the automatic choices made as :func:`render` makes them for ``scene`` (``resumed``: a
     render that continues another)."""
+    return _settings_for(scene, settings, _environment_alone(scene, settings), _delta_lights(scene), resumed)
+
+
+def _settings_for(scene: Scene, settings: RenderSettings, alone: bool, delta_lights: int, resumed: bool):
+    """:func:`settings_for` from what the scene's lights have already been found to be.  A scene whose only light
+    is a delta light (point, spot, directional of angle 0) takes one pick: every sample of it is the same direction."""
+    one_delta_light = scene.environment is None and not scene.emitters and len(scene.lights) == 1 and delta_lights == 1
     return settings.resolved(
-        environment_only=_environment_alone(scene, settings),
-        one_delta_light=_one_delta_light(scene),
+        environment_only=alone,
+        one_delta_light=one_delta_light,
         environment=scene.environment is not None,
         resumed=resumed,
     )
@@ -135,10 +137,9 @@ def compensation_for(scene: Scene, settings: RenderSettings) -> bool | str:
     return DIFFUSE if automatic else False
 
 
-def _resolved_and_checked(scene: Scene, settings: RenderSettings, resumed: bool = False) -> RenderSettings:
-    """:func:`settings_for`, checked again: the automatic counts may take the slots past 64, and then the message
-    says which counts were left automatic and what they came to (numbers the user never typed)."""
-    resolved = settings_for(scene, settings, resumed)
+def _checked(settings: RenderSettings, resolved: RenderSettings) -> RenderSettings:
+    """The ``resolved`` settings, checked again: the automatic counts may take the slots past 64, and then the
+    message says which counts were left automatic and what they came to (numbers the user never typed)."""
     try:
         resolved.validate()
     except ParameterError as exc:
@@ -152,7 +153,10 @@ def _resolved_and_checked(scene: Scene, settings: RenderSettings, resumed: bool 
 
 def plan_for(scene: Scene, settings: RenderSettings) -> pipeline.Plan:
     """What a render of ``scene`` with ``settings`` needs, and so its stages."""
-    alone = _environment_alone(scene, settings)
+    return _plan_for(scene, settings, _environment_alone(scene, settings))
+
+
+def _plan_for(scene: Scene, settings: RenderSettings, alone: bool) -> pipeline.Plan:
     k = scene.environment.kernel if scene.environment is not None else None
     lanes = environment_lanes.compiles()
     return pipeline.Plan(
@@ -168,6 +172,39 @@ def plan_for(scene: Scene, settings: RenderSettings) -> pipeline.Plan:
         packets=packets_native(),
         textured=any(material.textures is not None for material in scene.materials.values()),
         shape_tree=sum(isinstance(o.shape, Sphere | Rectangle) for o in scene.objects) > SHAPES_FOR_BVH,
+    )
+
+
+@dataclass(frozen=True)
+class RenderPlan:
+    """What a render works out from its scene and settings, once (:func:`resolve`), for the driver and its
+    statistics to read: the settings checked and with their automatic choices made, whether the environment map is
+    the only light, how many delta lights there are, which materials sample the compensated map, and the stages."""
+
+    settings: RenderSettings  # resolved and checked
+    environment_alone: bool  # the map is the only light, one pick a sample (no selector)
+    delta_lights: int  # point and spot lights and directional lights of angle 0
+    compensated: bool | str  # compensation_for: True, False or DIFFUSE
+    pipeline: pipeline.Plan  # what the scene needs, and so the stages
+
+
+def resolve(scene: Scene, settings: RenderSettings | None = None, *, resumed: bool = False) -> RenderPlan:
+    """The :class:`RenderPlan` of a render of ``scene`` with ``settings`` (``resumed``: one that continues
+    another): the settings checked as given (a user's value named as typed), resolved for the scene, and checked
+    again with the automatic counts in the message."""
+    settings = settings or RenderSettings()
+    settings.validate()
+    alone = _environment_alone(scene, settings)
+    _check(scene, settings, alone)
+    delta_lights = _delta_lights(scene)
+    resolved = _checked(settings, _settings_for(scene, settings, alone, delta_lights, resumed))
+    alone = _environment_alone(scene, resolved)  # the stages follow the resolved pick count (as plan_for)
+    return RenderPlan(
+        settings=resolved,
+        environment_alone=alone,
+        delta_lights=delta_lights,
+        compensated=compensation_for(scene, resolved),
+        pipeline=_plan_for(scene, resolved, alone),
     )
 
 
@@ -187,15 +224,16 @@ def _check(scene: Scene, settings: RenderSettings, alone: bool) -> None:
         )
 
 
-def _warn_of_unreached_delta_lights(scene: Scene, settings: RenderSettings) -> None:
+def _warn_of_unreached_delta_lights(plan: RenderPlan) -> None:
     """A point, spot or delta directional light is reached by light samples only (no direction of another technique
     is ever exactly its one): a render that takes none -- BSDF, cosine or uniform sampling, or MIS with no light
     samples -- leaves such lights out of the image, as the estimator defines, but a user may not expect it.  Said
     once per render, as a warning (the laboratory compares such strategies on purpose)."""
+    settings = plan.settings
     takes_none = settings.strategy in ("brdf", "cosine", "uniform") or (
         settings.strategy == "mis" and settings.n_env == 0
     )
-    delta = _delta_lights(scene) if takes_none else 0
+    delta = plan.delta_lights if takes_none else 0
     if delta:
         why = f"strategy {settings.strategy!r}" if settings.strategy != "mis" else "env_samples = 0"
         one = delta == 1
@@ -220,8 +258,9 @@ def _compensated_materials(kinds: np.ndarray, compensated) -> np.ndarray:
 class _Pass:
     """One render's stages and buffers: :meth:`run` renders one pass into an accumulator."""
 
-    def __init__(self, scene, settings, plan, arrays, tracer, largest_pass, threads):
+    def __init__(self, scene, render_plan: RenderPlan, arrays, tracer, largest_pass, threads):
         threads_max = max(threads, numba.config.NUMBA_NUM_THREADS)
+        settings, plan = render_plan.settings, render_plan.pipeline
         self.plan = plan
         self.stages = tuple(pipeline.stage_id(name) for name in plan.stages())
         self.names = plan.stages()
@@ -239,7 +278,7 @@ class _Pass:
         )
         self.ray_counts = np.zeros((threads_max, 8), np.int64)  # per worker (a row = a cache line)
         self.launcher = pipeline.Launcher(threads, None if pipeline.loop_per_stage() else self.stages)
-        compensated = compensation_for(scene, settings)
+        compensated = render_plan.compensated
         self.compensated = compensated
         self.constants = PassConstants(
             sampler=SAMPLERS[settings.sampler],
@@ -316,26 +355,23 @@ def render(
     (``stats['interrupted']``), as does a time limit (``stats['stopped_by_time_limit']``).  ``resume``: continue
     these statistics (a copy) with samples ``settings.first_sample`` onward; resuming where a render stopped gives
     the same bits as an uninterrupted render."""
-    settings = settings or RenderSettings()
-    settings.validate()
-    alone = _environment_alone(scene, settings)
-    _check(scene, settings, alone)
-    if settings.threads is not None:
-        numba.set_num_threads(min(settings.threads, numba.config.NUMBA_NUM_THREADS))
-    threads = numba.get_num_threads()
     t_setup = time.perf_counter()
-    settings = _resolved_and_checked(scene, settings, resumed=resume is not None)
-    _warn_of_unreached_delta_lights(scene, settings)
+    render_plan = resolve(scene, settings, resumed=resume is not None)
+    if render_plan.settings.threads is not None:
+        numba.set_num_threads(min(render_plan.settings.threads, numba.config.NUMBA_NUM_THREADS))
+    threads = numba.get_num_threads()
+    _warn_of_unreached_delta_lights(render_plan)
     helpers = []  # processes compiling some of the stages of a first render of this kind (precompile.py)
     try:
-        return _render_resolved(scene, settings, helpers, progress, tracer, resume, threads, t_setup)
+        return _render_planned(scene, render_plan, helpers, progress, tracer, resume, threads, t_setup)
     finally:
         precompile.stop(helpers)
 
 
-def _render_resolved(scene, settings, helpers, progress, tracer, resume, threads, t_setup) -> RenderResult:
-    """:func:`render` once its settings are resolved; ``helpers`` (empty): where it puts the processes it starts to
+def _render_planned(scene, render_plan, helpers, progress, tracer, resume, threads, t_setup) -> RenderResult:
+    """:func:`render` of its :class:`RenderPlan`; ``helpers`` (empty): where it puts the processes it starts to
     compile some of its stages, which it stops once its own warm-up has compiled (or loaded) them all."""
+    settings = render_plan.settings
     arrays = scene.compile()
     own_tracer = tracer is None
     tracer = tracer or RayTracer(arrays, threads=threads)
@@ -353,9 +389,9 @@ def _render_resolved(scene, settings, helpers, progress, tracer, resume, threads
         raise ParameterError(problem)
     acc = resume.copy() if resume is not None else Accumulator(n_pixels)
     acc.adaptive = settings.adaptive  # resolved: a continued render is uniform (or refused above)
-    plan = plan_for(scene, settings)
+    plan = render_plan.pipeline
     largest_pass = max(1, band * spp_pass)
-    work = _Pass(scene, settings, plan, arrays, tracer, largest_pass, threads)
+    work = _Pass(scene, render_plan, arrays, tracer, largest_pass, threads)
     kinds = work.lights.kind
     stats = {
         "width": width,
