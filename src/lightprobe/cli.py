@@ -31,7 +31,7 @@ app = typer.Typer(
     help="Monte Carlo image-based lighting with verified importance sampling.",
 )
 experiment_app = typer.Typer(
-    rich_markup_mode=PLAIN_HELP, no_args_is_help=True, help="Reproduce the measurements behind the README's claims."
+    rich_markup_mode=PLAIN_HELP, no_args_is_help=True, help="Reproduce the seed documents' measurements."
 )
 envmap_app = typer.Typer(
     rich_markup_mode=PLAIN_HELP, no_args_is_help=True, help="Inspect and convert environment maps."
