@@ -484,16 +484,17 @@ def test_a_time_limit_sizes_the_last_round_to_end_at_it(monkeypatch):
 
 def test_the_default_pass_holds_at_most_2_22_shading_slots():
     """2^19 camera samples per pass, fewer where they would take more than 2^22 slots (decisions.md 40, 51); a
-    pass_samples given is taken as it is."""
+    pass_samples given is taken as it is, past that cap (2^17 x 64 = 2^23 slots, about 2 GB of pass buffers: 2^19
+    took about 20 GB, populated when mapped, and ran the test suite's process out of memory on a 24 GB machine)."""
     passes = [wavefront.default_pass_samples(m) for m in (1, 8, 9, 16, 64)]
     assert passes == [1 << 19, 1 << 19, 466033, 1 << 18, 1 << 16]
     scene = small_scene((64, 48))
     auto = render(scene, RenderSettings(spp=4096, strategy="brdf", n_bsdf=64, n_env=0, time_limit=1e-3))
     assert auto.stats["spp_per_pass"] == (1 << 16) // (64 * 48)
     given = render(
-        scene, RenderSettings(spp=4096, strategy="brdf", n_bsdf=64, n_env=0, time_limit=1e-3, pass_samples=1 << 19)
+        scene, RenderSettings(spp=4096, strategy="brdf", n_bsdf=64, n_env=0, time_limit=1e-3, pass_samples=1 << 17)
     )
-    assert given.stats["spp_per_pass"] == (1 << 19) // (64 * 48)
+    assert given.stats["spp_per_pass"] == (1 << 17) // (64 * 48) > auto.stats["spp_per_pass"]
 
 
 def test_interruption_keeps_what_was_accumulated():
