@@ -608,3 +608,22 @@ def test_a_render_reads_one_plan_resolved_once():
     assert plan.environment_alone and plan.delta_lights == 0 and plan.pipeline.environment_alone
     with pytest.raises(ParameterError, match="env_candidates applies to scenes lit by an environment map alone"):
         wavefront.resolve(scene, RenderSettings(env_candidates=4))
+
+
+def test_a_finished_render_holds_no_pass_buffers():
+    """A render's pass buffers (GBs at the default pass size) are freed when it returns, not at the cyclic
+    collector's next run: the stage loop is looked up by its literal group, so no exception's traceback keeps the
+    pass's frames in a reference cycle (with the collector off, the old lookup left every render's ``_Pass``)."""
+    import gc
+
+    scene = small_scene((8, 6))
+    render(scene, RenderSettings(spp=2))
+    gc.collect()
+    gc.disable()
+    try:
+        for seed in range(3):
+            render(scene, RenderSettings(spp=2, seed=seed))
+        alive = [o for o in gc.get_objects() if isinstance(o, wavefront._Pass)]
+    finally:
+        gc.enable()
+    assert alive == []

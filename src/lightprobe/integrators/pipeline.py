@@ -222,7 +222,9 @@ class Launcher:
         """Stage ``stage`` (an id) over the pass whose ``records`` are (s, env, lights, sel, c, cams, slots, acc)."""
         group, position = self._place(stage)
         self.counter[0] = 0
-        call = self._entries.get(group, run_stage)
+        call = self._entries.get(group)
+        if call is None:  # later calls skip the dispatcher's typing of ~150 arrays (a millisecond)
+            call = self._entries[group] = _loop_for(group, (position, *records, self.counter, 0))
         futures = [
             Launcher._pool.submit(call, group, position, *records, self.counter, w) for w in range(1, self.threads)
         ]
@@ -232,11 +234,20 @@ class Launcher:
             wait(futures)  # never leave a worker writing into the pass after a Ctrl-C or an error
         for f in futures:
             f.result()
-        if group not in self._entries:  # later calls skip the dispatcher's typing of ~150 arrays (a millisecond)
-            signature = (types.literal(group), *(typeof(x) for x in (position, *records, self.counter, 0)))
-            compiled = run_stage.overloads.get(signature)
-            if compiled is not None:
-                self._entries[group] = compiled.entry_point
+
+
+def _loop_for(group: int, args: tuple):
+    """The compiled :func:`run_stage` of ``group`` for arguments like ``args`` (after the group): compiled, or loaded
+    from the cache, for the group as a literal type.  Called with a plain int, the dispatcher would first raise and
+    catch Numba's ForceLiteralArg, whose traceback holds the calling frames, the pass's records among them, in a
+    reference cycle: every render's pass buffers (GBs) then stayed in memory until Python's cyclic collector next
+    ran, and a test process grew past 20 GB."""
+    signature = (types.literal(group), *(typeof(x) for x in args))
+    compiled = run_stage.overloads.get(signature)
+    if compiled is None:
+        run_stage.compile(signature)
+        compiled = run_stage.overloads[signature]
+    return compiled.entry_point
 
 
 @dataclass(frozen=True)
