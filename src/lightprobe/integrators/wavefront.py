@@ -153,10 +153,7 @@ def _checked(settings: RenderSettings, resolved: RenderSettings) -> RenderSettin
 
 def plan_for(scene: Scene, settings: RenderSettings) -> pipeline.Plan:
     """What a render of ``scene`` with ``settings`` needs, and so its stages."""
-    return _plan_for(scene, settings, _environment_alone(scene, settings))
-
-
-def _plan_for(scene: Scene, settings: RenderSettings, alone: bool) -> pipeline.Plan:
+    alone = _environment_alone(scene, settings)
     k = scene.environment.kernel if scene.environment is not None else None
     lanes = environment_lanes.compiles()
     return pipeline.Plan(
@@ -198,13 +195,13 @@ def resolve(scene: Scene, settings: RenderSettings | None = None, *, resumed: bo
     _check(scene, settings, alone)
     delta_lights = _delta_lights(scene)
     resolved = _checked(settings, _settings_for(scene, settings, alone, delta_lights, resumed))
-    alone = _environment_alone(scene, resolved)  # the stages follow the resolved pick count (as plan_for)
+    stages = plan_for(scene, resolved)  # the stages follow the resolved pick count
     return RenderPlan(
         settings=resolved,
-        environment_alone=alone,
+        environment_alone=stages.environment_alone,
         delta_lights=delta_lights,
         compensated=compensation_for(scene, resolved),
-        pipeline=_plan_for(scene, resolved, alone),
+        pipeline=stages,
     )
 
 
