@@ -597,7 +597,7 @@ def test_a_render_reads_one_plan_resolved_once():
     plan = wavefront.resolve(scene, settings)
     assert plan.settings == wavefront.settings_for(scene, settings)
     assert plan.pipeline == wavefront.plan_for(scene, plan.settings)
-    assert plan.delta_lights == 3 and not plan.environment_alone
+    assert plan.delta_lights == 3 and not plan.pipeline.environment_alone
     result = render(scene, settings)
     assert result.stats["stages"] == list(plan.pipeline.stages())
     assert result.stats["mis_compensation"] == plan.compensated
@@ -605,7 +605,7 @@ def test_a_render_reads_one_plan_resolved_once():
     alone = Scene(Camera([0, 1, 4], [0, 0, 0], resolution=(8, 6)), EnvironmentMap.from_array(constant(0.5)))
     alone.add(Rectangle([-4, 0, -4], [0, 0, 8], [8, 0, 0]), Lambert(0.5))
     plan = wavefront.resolve(alone, settings)
-    assert plan.environment_alone and plan.delta_lights == 0 and plan.pipeline.environment_alone
+    assert plan.pipeline.environment_alone and plan.delta_lights == 0
     with pytest.raises(ParameterError, match="env_candidates applies to scenes lit by an environment map alone"):
         wavefront.resolve(scene, RenderSettings(env_candidates=4))
 

@@ -73,6 +73,7 @@ __all__ = [
     "Plan",
     "Stage",
     "group_id",
+    "loop_groups",
     "loop_per_stage",
     "run_stage",
     "stage_id",
@@ -93,6 +94,12 @@ def loop_per_stage() -> bool:
     if given not in ("plan", "stage"):
         raise ParameterError(f"{LOOPS_ENVIRONMENT}={given!r}: expected 'plan' or 'stage'")
     return given == "stage"
+
+
+def loop_groups(stages: tuple[int, ...]) -> tuple[tuple[int, ...], ...]:
+    """The groups whose compiled loops run a plan's ``stages`` (ids): the plan's one group, or with
+    ``LIGHTPROBE_STAGE_LOOPS=stage`` each stage alone."""
+    return tuple((i,) for i in stages) if loop_per_stage() else (tuple(stages),)
 
 
 @dataclass(frozen=True)
@@ -194,8 +201,9 @@ def run_stage(group, position, s, env, lights, sel, c, cams, slots, acc, counter
 
 
 class Launcher:
-    """Runs the stages ``stages`` (ids; one compiled loop for them all, :func:`run_stage`; None: each stage alone)
-    with ``threads`` workers: the calling thread is worker 0, a shared pool's threads the others.  Each worker runs
+    """Runs the stages ``stages`` (ids: one compiled loop for them all, :func:`run_stage`; None, or
+    ``LIGHTPROBE_STAGE_LOOPS=stage``: each stage in its own, as :func:`loop_groups` says) with ``threads`` workers:
+    the calling thread is worker 0, a shared pool's threads the others.  Each worker runs
     :func:`run_stage`, which releases the GIL, so the workers run in parallel; which worker takes which chunk changes
     nothing in the image (every item of a stage is independent, and a worker's scratch rows are its own).  Measured
     against Numba's parallel loops, decisions.md 77."""
@@ -205,7 +213,7 @@ class Launcher:
 
     def __init__(self, threads: int, stages: tuple[int, ...] | None = None):
         self.threads = threads
-        self.stages = None if stages is None else tuple(stages)
+        self.stages = None if stages is None or loop_per_stage() else tuple(stages)
         if threads > 1 and Launcher._pool_size < threads - 1:
             Launcher._pool = ThreadPoolExecutor(max_workers=threads - 1, thread_name_prefix="lightprobe-stage")
             Launcher._pool_size = threads - 1

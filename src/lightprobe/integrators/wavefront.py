@@ -175,11 +175,11 @@ def plan_for(scene: Scene, settings: RenderSettings) -> pipeline.Plan:
 @dataclass(frozen=True)
 class RenderPlan:
     """What a render works out from its scene and settings, once (:func:`resolve`), for the driver and its
-    statistics to read: the settings checked and with their automatic choices made, whether the environment map is
-    the only light, how many delta lights there are, which materials sample the compensated map, and the stages."""
+    statistics to read: the settings checked and with their automatic choices made, how many delta lights there
+    are, which materials sample the compensated map, and the stages (whether the environment map is the only light:
+    ``pipeline.environment_alone``)."""
 
     settings: RenderSettings  # resolved and checked
-    environment_alone: bool  # the map is the only light, one pick a sample (no selector)
     delta_lights: int  # point and spot lights and directional lights of angle 0
     compensated: bool | str  # compensation_for: True, False or DIFFUSE
     pipeline: pipeline.Plan  # what the scene needs, and so the stages
@@ -195,13 +195,11 @@ def resolve(scene: Scene, settings: RenderSettings | None = None, *, resumed: bo
     _check(scene, settings, alone)
     delta_lights = _delta_lights(scene)
     resolved = _checked(settings, _settings_for(scene, settings, alone, delta_lights, resumed))
-    stages = plan_for(scene, resolved)  # the stages follow the resolved pick count
     return RenderPlan(
         settings=resolved,
-        environment_alone=stages.environment_alone,
         delta_lights=delta_lights,
         compensated=compensation_for(scene, resolved),
-        pipeline=stages,
+        pipeline=plan_for(scene, resolved),  # the stages follow the resolved pick count
     )
 
 
@@ -274,7 +272,7 @@ class _Pass:
             env_irradiance_compensated=environment.compensated_irradiance_terms if environment is not None else None,
         )
         self.ray_counts = np.zeros((threads_max, 8), np.int64)  # per worker (a row = a cache line)
-        self.launcher = pipeline.Launcher(threads, None if pipeline.loop_per_stage() else self.stages)
+        self.launcher = pipeline.Launcher(threads, self.stages)
         compensated = render_plan.compensated
         self.compensated = compensated
         self.constants = PassConstants(
@@ -547,8 +545,7 @@ def _group_cached(plan: pipeline.Plan) -> bool:
     loops) is in the on-disk cache."""
     from .._numba import cached_signatures
 
-    ids = tuple(pipeline.stage_id(name) for name in plan.stages())
-    groups = [(i,) for i in ids] if pipeline.loop_per_stage() else [ids]
+    groups = pipeline.loop_groups(tuple(pipeline.stage_id(name) for name in plan.stages()))
     cached = {signature[0] for signature in cached_signatures(pipeline.run_stage)}
     return all(numba.types.literal(pipeline.group_id(group)) in cached for group in groups)
 
