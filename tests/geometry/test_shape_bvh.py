@@ -13,13 +13,14 @@ from lightprobe.geometry.raytracer import _closest_analytic_batch, _occluded_ana
 from lightprobe.geometry.scene import SceneArrays
 from lightprobe.geometry.shape_bvh import (
     LEAF_SIZE,
+    MAX_BINARY_DEPTH,
     SHAPES_FOR_BVH,
     box_entered,
     build_shape_tree,
     empty_shape_tree,
     shape_boxes,
 )
-from lightprobe.geometry.shape_tree_lanes import boxes_entered
+from lightprobe.geometry.shape_tree_lanes import boxes_entered, nearest_boxes
 from lightprobe.geometry.wide_tree import collapse
 
 
@@ -183,3 +184,90 @@ def test_the_eight_wide_walk_tests_the_binary_trees_boxes():
     _scalar_masks(tree.lo, tree.hi, kids, origins, inverse, tmax, scalar)
     np.testing.assert_array_equal(vector, scalar)
     assert np.count_nonzero(vector) > 500 and np.count_nonzero(vector & (vector - 1)) > 100  # some with several
+
+
+@njit
+def _nearest(boxes, children, origins, inverse, tmax, among, out):
+    for i in range(origins.shape[0]):
+        o, inv = origins[i], inverse[i]
+        for node in range(boxes.shape[0]):
+            out[i, node] = nearest_boxes(
+                boxes, node, o[0], o[1], o[2], inv[0], inv[1], inv[2], tmax[i], among[i, node], children
+            )
+
+
+def test_the_nearest_first_test_picks_the_box_the_segment_enters_first():
+    """``nearest_boxes``: of the children asked about, those entered (as the scalar slab test), the first entered
+    (the least entry distance, ties all set), and the leaves among them."""
+    spheres, rects = _shapes(200, 1500, seed=5, large=True)
+    tree = build_shape_tree(spheres, rects)
+    m = tree.skip.shape[0]
+    second = np.where(tree.count == 0, tree.skip[np.minimum(np.arange(m) + 1, m - 1)], -1)
+    kids, _, _, _, _ = collapse(second, np.arange(1, m + 1))
+    origins, dirs, tmax = _rays(300, seed=13)
+    with np.errstate(divide="ignore"):
+        inverse = 1.0 / dirs
+    among = np.random.default_rng(2).integers(0, 256, (300, kids.shape[0]))
+    among[::3] = 255
+    found = np.empty((300, kids.shape[0]), np.int64)
+    _nearest(tree.boxes, tree.child, origins, inverse, tmax, among, found)
+    scalar = np.empty_like(found)
+    _scalar_masks(tree.lo, tree.hi, kids, origins, inverse, tmax, scalar)
+    entered = scalar & among
+    np.testing.assert_array_equal((found >> 8) & 255, entered)
+    np.testing.assert_array_equal(
+        (found >> 16) & 255, entered & np.packbits(tree.child < -1, axis=1, bitorder="little")[:, 0]
+    )
+    lo = tree.lo[np.maximum(kids, 0)]  # (W, 8, 3)
+    hi = tree.hi[np.maximum(kids, 0)]
+    checked = 0
+    for i in range(300):
+        with np.errstate(invalid="ignore"):
+            t0 = (lo - origins[i]) * inverse[i]
+            t1 = (hi - origins[i]) * inverse[i]
+        near = np.maximum(0.0, np.nan_to_num(np.minimum(t0, t1), nan=-np.inf).max(axis=2))
+        for node in np.flatnonzero(entered[i]):
+            slots = [c for c in range(8) if entered[i, node] >> c & 1]
+            least = min(near[node, c] for c in slots)
+            expected = sum(1 << c for c in slots if near[node, c] == least)
+            assert found[i, node] & 255 == expected
+            checked += len(slots) > 1
+    assert checked > 100  # nodes where the choice was between several children
+
+
+def test_surface_area_splits_put_the_empty_space_between_the_children():
+    """Two rows of rectangles with a gap between them, 100 on the left and 300 on the right: the median split along
+    x cuts the right row, so both children would span the gap; the surface-area heuristic splits at the gap."""
+    x = np.concatenate([np.linspace(0.0, 1.0, 100), np.linspace(3.0, 4.0, 300)])
+    origin = np.column_stack([x, np.zeros_like(x), np.zeros_like(x)])
+    rects = rectangle_rows(origin, np.tile([0.002, 0.0, 0.0], (400, 1)), np.tile([0.0, 0.0, 0.01], (400, 1)))
+    tree = build_shape_tree(np.zeros((0, 4)), rects)
+    left, right = 1, tree.skip[1]
+    assert tree.hi[left, 0] < 1.01 and tree.lo[right, 0] > 2.99
+
+
+def test_a_clustered_scene_keeps_the_wide_tree_within_its_depth():
+    """Shapes at x = 1.2^k: each surface-area split would peel off the farthest few, a chain far deeper than the eight
+    wide levels a ray's walk can hold; below that depth the build splits at the median, and the walk still finds
+    every hit."""
+    n = 3000
+    x = 1.2 ** (np.arange(n) % 200) + np.arange(n) * 1e-3
+    origin = np.column_stack([x, np.arange(n) % 7 * 0.1, np.zeros(n)])
+    rects = rectangle_rows(origin, np.tile([0.01, 0.0, 0.0], (n, 1)), np.tile([0.0, 0.05, 0.05], (n, 1)))
+    tree = build_shape_tree(np.zeros((0, 4)), rects)
+    depth = np.zeros(tree.skip.shape[0], np.int64)
+    for node in range(tree.skip.shape[0]):
+        if tree.count[node] == 0:
+            depth[node + 1] = depth[tree.skip[node + 1]] = depth[node] + 1
+    assert depth.max() == MAX_BINARY_DEPTH  # the heuristic went as deep as it may, not deeper
+    rng = np.random.default_rng(4)
+    targets = origin[rng.integers(0, n, 3000)] + [0.005, 0.025, 0.025]  # rays aimed at shapes, hitting them or others
+    origins = targets + rng.normal(size=(3000, 3)) * rng.choice([0.5, 5.0, 50.0], (3000, 1))
+    dirs = targets - origins
+    dirs /= np.linalg.norm(dirs, axis=1)[:, None]
+    tmax = np.full(3000, np.inf)
+    flat = _trace(_arrays(np.zeros((0, 4)), rects, empty_shape_tree()), origins, dirs, tmax)
+    walked = _trace(_arrays(np.zeros((0, 4)), rects, tree), origins, dirs, tmax)
+    for a, b in zip(flat, walked, strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert np.isfinite(flat[0]).sum() > 2500

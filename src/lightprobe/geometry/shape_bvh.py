@@ -9,11 +9,12 @@ The shapes stay exact: the tree only culls, each candidate is intersected by the
 
 Layout: nodes in depth-first order with an *escape* index (a threaded BVH, Smits 1998): node i's subtree is the
 range (i, ``skip[i]``), an interior node's children i + 1 and ``skip[i + 1]``.  Boxes are padded by far more than
-their float64 rounding, so no ray that meets a shape can miss its box.  Built in compiled code by median splits
-along the axis of largest centroid extent (as the light BVH, ``emitters/selection.py``): 100,000 shapes in well
-under a second.  Rays walk the same tree collapsed to eight children a node (``wide_tree.py``; ``boxes``,
-``child``, ``parent``): one vector slab test per node for its eight children (``shape_tree_lanes.py``, whose scalar
-twin is :func:`box_entered`), where the threaded walk tested one box at a time (decisions.md 90).
+their float64 rounding, so no ray that meets a shape can miss its box.  Built in compiled code, one shape a leaf,
+each split chosen by the surface-area heuristic (:func:`_build_sah`; median splits until decisions.md 106, which
+cut a street of lit facades down its middle): 100,000 shapes in well under a second.  Rays walk the same tree
+collapsed to eight children a node (``wide_tree.py``; ``boxes``, ``child``, ``parent``): one vector slab test per
+node for its eight children (``shape_tree_lanes.py``, whose scalar twin is :func:`box_entered`), where the threaded
+walk tested one box at a time (decisions.md 90), nearest child first for a nearest hit (``intersect._next_leaves``).
 
 The few largest shapes (at most ``MAX_LOOSE``, each more than a quarter of the scene's extent: a ground, a dome)
 stay out of the tree and are tested first: in it, their boxes would be part of every node above them.
@@ -27,7 +28,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .._numba import jit, jit_alloc, jit_inline
+from .._numba import jit_alloc, jit_inline
 from ..errors import ParameterError
 from .shape_tree_lanes import BOXES_WIDTH
 from .wide_tree import WIDTH, collapse
@@ -37,10 +38,14 @@ __all__ = ["LEAF_SIZE", "SHAPES_FOR_BVH", "ShapeTree", "build_shape_tree", "empt
 #: analytic shapes above which a scene takes the hierarchy (the crossover is about 32 on the environment path and
 #: below 6 on the area-light path: decisions.md 70)
 SHAPES_FOR_BVH = 16
-LEAF_SIZE = 1  # one shape a leaf: 4-11 % faster than two on the suite's tree scenes, same bits (decisions.md 90)
+LEAF_SIZE = 1  # one shape a leaf (_build_sah): 4-11 % faster than two on the suite's tree scenes (decisions.md 90)
 MAX_LOOSE = 4  # large shapes kept out of the tree at most
 _PAD = 1e-9  # relative to each box's size and coordinates
 MAX_WIDE_DEPTH = 8  # levels of the eight-wide tree: a ray's walk keeps a byte per level in one int64
+# binary levels below the root at most: a wide node's internal children lie three binary levels below it
+# (wide_tree.py), so a leaf at binary depth 21 sits in wide level 7 at most, the deepest of MAX_WIDE_DEPTH
+MAX_BINARY_DEPTH = 3 * (MAX_WIDE_DEPTH - 1)
+SAH_BINS = 32  # candidate split planes per axis of the surface-area heuristic (Wald 2007's binned build)
 
 
 class ShapeTree(NamedTuple):
@@ -95,7 +100,11 @@ def build_shape_tree(spheres: np.ndarray, rects: np.ndarray) -> ShapeTree:
     if loose.size == n:
         loose = loose[:0]
     rest = np.setdiff1d(np.arange(n), loose)
-    node_lo, node_hi, skip, first, count, prims = _build(lo[rest] - pad[rest], hi[rest] + pad[rest], LEAF_SIZE)
+    if rest.size > 1 << MAX_BINARY_DEPTH:
+        raise ParameterError(f"too many spheres and rectangles for the shape hierarchy ({rest.size} in it)")
+    node_lo, node_hi, skip, first, count, prims = _build_sah(
+        lo[rest] - pad[rest], hi[rest] + pad[rest], MAX_BINARY_DEPTH, SAH_BINS
+    )
     boxes, child, parent = _eight_wide(node_lo, node_hi, skip, count)
     return ShapeTree(
         node_lo, node_hi, skip, first, count, np.ascontiguousarray(rest[prims]), np.sort(loose), boxes, child, parent
@@ -116,19 +125,11 @@ def _eight_wide(node_lo, node_hi, skip, count):
     return np.ascontiguousarray(boxes), child, parent
 
 
-@jit
-def _subtree_nodes(n, leaf):
-    """Nodes of the tree over n shapes: median splits until at most ``leaf`` remain."""
-    if n <= leaf:
-        return 1
-    half = n // 2
-    return 1 + _subtree_nodes(half, leaf) + _subtree_nodes(n - half, leaf)
-
-
 @jit_alloc
 def sort_along_widest_axis(centroid, items, start, end):
     """Sort ``items[start:end]`` (rows of ``centroid``) along the axis where their centroids spread the most: the
-    median split of this tree and of the light BVH (emitters/selection.py).  Stable, so the same tree everywhere."""
+    median split of the light BVH (emitters/selection.py) and this tree's fallback.  Stable, so the same tree
+    everywhere."""
     axis = 0
     widest = -1.0
     for a in range(3):
@@ -142,47 +143,6 @@ def sort_along_widest_axis(centroid, items, start, end):
     for j in range(start, end):
         keys[j - start] = centroid[items[j], axis]
     items[start:end] = items[start:end][np.argsort(keys, kind="mergesort")].copy()
-
-
-@jit_alloc
-def _build(lo, hi, leaf):
-    n = lo.shape[0]
-    m = _subtree_nodes(n, leaf)
-    node_lo = np.empty((m, 3))
-    node_hi = np.empty((m, 3))
-    skip = np.empty(m, np.int64)
-    first = np.zeros(m, np.int64)
-    count = np.zeros(m, np.int64)
-    prims = np.arange(n)
-    centroid = 0.5 * (lo + hi)
-    # explicit stack of (node, start, end) over ``prims``; a node's subtree takes _subtree_nodes(end - start) slots
-    stack = np.empty((2 * 64 + 2, 3), np.int64)
-    stack[0, 0], stack[0, 1], stack[0, 2] = 0, 0, n
-    top = 1
-    while top > 0:
-        top -= 1
-        node, start, end = stack[top, 0], stack[top, 1], stack[top, 2]
-        for a in range(3):
-            node_lo[node, a] = np.inf
-            node_hi[node, a] = -np.inf
-        for j in range(start, end):
-            p = prims[j]
-            for a in range(3):
-                node_lo[node, a] = min(node_lo[node, a], lo[p, a])
-                node_hi[node, a] = max(node_hi[node, a], hi[p, a])
-        size = end - start
-        skip[node] = node + _subtree_nodes(size, leaf)
-        if size <= leaf:
-            first[node] = start
-            count[node] = size
-            continue
-        sort_along_widest_axis(centroid, prims, start, end)
-        half = size // 2
-        left_nodes = _subtree_nodes(half, leaf)
-        stack[top, 0], stack[top, 1], stack[top, 2] = node + 1 + left_nodes, start + half, end
-        stack[top + 1, 0], stack[top + 1, 1], stack[top + 1, 2] = node + 1, start, start + half
-        top += 2
-    return node_lo, node_hi, skip, first, count, prims
 
 
 @jit_inline
@@ -199,3 +159,127 @@ def box_entered(ox, oy, oz, ix, iy, iz, lo, hi, i, tmax):
     near = max(0.0, min(a0, b0), min(a1, b1), min(a2, b2))
     far = min(tmax, max(a0, b0), max(a1, b1), max(a2, b2))
     return near <= far
+
+
+@jit_inline
+def _area(lo_x, lo_y, lo_z, hi_x, hi_y, hi_z):
+    """Half the surface area of a box: a ray's chance of entering it, up to a factor shared by all boxes."""
+    x, y, z = hi_x - lo_x, hi_y - lo_y, hi_z - lo_z
+    return x * y + y * z + z * x
+
+
+@jit_alloc
+def _build_sah(lo, hi, max_depth, bins):
+    """The tree of one shape a leaf, each split chosen by the surface-area heuristic (MacDonald and Booth 1990;
+    binned as Wald 2007): of ``bins`` - 1 planes on each axis between the centroids' extremes, the one that
+    minimises area(left) x shapes(left) + area(right) x shapes(right), the expected number of shapes a ray through
+    the node tests below it.  Median splits cut a street of lit facades through the middle of a facade and give two
+    children whose boxes both span the street; the heuristic puts the empty space between boxes.  A split must
+    leave each side at most 2^(levels left) shapes so that no leaf is deeper than ``max_depth``; when none of the
+    planes does (or every centroid coincides), the node splits at the median along the widest axis instead.
+    Deterministic: a stable partition, ties to the lower axis and plane.  Returns (node_lo, node_hi, skip, first,
+    count, prims) of :class:`ShapeTree`, depth first: any binary tree of n leaves has 2n - 1 nodes, so a node's
+    subtree of k shapes takes 2k - 1 slots wherever its splits fall."""
+    n = lo.shape[0]
+    m = 2 * n - 1
+    node_lo = np.empty((m, 3))
+    node_hi = np.empty((m, 3))
+    skip = np.empty(m, np.int64)
+    first = np.zeros(m, np.int64)
+    count = np.zeros(m, np.int64)
+    prims = np.arange(n)
+    scratch = np.empty(n, np.int64)
+    centroid = 0.5 * (lo + hi)
+    bin_lo = np.empty((bins, 3))
+    bin_hi = np.empty((bins, 3))
+    bin_n = np.empty(bins, np.int64)
+    right_area = np.empty(bins)
+    right_n = np.empty(bins, np.int64)
+    c_lo = np.empty(3)
+    c_hi = np.empty(3)
+    stack = np.empty((2 * max_depth + 2, 4), np.int64)  # node, start, end, depth
+    stack[0, 0], stack[0, 1], stack[0, 2], stack[0, 3] = 0, 0, n, 0
+    top = 1
+    while top > 0:
+        top -= 1
+        node, start, end, depth = stack[top, 0], stack[top, 1], stack[top, 2], stack[top, 3]
+        for a in range(3):
+            node_lo[node, a], node_hi[node, a] = np.inf, -np.inf
+            c_lo[a], c_hi[a] = np.inf, -np.inf
+        for j in range(start, end):
+            p = prims[j]
+            for a in range(3):
+                node_lo[node, a] = min(node_lo[node, a], lo[p, a])
+                node_hi[node, a] = max(node_hi[node, a], hi[p, a])
+                c_lo[a] = min(c_lo[a], centroid[p, a])
+                c_hi[a] = max(c_hi[a], centroid[p, a])
+        size = end - start
+        skip[node] = node + 2 * size - 1
+        if size == 1:
+            first[node], count[node] = start, 1
+            continue
+        cap = 1 << (max_depth - depth - 1)  # the most shapes a child's subtree of max_depth - depth - 1 levels holds
+        best_cost, best_axis, best_plane = np.inf, -1, -1
+        for a in range(3):
+            extent = c_hi[a] - c_lo[a]
+            if not extent > 0.0:
+                continue
+            for b in range(bins):
+                bin_n[b] = 0
+                for k in range(3):
+                    bin_lo[b, k], bin_hi[b, k] = np.inf, -np.inf
+            for j in range(start, end):
+                p = prims[j]
+                b = min(int(bins * ((centroid[p, a] - c_lo[a]) / extent)), bins - 1)
+                bin_n[b] += 1
+                for k in range(3):
+                    bin_lo[b, k] = min(bin_lo[b, k], lo[p, k])
+                    bin_hi[b, k] = max(bin_hi[b, k], hi[p, k])
+            # sweep from the right: the box and count of bins b .. bins - 1
+            rx0, ry0, rz0, rx1, ry1, rz1, rn = np.inf, np.inf, np.inf, -np.inf, -np.inf, -np.inf, 0
+            for b in range(bins - 1, 0, -1):
+                rx0, ry0, rz0 = min(rx0, bin_lo[b, 0]), min(ry0, bin_lo[b, 1]), min(rz0, bin_lo[b, 2])
+                rx1, ry1, rz1 = max(rx1, bin_hi[b, 0]), max(ry1, bin_hi[b, 1]), max(rz1, bin_hi[b, 2])
+                rn += bin_n[b]
+                right_n[b] = rn
+                right_area[b] = _area(rx0, ry0, rz0, rx1, ry1, rz1) if rn > 0 else 0.0
+            # sweep from the left: the plane after bin b splits bins 0 .. b from b + 1 .. bins - 1
+            lx0, ly0, lz0, lx1, ly1, lz1, ln = np.inf, np.inf, np.inf, -np.inf, -np.inf, -np.inf, 0
+            for b in range(bins - 1):
+                lx0, ly0, lz0 = min(lx0, bin_lo[b, 0]), min(ly0, bin_lo[b, 1]), min(lz0, bin_lo[b, 2])
+                lx1, ly1, lz1 = max(lx1, bin_hi[b, 0]), max(ly1, bin_hi[b, 1]), max(lz1, bin_hi[b, 2])
+                ln += bin_n[b]
+                rn = right_n[b + 1]
+                if ln == 0 or rn == 0 or ln > cap or rn > cap:
+                    continue
+                cost = _area(lx0, ly0, lz0, lx1, ly1, lz1) * ln + right_area[b + 1] * rn
+                if cost < best_cost:
+                    best_cost, best_axis, best_plane = cost, a, b
+        if best_axis < 0:  # no plane separates the centroids within the depth allowed: the median
+            sort_along_widest_axis(centroid, prims, start, end)
+            half = size // 2
+        else:
+            a = best_axis
+            extent = c_hi[a] - c_lo[a]
+            half = 0
+            for j in range(start, end):  # a stable partition: the left side's shapes first, each side in order
+                p = prims[j]
+                if min(int(bins * ((centroid[p, a] - c_lo[a]) / extent)), bins - 1) <= best_plane:
+                    scratch[start + half] = p
+                    half += 1
+            right = start + half
+            for j in range(start, end):
+                p = prims[j]
+                if min(int(bins * ((centroid[p, a] - c_lo[a]) / extent)), bins - 1) > best_plane:
+                    scratch[right] = p
+                    right += 1
+            prims[start:end] = scratch[start:end]
+        stack[top, 0], stack[top, 1], stack[top, 2], stack[top, 3] = node + 2 * half, start + half, end, depth + 1
+        stack[top + 1, 0], stack[top + 1, 1], stack[top + 1, 2], stack[top + 1, 3] = (
+            node + 1,
+            start,
+            start + half,
+            depth + 1,
+        )
+        top += 2
+    return node_lo, node_hi, skip, first, count, prims
