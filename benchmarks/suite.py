@@ -505,8 +505,9 @@ def main() -> int:
     parser.add_argument("--write-docs", action="store_true", help="write the table into docs/performance.md")
     parser.add_argument("--quick", action="store_true", help="16 spp, one seed, references of at most a minute")
     parser.add_argument("--json", help="also write every row to this file")
-    parser.add_argument("--table-from", metavar="LOG",
-                        help="no renders: the table (and --write-docs) from a run's printed output")  # fmt: skip
+    parser.add_argument("--table-from", metavar="LOG", nargs="+",
+                        help="no renders: the table (and --write-docs) from a run's printed output; with several "
+                             "logs, each scene's rows from the last log that has them")  # fmt: skip
     parser.add_argument("--worker", choices=["mitsuba", "reference", "lightprobe", "pilot", "occlusion"],
                         help=argparse.SUPPRESS)  # fmt: skip
     parser.add_argument("--scene", help=argparse.SUPPRESS)
@@ -575,28 +576,49 @@ def _commit() -> str:
 
 
 def _table_from(args) -> int:
-    """The table of an earlier run from its printed output (one JSON object per line; a run cut short gives the
-    rows it finished)."""
-    rows, references, notes, header = [], {}, {}, None
-    for line in Path(args.table_from).read_text().splitlines():
-        if line.endswith(": skipped") or ": skipped: " in line or ": failed: " in line:
-            scene, _, note = line.partition(": ")
-            notes[scene] = note
-        if not line.startswith("{"):
-            continue
-        item = json.loads(line)
-        if "cores" in item:
-            header = item
-        elif "renderer" in item:
-            rows.append(item)
-        elif "reference" in item:
-            references.setdefault(item["reference"], {}).update(item)
-        elif "occlusion" in item and item.get("unoccluded") is not None:
-            references.setdefault(item["occlusion"], {})["unoccluded"] = item["unoccluded"]
-    if header is None:
-        raise SystemExit(f"{args.table_from}: no run header")
+    """The table of earlier runs from their printed output (one JSON object per line; a run cut short gives the
+    rows it finished).  With several logs, a scene's rows and reference come from the last log that has rows for
+    it (a run of some scenes after a change replaces theirs), and the table says which commit measured which
+    scenes; the logs must share resolution, seeds and lightprobe options."""
+    rows, references, notes, header, measured = [], {}, {}, None, {}
+    for log in args.table_from:
+        got, refs, this = [], {}, None
+        for line in Path(log).read_text().splitlines():
+            if line.endswith(": skipped") or ": skipped: " in line or ": failed: " in line:
+                scene, _, note = line.partition(": ")
+                notes[scene] = note
+            if not line.startswith("{"):
+                continue
+            item = json.loads(line)
+            if "cores" in item:
+                this = item
+            elif "renderer" in item:
+                got.append(item)
+            elif "reference" in item:
+                refs.setdefault(item["reference"], {}).update(item)
+            elif "occlusion" in item and item.get("unoccluded") is not None:
+                refs.setdefault(item["occlusion"], {})["unoccluded"] = item["unoccluded"]
+        if this is None:
+            raise SystemExit(f"{log}: no run header")
+        if header is not None:
+            for key in ("resolution", "seeds", "lightprobe_options"):
+                if this[key] != header[key]:
+                    raise SystemExit(f"{log}: its {key} {this[key]} differs from the first log's {header[key]}")
+            this = {**this, "spp": sorted(set(header["spp"]) | set(this["spp"]))}
+        header = this
+        scenes = {row["scene"] for row in got}
+        rows = [row for row in rows if row["scene"] not in scenes] + got
+        for scene in scenes:
+            references[scene] = refs.get(scene, {})
+            measured[scene] = (this.get("commit") or "unknown", this.get("date") or "an unknown date")
     args.resolution, args.seeds, args.spp = header["resolution"], header["seeds"], header["spp"]
     args.lightprobe_option = [f"{k}={json.dumps(v)}" for k, v in header["lightprobe_options"].items()]
+    if len(set(measured.values())) > 1:
+        by_run: dict = {}
+        for scene, run in measured.items():
+            by_run.setdefault(run, []).append(scene)
+        header = {**header, "commit": "; ".join(f"{c} ({d}: {', '.join(names)})" for (c, d), names in by_run.items()),
+                  "date": " / ".join(sorted({d for _, d in by_run}))}  # fmt: skip
     _report(args, header, rows, references, notes, None)
     return 0
 

@@ -173,3 +173,32 @@ def test_outline_variance_is_zero_off_and_inside_an_emitter_and_at_most_a_quarte
     assert np.all(floor >= 0.0) and np.all(floor <= 9.0 / 4 + 1e-9)
     assert floor[0, 0, 0] == 0.0 and floor[6, 8, 0] == 0.0  # a corner sees nothing; the centre is inside the light
     assert (floor > 0.0).sum() >= 3 * 10  # the outline crosses pixels all around the light
+
+
+def test_a_table_from_two_logs_takes_each_scenes_rows_from_the_last_log_that_has_them(tmp_path, capsys):
+    """``--table-from old.log new.log``: a scene measured again after a change replaces its rows; the others keep
+    theirs, and the table names the commit of each; logs of another resolution are refused."""
+    import json
+
+    suite = _suite_module()
+
+    def log(path, commit, rows, resolution=(320, 240)):
+        head = {"cores": 2, "spp": [16], "seeds": 2, "resolution": list(resolution), "lightprobe_options": {},
+                "commit": commit, "date": "2026-11-29"}  # fmt: skip
+        path.write_text("\n".join(json.dumps(x) for x in [head, *rows]) + "\n")
+        return str(path)
+
+    old = log(tmp_path / "old.log", "aaaaaaa", [
+        _row("mitsuba", "a", 16, "multijitter 1+1", 0.01, 1.0), _row("lightprobe", "a", 16, "defaults", 0.001, 1.0),
+        _row("mitsuba", "b", 16, "multijitter 1+1", 0.01, 1.0), _row("lightprobe", "b", 16, "defaults", 0.01, 1.0),
+    ])  # fmt: skip
+    new = log(tmp_path / "new.log", "bbbbbbb", [
+        _row("mitsuba", "b", 16, "multijitter 1+1", 0.01, 1.0), _row("lightprobe", "b", 16, "defaults", 0.005, 1.0),
+    ])  # fmt: skip
+    args = type("Args", (), {"table_from": [old, new], "write_docs": False, "json": None})()
+    assert suite._table_from(args) == 0
+    text = capsys.readouterr().out
+    assert "**10.00x**" in text and "**2.00x**" in text and "**1.00x**" not in text  # b's old row is gone
+    args.table_from = [old, log(tmp_path / "small.log", "ccccccc", [], resolution=(64, 48))]
+    with pytest.raises(SystemExit, match="resolution"):
+        suite._table_from(args)
