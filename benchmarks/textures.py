@@ -36,7 +36,8 @@ def _asset_module():
 
 
 def _scene(asset, textured: bool, environment):
-    from lightprobe.geometry import Camera, Scene
+    from lightprobe.geometry import Camera
+    from lightprobe.scene import Scene
 
     scene = Scene(Camera([0.35, 0.95, 2.3], [0.0, 0.42, 0.0], fov=32, resolution=(640, 480)), environment)
     for item in asset.meshes:

@@ -63,8 +63,9 @@ def test_the_textured_asset_script_writes_a_glb_that_loads_and_renders(tmp_path)
     import importlib.util
 
     from lightprobe.emitters.envmap import EnvironmentMap
-    from lightprobe.geometry import Camera, Scene
+    from lightprobe.geometry import Camera
     from lightprobe.io.gltf import load_gltf
+    from lightprobe.scene import Scene
 
     root = Path(__file__).resolve().parents[1] / "examples"
     spec = importlib.util.spec_from_file_location("make_textured_asset", root / "make_textured_asset.py")

@@ -135,3 +135,38 @@ def test_the_package_kernels_carry_their_import_closure_stamp():
     stamp = pipeline.run_stage._cache._cache_file._source_stamp
     assert stamp == _numba._closure_stamps()[str(Path(pipeline.__file__).resolve())]
     assert getattr(caching.IndexDataCacheFile.save, "_lightprobe", False)
+
+
+def test_a_cache_index_naming_a_module_that_is_gone_is_a_miss(tmp_path):
+    """An index pickles its versions' signatures, which name their types' modules; after an upgrade that moved one,
+    Numba's loader raised ModuleNotFoundError from the kernel's first call.  The installed loader reads it as an
+    empty index (the kernel is compiled again and the index rewritten), and still reads a good one."""
+    import pickle
+    import sys
+    import types
+
+    from numba.core import caching
+
+    gone = types.ModuleType("lightprobe_module_that_moved")
+
+    class Moved:
+        pass
+
+    Moved.__module__ = gone.__name__
+    Moved.__qualname__ = "Moved"
+    gone.Moved = Moved
+    sys.modules[gone.__name__] = gone
+    try:
+        payload = pickle.dumps(("stamp", {"signature": Moved()}))
+    finally:
+        del sys.modules[gone.__name__]
+    index = caching.IndexDataCacheFile.__new__(caching.IndexDataCacheFile)
+    index._index_path = str(tmp_path / "f.nbi")
+    index._version = "v"
+    index._source_stamp = "stamp"
+    for data, expected in ((payload, {}), (pickle.dumps(("stamp", {"k": 1})), {"k": 1})):
+        with open(index._index_path, "wb") as f:
+            pickle.dump("v", f)
+            f.write(data)
+        assert getattr(caching.IndexDataCacheFile._load_index, "_lightprobe", False)
+        assert index._load_index() == expected

@@ -12,10 +12,10 @@ import pytest
 
 from lightprobe.bsdfs import Lambert
 from lightprobe.geometry.camera import Camera
-from lightprobe.geometry.scene import Scene
 from lightprobe.geometry.shapes import Rectangle
 from lightprobe.integrators.wavefront import RenderSettings, render
 from lightprobe.reference_scenes import NAMES, SUITE, build, describe, unavailable, unoccluded_power_fraction
+from lightprobe.scene import Scene
 
 SUITE_SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "suite.py"
 

@@ -18,8 +18,9 @@ from .bsdfs import BSDF, GGXConductor, Lambert, MetallicRoughness, Phong, RoughP
 from .emitters.envmap import EnvironmentMap
 from .emitters.punctual import PointLight, SpotLight
 from .errors import ImageError, LightprobeError, LightprobeWarning, ParameterError, SceneError
-from .geometry import Camera, Rectangle, Scene, Sphere, TriangleMesh
+from .geometry import Camera, Rectangle, Sphere, TriangleMesh
 from .integrators import Estimate, RenderResult, RenderSettings, estimate, render
+from .scene import Scene
 from .textures import ImageTexture, MaterialTextures
 
 __version__ = "0.1.0"

@@ -143,6 +143,7 @@ def _install_cache_rules() -> bool:
     """The package's kernels stamped by their import closure (the module docstring); and Numba's index of a
     function's cached versions updated under a file lock, so that processes compiling into one cache at once
     (pytest-xdist's workers) cannot give two versions the same data file."""
+    import pickle
     import threading
 
     from numba.core import caching
@@ -174,6 +175,21 @@ def _install_cache_rules() -> bool:
     if not any(getattr(c, "_lightprobe", False) for c in impl._locator_classes):
         PackageLocator._lightprobe = True
         impl._locator_classes.insert(0, PackageLocator)
+
+    load_index = caching.IndexDataCacheFile._load_index
+    if not getattr(load_index, "_lightprobe", False):
+
+        def tolerant_load_index(self):
+            # an index pickles its versions' signatures, which name the types' modules: after an upgrade that moved
+            # one (geometry/scene.py's SceneArrays, decisions.md 107) Numba's own loader raised ModuleNotFoundError
+            # from every kernel taking it; an index that cannot be read is a miss, and the next save rewrites it
+            try:
+                return load_index(self)
+            except (ImportError, AttributeError, EOFError, TypeError, ValueError, pickle.UnpicklingError):
+                return {}
+
+        tolerant_load_index._lightprobe = True
+        caching.IndexDataCacheFile._load_index = tolerant_load_index
 
     save = caching.IndexDataCacheFile.save
     if fcntl is None or getattr(save, "_lightprobe", False):

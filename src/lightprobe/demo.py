@@ -17,8 +17,8 @@ from .emitters.envmap import EnvironmentMap
 from .emitters.procedural import sky_with_sun
 from .geometry.camera import Camera
 from .geometry.mesh import TriangleMesh
-from .geometry.scene import Scene
 from .geometry.shapes import Rectangle, Sphere
+from .scene import Scene
 
 __all__ = ["DEMOS", "blob_mesh", "demo_scene", "many_lights_scene"]
 

@@ -2,7 +2,7 @@
 
 The assets (a 1024x512 sky with a 0.5-degree sun, a 98,000-triangle blob) come from the peer kit's own
 deterministic generator, ``../shared/peers/mitsuba/scene_assets.py`` (NumPy only), so lightprobe and Mitsuba render
-exactly the same data.  :func:`peer_scene` returns a :class:`~lightprobe.geometry.scene.Scene`.
+exactly the same data.  :func:`peer_scene` returns a :class:`~lightprobe.scene.Scene`.
 """
 
 from __future__ import annotations
@@ -19,8 +19,8 @@ from .emitters.envmap import EnvironmentMap
 from .errors import SceneError
 from .geometry.camera import Camera
 from .geometry.mesh import TriangleMesh
-from .geometry.scene import Scene
 from .geometry.shapes import Rectangle, Sphere
+from .scene import Scene
 
 __all__ = ["find_peers", "peer_assets", "peer_scene", "reference_floor", "variance_file"]
 

@@ -652,7 +652,7 @@ def build(
     resolution: tuple[int, int] | None = None,
     lights: int | None = None,
 ):
-    """The lightprobe :class:`~lightprobe.geometry.scene.Scene` of reference scene ``name`` (of :data:`NAMES` or
+    """The lightprobe :class:`~lightprobe.scene.Scene` of reference scene ``name`` (of :data:`NAMES` or
     :data:`SUITE`).  ``lights_as_mesh``: the rectangle lights as one emissive mesh of two triangles each, one
     radiance per face (the same emitters); ``resolution``: the image size (default: the test references' 64 x 48
     for :data:`NAMES`, :data:`SUITE_RESOLUTION` for the suite's other scenes); ``lights``: as :func:`describe`."""
@@ -660,8 +660,8 @@ def build(
     from .emitters.envmap import EnvironmentMap
     from .geometry.camera import Camera
     from .geometry.mesh import TriangleMesh
-    from .geometry.scene import Scene
     from .geometry.shapes import Rectangle, Sphere
+    from .scene import Scene
 
     if resolution is None:
         resolution = RESOLUTION if name in NAMES else SUITE_RESOLUTION

@@ -14,8 +14,8 @@ from lightprobe.emitters.envmap import EnvironmentMap
 from lightprobe.emitters.procedural import constant
 from lightprobe.errors import ParameterError
 from lightprobe.geometry.camera import Camera
-from lightprobe.geometry.scene import Scene
 from lightprobe.geometry.shapes import Rectangle, Sphere
+from lightprobe.scene import Scene
 
 REF = np.ones((2, 2, 3))
 IMG = REF + np.array([[0.0, 0.1], [0.2, -0.3]])[:, :, None]  # the same error in every channel

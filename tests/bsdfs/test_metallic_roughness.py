@@ -133,8 +133,9 @@ def test_rendered_under_a_constant_sky_it_reflects_its_albedo(strategy):
     radiance 1 shows the directional albedo at normal incidence (the spec's quadrature), for every strategy."""
     from lightprobe.emitters.envmap import EnvironmentMap
     from lightprobe.emitters.procedural import constant
-    from lightprobe.geometry import Camera, Scene, Sphere
+    from lightprobe.geometry import Camera, Sphere
     from lightprobe.integrators import RenderSettings, render
+    from lightprobe.scene import Scene
 
     color, metallic, roughness = [0.9, 0.5, 0.2], 0.3, 0.5
     scene = Scene(Camera([0.0, 0.0, 5.0], [0.0, 0.0, 0.0], fov=0.05, resolution=(2, 2)),

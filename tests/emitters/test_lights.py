@@ -154,9 +154,9 @@ def test_the_sidecar_counts_every_kind_of_light_by_its_flags():
     from lightprobe.bsdfs import Lambert
     from lightprobe.geometry.camera import Camera
     from lightprobe.geometry.mesh import TriangleMesh
-    from lightprobe.geometry.scene import Scene
     from lightprobe.geometry.shapes import Rectangle, Sphere
     from lightprobe.integrators.wavefront import RenderSettings, render
+    from lightprobe.scene import Scene
 
     image = sky_with_sun(32, 16, sun_elevation_deg=40.0, sun_azimuth_deg=30.0, sun_diameter_deg=5.0)
     scene = Scene(Camera([0, 1, 4], [0, 0, 0], resolution=(8, 6)), EnvironmentMap.from_array(image))

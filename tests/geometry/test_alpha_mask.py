@@ -13,10 +13,11 @@ import pytest
 from lightprobe.bsdfs import Lambert
 from lightprobe.emitters.envmap import EnvironmentMap
 from lightprobe.emitters.punctual import PointLight
-from lightprobe.geometry import Camera, Scene
+from lightprobe.geometry import Camera
 from lightprobe.geometry.mesh import TriangleMesh
 from lightprobe.geometry.raytracer import RayTracer
 from lightprobe.integrators import RenderSettings, render
+from lightprobe.scene import Scene
 from lightprobe.textures import ImageTexture, MaterialTextures
 from lightprobe.textures.image_texture import SRGB_TABLE
 

@@ -26,8 +26,8 @@ from lightprobe.geometry.intersect import (
 )
 from lightprobe.geometry.mesh import TriangleMesh
 from lightprobe.geometry.raytracer import RayTracer
-from lightprobe.geometry.scene import Scene
 from lightprobe.geometry.shapes import Rectangle, Sphere
+from lightprobe.scene import Scene
 
 PLACES = [
     ((0.0, 0.0, 0.0), 1.0),

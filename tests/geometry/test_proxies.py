@@ -13,9 +13,9 @@ from lightprobe.geometry.camera import Camera
 from lightprobe.geometry.embree import FAR, EmbreeScene, new_scratch, occluded_batch
 from lightprobe.geometry.mesh import TriangleMesh
 from lightprobe.geometry.proxies import NO_BALL, closest_distances, is_closed, mesh_spheres, winding_number
-from lightprobe.geometry.scene import Scene
 from lightprobe.geometry.shapes import Rectangle
 from lightprobe.integrators.wavefront import RenderSettings, render
+from lightprobe.scene import Scene
 
 CUBE_VERTICES = np.array(
     [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]], dtype=np.float64

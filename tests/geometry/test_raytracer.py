@@ -14,8 +14,8 @@ from lightprobe.emitters.envmap import EnvironmentMap
 from lightprobe.geometry.camera import Camera
 from lightprobe.geometry.intersect import MESH, MISS, RECT, SPHERE
 from lightprobe.geometry.raytracer import RayTracer
-from lightprobe.geometry.scene import Scene
 from lightprobe.geometry.shapes import Rectangle, Sphere
+from lightprobe.scene import Scene
 
 
 @pytest.fixture(scope="module")

@@ -7,9 +7,9 @@ import pytest
 import trimesh
 
 from lightprobe.errors import SceneError
-from lightprobe.geometry.scene import Scene
 from lightprobe.io.images import write_image
 from lightprobe.io.scene_file import load_scene
+from lightprobe.scene import Scene
 
 SCENE = """
 [camera]

@@ -10,7 +10,7 @@ from numba import njit
 
 from lightprobe.geometry.intersect import rectangle_rows
 from lightprobe.geometry.raytracer import _closest_analytic_batch, _occluded_analytic_batch
-from lightprobe.geometry.scene import SceneArrays
+from lightprobe.geometry.scene_arrays import SceneArrays
 from lightprobe.geometry.shape_bvh import (
     LEAF_SIZE,
     MAX_BINARY_DEPTH,

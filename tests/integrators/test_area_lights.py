@@ -18,9 +18,9 @@ from lightprobe.emitters.procedural import sky_with_sun
 from lightprobe.errors import ParameterError
 from lightprobe.geometry.camera import Camera
 from lightprobe.geometry.mesh import TriangleMesh
-from lightprobe.geometry.scene import Scene
 from lightprobe.geometry.shapes import Rectangle, Sphere
 from lightprobe.integrators.wavefront import RenderSettings, render
+from lightprobe.scene import Scene
 
 from ..emitters.test_area import polygon_irradiance
 

@@ -26,10 +26,10 @@ from lightprobe.emitters.procedural import constant
 from lightprobe.errors import LightprobeWarning
 from lightprobe.geometry.camera import Camera
 from lightprobe.geometry.mesh import TriangleMesh
-from lightprobe.geometry.scene import Scene
 from lightprobe.geometry.shapes import Rectangle, Sphere
 from lightprobe.integrators import wavefront
 from lightprobe.integrators.wavefront import RenderSettings, render
+from lightprobe.scene import Scene
 
 from ..emitters.test_area import polygon_irradiance
 

@@ -13,7 +13,6 @@ from lightprobe.bsdfs import Lambert
 from lightprobe.emitters.area import light_intersect
 from lightprobe.geometry.camera import Camera
 from lightprobe.geometry.mesh import TriangleMesh
-from lightprobe.geometry.scene import Scene
 from lightprobe.geometry.shapes import Rectangle, Sphere
 from lightprobe.integrators import outlines
 from lightprobe.integrators.outlines import (
@@ -25,6 +24,7 @@ from lightprobe.integrators.outlines import (
     disk_polygon_area,
 )
 from lightprobe.integrators.wavefront import RenderSettings, render
+from lightprobe.scene import Scene
 
 
 def _disk_area(points) -> float:

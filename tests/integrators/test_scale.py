@@ -28,9 +28,9 @@ from lightprobe.emitters.procedural import sky_with_sun
 from lightprobe.geometry.camera import Camera
 from lightprobe.geometry.intersect import rect_hit, rectangle_rows
 from lightprobe.geometry.mesh import TriangleMesh
-from lightprobe.geometry.scene import Scene
 from lightprobe.geometry.shapes import Rectangle, Sphere
 from lightprobe.integrators.wavefront import RenderSettings, render
+from lightprobe.scene import Scene
 
 
 def _small_light_scene(x0, shape, material):

@@ -106,11 +106,11 @@ def test_the_renderer_takes_each_groups_numbers(path):
     from lightprobe.emitters.procedural import sky_with_sun
     from lightprobe.geometry.camera import Camera
     from lightprobe.geometry.frame import coordinate_system, to_world
-    from lightprobe.geometry.scene import Scene
     from lightprobe.geometry.shapes import Rectangle
     from lightprobe.integrators.techniques import STRATEGIES
     from lightprobe.integrators.wavefront import RenderSettings, render
     from lightprobe.sampling.kernels import square_to_cosine_hemisphere
+    from lightprobe.scene import Scene
 
     env = EnvironmentMap.from_array(sky_with_sun(64, 32, sun_diameter_deg=20.0, sun_radiance=(8.0, 7.0, 6.0)))
     scene = Scene(Camera([0, 1.6, 4.5], [0, 0, 0], fov=1.0, resolution=(1, 1)), env)

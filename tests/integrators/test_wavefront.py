@@ -15,13 +15,13 @@ from lightprobe.emitters.envmap import EnvironmentMap
 from lightprobe.emitters.procedural import constant, sky_with_sun
 from lightprobe.errors import ParameterError
 from lightprobe.geometry.camera import Camera
-from lightprobe.geometry.scene import Scene
 from lightprobe.geometry.shapes import Rectangle, Sphere
 from lightprobe.integrators import wavefront
 from lightprobe.integrators.accumulation import Accumulator
 from lightprobe.integrators.settings import AUTO_BSDF_SAMPLES, AUTO_ENV_SAMPLES, RESOLVED_PER_SCENE
 from lightprobe.integrators.wavefront import RenderSettings, render, result_from
 from lightprobe.peer import find_peers, peer_scene
+from lightprobe.scene import Scene
 
 from . import STRATEGY_CASES
 

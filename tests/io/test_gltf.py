@@ -325,8 +325,9 @@ def test_textures_from_files_data_uris_and_buffer_views(tmp_path, how):
 def test_a_textured_gltf_renders_and_reads_its_tangents(tmp_path):
     """UVs outside [0, 1] wrap, the file's tangents are kept (turned with the node), the image is finite."""
     from lightprobe.emitters.envmap import EnvironmentMap
-    from lightprobe.geometry import Camera, Scene
+    from lightprobe.geometry import Camera
     from lightprobe.integrators import RenderSettings, render
+    from lightprobe.scene import Scene
 
     asset = load_gltf(textured_gltf(tmp_path, tangents=True))
     # the node turns the quad a quarter turn about +Y: the tangent +x goes to -z

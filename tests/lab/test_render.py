@@ -147,8 +147,8 @@ def test_strategy_tokens_and_scene_checks(exercise_scene):
     area = build("area")
     with pytest.raises(TechniqueError, match="environment map alone"):
         render_lab(area, strategy, RenderSettings(spp=1))
-    from lightprobe.geometry import Scene
     from lightprobe.geometry.mesh import TriangleMesh
+    from lightprobe.scene import Scene
     from lightprobe.textures import ImageTexture, MaterialTextures
 
     scene, _ = exercise_scene

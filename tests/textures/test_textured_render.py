@@ -15,9 +15,10 @@ from lightprobe.bsdfs import Lambert, MetallicRoughness
 from lightprobe.emitters.directional import DirectionalLight
 from lightprobe.emitters.envmap import EnvironmentMap
 from lightprobe.errors import SceneError
-from lightprobe.geometry import Camera, Rectangle, Scene, Sphere
+from lightprobe.geometry import Camera, Rectangle, Sphere
 from lightprobe.geometry.mesh import TriangleMesh
 from lightprobe.integrators import RenderSettings, render
+from lightprobe.scene import Scene
 from lightprobe.textures import ImageTexture, MaterialTextures
 from lightprobe.textures.image_texture import SRGB_TABLE
 

@@ -14,8 +14,8 @@ import contextlib
 import dataclasses
 
 from ..errors import LightprobeError
-from ..geometry.scene import Scene
 from ..integrators.wavefront import Accumulator, RenderResult, RenderSettings, render, result_from
+from ..scene import Scene
 
 __all__ = ["dask_client", "render_on_dask", "sample_ranges"]
 

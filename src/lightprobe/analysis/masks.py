@@ -7,8 +7,8 @@ import numpy as np
 from ..geometry.intersect import MESH, MISS, RECT, SPHERE
 from ..geometry.mesh import TriangleMesh
 from ..geometry.raytracer import RayTracer
-from ..geometry.scene import Scene
 from ..geometry.shapes import Rectangle, Sphere
+from ..scene import Scene
 
 __all__ = ["BACKGROUND", "object_id_pass"]
 

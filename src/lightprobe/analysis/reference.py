@@ -28,7 +28,6 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import LightprobeError
-from ..geometry.scene import Scene
 from ..integrators.settings import DIFFUSE, RESOLVED_PER_SCENE
 from ..integrators.wavefront import (
     Accumulator,
@@ -40,6 +39,7 @@ from ..integrators.wavefront import (
     result_from,
     settings_for,
 )
+from ..scene import Scene
 
 __all__ = ["checkpoint_path", "render_reference"]
 

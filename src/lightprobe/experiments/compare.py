@@ -35,8 +35,8 @@ import numpy as np
 
 from ..analysis import metrics
 from ..errors import LightprobeError
-from ..geometry.scene import Scene
 from ..integrators.wavefront import RenderSettings, render, result_from, settings_for
+from ..scene import Scene
 
 __all__ = ["PRESETS", "StrategyRun", "compare", "parse_strategy"]
 

@@ -25,9 +25,9 @@ import numpy as np
 
 from ..bsdfs import Lambert, RoughPlastic
 from ..geometry.camera import Camera
-from ..geometry.scene import Scene
 from ..geometry.shapes import Rectangle, Sphere
 from ..integrators.wavefront import RenderSettings, render
+from ..scene import Scene
 
 __all__ = ["Row", "area_sampling", "area_sampling_scene", "many_lights", "to_json_lines", "to_markdown"]
 

@@ -31,9 +31,9 @@ from ..emitters.envmap import EnvironmentMap
 from ..emitters.procedural import sky_with_sun
 from ..errors import LightprobeError, LightprobeWarning
 from ..geometry.camera import Camera
-from ..geometry.scene import Scene
 from ..geometry.shapes import Rectangle, Sphere
 from ..integrators.wavefront import RenderSettings, render
+from ..scene import Scene
 from .compare import compare
 
 __all__ = ["Row", "environment", "krivanek_mis", "pbrt_envmap_vs_cosine"]

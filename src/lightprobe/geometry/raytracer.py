@@ -15,7 +15,7 @@ from .._numba import jit_parallel, prange
 from ..errors import LightprobeError
 from .embree import FAR, EmbreeScene, intersect_batch, new_scratch, occluded_batch
 from .intersect import MESH, MISS, closest_analytic, may_hit_mesh, occluded_analytic
-from .scene import SceneArrays
+from .scene_arrays import SceneArrays
 
 __all__ = ["RayTracer"]
 
@@ -52,7 +52,7 @@ class RayTracer:
     Parameters
     ----------
     arrays : SceneArrays
-        From :meth:`lightprobe.geometry.scene.Scene.compile`.
+        From :meth:`lightprobe.scene.Scene.compile`.
     threads : int
         Kept for callers; Embree batches run in Numba's threads (``numba.set_num_threads``).
     """

@@ -42,10 +42,10 @@ from ..emitters.selection import build_selector
 from ..errors import LightprobeWarning, ParameterError
 from ..geometry.embree import PACKET, packets_native
 from ..geometry.raytracer import RayTracer
-from ..geometry.scene import Scene
 from ..geometry.shape_bvh import SHAPES_FOR_BVH
 from ..geometry.shapes import Rectangle, Sphere
 from ..sampling.rng import SAMPLERS
+from ..scene import Scene
 from ..simd import LANES
 from . import adaptive, outlines, pipeline, precompile
 from .accumulation import Accumulator, RenderResult, result_from

@@ -147,9 +147,9 @@ from ..emitters.punctual import PointLight, SpotLight
 from ..errors import LightprobeError, SceneError, numeric_array
 from ..geometry.camera import Camera
 from ..geometry.mesh import TriangleMesh
-from ..geometry.scene import Scene
 from ..geometry.shapes import Rectangle, Sphere
 from ..integrators.settings import read_render_table
+from ..scene import Scene
 
 __all__ = ["load_scene", "material_from_table"]
 

@@ -9,12 +9,12 @@ from lightprobe.emitters.envmap import placeholder_environment
 from lightprobe.emitters.selection import build_selector
 from lightprobe.geometry.camera import Camera
 from lightprobe.geometry.embree import PACKET, new_scratch
-from lightprobe.geometry.scene import Scene
 from lightprobe.integrators import outlines, pipeline
 from lightprobe.integrators.accumulation import Accumulator
 from lightprobe.integrators.pass_state import CameraSamples, PassConstants, Slots, camera_buffers, slot_buffers
 from lightprobe.integrators.stages.ray_lanes import FIELDS as RAY_FIELDS
 from lightprobe.integrators.techniques import STRATEGIES
+from lightprobe.scene import Scene
 
 
 def constants(m: int, **given) -> PassConstants:

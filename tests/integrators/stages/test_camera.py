@@ -16,11 +16,11 @@ from lightprobe.geometry.camera import Camera
 from lightprobe.geometry.embree import new_scratch
 from lightprobe.geometry.intersect import MESH, MISS, RECT, SPHERE
 from lightprobe.geometry.raytracer import RayTracer
-from lightprobe.geometry.scene import Scene
 from lightprobe.geometry.shapes import Rectangle, Sphere
 from lightprobe.integrators import wavefront
 from lightprobe.integrators.wavefront import RenderSettings, render
 from lightprobe.sampling.rng import SAMPLERS
+from lightprobe.scene import Scene
 
 from . import records
 

@@ -118,8 +118,8 @@ def test_maps_the_lanes_do_not_take_render_through_the_scalar_stage(env, monkeyp
     with cosine-weighted BSDF samples."""
     from lightprobe.bsdfs import Lambert
     from lightprobe.geometry.camera import Camera
-    from lightprobe.geometry.scene import Scene
     from lightprobe.geometry.shapes import Sphere
+    from lightprobe.scene import Scene
 
     radiance, albedo = 1.5, 0.6
     if env == "nearest":

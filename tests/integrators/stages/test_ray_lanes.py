@@ -13,7 +13,6 @@ from lightprobe.emitters.kinds import LIGHT_RECT, LIGHT_SPHERE, LIGHT_TRIANGLE
 from lightprobe.geometry.camera import Camera
 from lightprobe.geometry.intersect import ANALYTIC_ERROR, MISS, RECT, SPHERE
 from lightprobe.geometry.mesh import TriangleMesh
-from lightprobe.geometry.scene import Scene
 from lightprobe.geometry.shapes import Rectangle, Sphere
 from lightprobe.integrators import pipeline
 from lightprobe.integrators.techniques import (
@@ -27,6 +26,7 @@ from lightprobe.integrators.techniques import (
     TEST_MESH,
     VISIBLE,
 )
+from lightprobe.scene import Scene
 
 from . import records
 

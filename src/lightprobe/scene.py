@@ -17,21 +17,21 @@ flattens everything into the plain arrays the Numba kernels read (:class:`SceneA
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import NamedTuple
 
 import numpy as np
 
-from ..bsdfs.base import BSDF, PARAM_SIZE
-from ..emitters.envmap import EnvironmentMap
-from ..errors import SceneError, warn_once
-from .camera import Camera
-from .intersect import RECT_WIDTH, rectangle_rows
-from .mesh import TriangleMesh
-from .shape_bvh import build_shape_tree
-from .shapes import Rectangle, Sphere
-from .transform import make_transform
+from .bsdfs.base import BSDF, PARAM_SIZE
+from .emitters.envmap import EnvironmentMap
+from .errors import SceneError, warn_once
+from .geometry.camera import Camera
+from .geometry.intersect import RECT_WIDTH, rectangle_rows
+from .geometry.mesh import TriangleMesh
+from .geometry.scene_arrays import SceneArrays
+from .geometry.shape_bvh import build_shape_tree
+from .geometry.shapes import Rectangle, Sphere
+from .geometry.transform import make_transform
 
-__all__ = ["Scene", "SceneArrays", "SceneObject"]
+__all__ = ["Scene", "SceneObject"]
 
 Shape = TriangleMesh | Sphere | Rectangle
 
@@ -43,54 +43,6 @@ class SceneObject:
     two_sided: bool
     name: str
     emission: np.ndarray | None = None  # RGB radiance emitted (uniformly, on the front or both sides), or None
-
-
-class SceneArrays(NamedTuple):
-    """Everything the kernels need, as arrays (world space)."""
-
-    mesh_vertices: np.ndarray  # (V, 3) float64
-    mesh_normals: np.ndarray  # (V, 3) float64, zeros for flat meshes
-    mesh_faces: np.ndarray  # (F, 3) int64, indices into mesh_vertices
-    mesh_face_start: np.ndarray  # (M + 1,) int64: mesh g owns faces [start[g], start[g+1])
-    mesh_smooth: np.ndarray  # (M,) int64, 1 = interpolate vertex normals
-    mesh_material: np.ndarray  # (M,) int64
-    mesh_two_sided: np.ndarray  # (M,) int64
-    mesh_bounds: np.ndarray  # (M, 2, 3) float64
-    mesh_spheres: np.ndarray  # (M, 5) float64: centre, outer radius^2, inner radius^2 (geometry/proxies.py)
-    spheres: np.ndarray  # (S, 4) float64: centre, radius
-    sphere_material: np.ndarray
-    sphere_two_sided: np.ndarray
-    rects: np.ndarray  # (R, RECT_WIDTH) float64: origin, edge_u, edge_v, unit normal, dual u, dual v
-    rect_material: np.ndarray
-    rect_two_sided: np.ndarray
-    sphere_light: np.ndarray  # (S,) int64: the sphere's row in the light table, -1 if it does not emit
-    rect_light: np.ndarray  # (R,) int64
-    mesh_light_start: np.ndarray  # (M,) int64: the light of face f of mesh g is start[g] + f; -1: no emission
-    material_kind: np.ndarray  # (K,) int64
-    material_params: np.ndarray  # (K, PARAM_SIZE) float64
-    # textures (textures/): per material, 1 if textured, its texture rows by use (-1: none) and normal-map scale;
-    # per mesh vertex, texture coordinates and tangents (zeros where unused); the packed texture table
-    material_textured: np.ndarray  # (K,) int64
-    material_textures: np.ndarray  # (K, 3) int64: base colour, metallic-roughness, normal
-    material_normal_scale: np.ndarray  # (K,) float64
-    material_alpha: np.ndarray  # (K, 2) float64: alpha cutoff (-1: opaque) and alpha factor (geometry/alpha_mask.py)
-    mesh_uvs: np.ndarray  # (V, 2) float64
-    mesh_tangents: np.ndarray  # (V, 4) float64
-    texture_table: np.ndarray  # (T, 7) int64 (textures/image_texture.py)
-    texture_bytes: np.ndarray  # (N, 4) uint8
-    texture_floats: np.ndarray  # (N', 4) float32
-    # a hierarchy over spheres and rectangles when there are many (geometry/shape_bvh.ShapeTree's arrays; a nested
-    # tuple is refused by Numba's parallel kernels, so its fields are flat here): empty arrays otherwise
-    tree_lo: np.ndarray
-    tree_hi: np.ndarray
-    tree_skip: np.ndarray
-    tree_first: np.ndarray
-    tree_count: np.ndarray
-    tree_prims: np.ndarray
-    tree_loose: np.ndarray
-    tree_boxes: np.ndarray
-    tree_child: np.ndarray
-    tree_parent: np.ndarray
 
 
 class Scene:
@@ -140,7 +92,7 @@ class Scene:
         if material is None:
             if emission is None:
                 raise SceneError(f"{label}: needs a material (or an emission)")
-            from ..bsdfs import Lambert
+            from .bsdfs import Lambert
 
             if "black" not in self.materials:
                 self.add_material("black", Lambert(0.0))
@@ -173,8 +125,8 @@ class Scene:
     def add_light(self, light):
         """Add a :class:`~lightprobe.emitters.punctual.PointLight`, :class:`~lightprobe.emitters.punctual.SpotLight`
         or :class:`~lightprobe.emitters.directional.DirectionalLight` (an emitter without a surface)."""
-        from ..emitters.directional import DirectionalLight
-        from ..emitters.punctual import PointLight
+        from .emitters.directional import DirectionalLight
+        from .emitters.punctual import PointLight
 
         if not isinstance(light, PointLight | DirectionalLight):
             raise SceneError(f"add_light takes a PointLight, SpotLight or DirectionalLight, got {type(light).__name__}")
@@ -284,8 +236,8 @@ class Scene:
         """The light table (:class:`~lightprobe.emitters.kinds.LightArrays`, world space): every emissive object --
         spheres, rectangles, then each face of each emissive mesh, in the order :meth:`compile` numbers them --,
         the point and spot lights, then the infinite lights: the directional ones, and the environment last."""
-        from ..emitters.kinds import KINDS, LightArrays, concatenate
-        from ..emitters.lights import light_arrays
+        from .emitters.kinds import KINDS, LightArrays, concatenate
+        from .emitters.lights import light_arrays
 
         emitters = self.emitters
         spheres = [o for o in emitters if isinstance(o.shape, Sphere)]
@@ -349,8 +301,8 @@ def _light_rows(obj: SceneObject) -> int:
 
 def _emission(value, shape, label: str) -> np.ndarray | None:
     """RGB radiance (3,), or for a mesh also one per face (F, 3); None when it is black everywhere."""
-    from ..bsdfs.base import rgb_param
-    from ..errors import LightprobeError, numeric_array
+    from .bsdfs.base import rgb_param
+    from .errors import LightprobeError, numeric_array
 
     arr = numeric_array(value, f"{label}: emission", SceneError)
     if arr.ndim == 2 and isinstance(shape, TriangleMesh):
@@ -368,7 +320,7 @@ def _emission(value, shape, label: str) -> np.ndarray | None:
 
 def _triangle_lights(mesh: TriangleMesh, emission, two_sided: bool):
     """The light table rows of an emissive mesh, one per face."""
-    from ..emitters.kinds import KINDS, LightArrays
+    from .emitters.kinds import KINDS, LightArrays
 
     v = mesh.vertices[mesh.faces]  # (F, 3, 3)
     cross = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
@@ -389,8 +341,8 @@ class _TextureRows:
     """The materials' textures in the kernels' layout (``SceneArrays.material_textured`` and after)."""
 
     def __init__(self, materials: list[BSDF]):
-        from ..textures import pack_textures
-        from ..textures.material_textures import USES
+        from .textures import pack_textures
+        from .textures.material_textures import USES
 
         k = len(materials)
         self.textured = np.zeros(k, np.int64)
@@ -416,7 +368,7 @@ class _TextureRows:
     @staticmethod
     def proxy_spheres(mesh: TriangleMesh, material: BSDF) -> np.ndarray:
         """The mesh's proxy spheres; without the inner ball if its material cuts holes in it."""
-        from .proxies import NO_BALL
+        from .geometry.proxies import NO_BALL
 
         if material.textures is None or not material.textures.masked:
             return mesh.spheres
@@ -427,8 +379,8 @@ class _TextureRows:
     @staticmethod
     def tangents(mesh: TriangleMesh, material: BSDF) -> np.ndarray:
         """The mesh's tangents where its material has a normal map (generated if it stores none), else zeros."""
-        from ..textures import generate_tangents
-        from .mesh import angle_weighted_normals
+        from .geometry.mesh import angle_weighted_normals
+        from .textures import generate_tangents
 
         if material.textures is None or material.textures.normal is None:
             return np.zeros((mesh.vertices.shape[0], 4))
