@@ -577,9 +577,10 @@ def _commit() -> str:
 
 def _table_from(args) -> int:
     """The table of earlier runs from their printed output (one JSON object per line; a run cut short gives the
-    rows it finished).  With several logs, a scene's rows and reference come from the last log that has rows for
-    it (a run of some scenes after a change replaces theirs), and the table says which commit measured which
-    scenes; the logs must share resolution, seeds and lightprobe options."""
+    rows it finished).  With several logs, a renderer's rows of a scene come from the last log that has that
+    renderer's rows of it (a run of some scenes after a change replaces lightprobe's and the peers' rows there and
+    keeps another peer's), references merge, and the table says which commit measured what; the logs must share
+    resolution, seeds and lightprobe options."""
     rows, references, notes, header, measured = [], {}, {}, None, {}
     for log in args.table_from:
         got, refs, this = [], {}, None
@@ -606,17 +607,18 @@ def _table_from(args) -> int:
                     raise SystemExit(f"{log}: its {key} {this[key]} differs from the first log's {header[key]}")
             this = {**this, "spp": sorted(set(header["spp"]) | set(this["spp"]))}
         header = this
-        scenes = {row["scene"] for row in got}
-        rows = [row for row in rows if row["scene"] not in scenes] + got
-        for scene in scenes:
-            references[scene] = refs.get(scene, {})
-            measured[scene] = (this.get("commit") or "unknown", this.get("date") or "an unknown date")
+        measures = {(row["scene"], row["renderer"]) for row in got}
+        rows = [row for row in rows if (row["scene"], row["renderer"]) not in measures] + got
+        for scene, ref in refs.items():
+            references.setdefault(scene, {}).update(ref)
+        for scene, renderer in measures:
+            measured[scene, renderer] = (this.get("commit") or "unknown", this.get("date") or "an unknown date")
     args.resolution, args.seeds, args.spp = header["resolution"], header["seeds"], header["spp"]
     args.lightprobe_option = [f"{k}={json.dumps(v)}" for k, v in header["lightprobe_options"].items()]
     if len(set(measured.values())) > 1:
         by_run: dict = {}
-        for scene, run in measured.items():
-            by_run.setdefault(run, []).append(scene)
+        for (scene, renderer), run in sorted(measured.items()):
+            by_run.setdefault(run, []).append(f"{scene} {renderer}")
         header = {**header, "commit": "; ".join(f"{c} ({d}: {', '.join(names)})" for (c, d), names in by_run.items()),
                   "date": " / ".join(sorted({d for _, d in by_run}))}  # fmt: skip
     _report(args, header, rows, references, notes, None)

@@ -175,9 +175,10 @@ def test_outline_variance_is_zero_off_and_inside_an_emitter_and_at_most_a_quarte
     assert (floor > 0.0).sum() >= 3 * 10  # the outline crosses pixels all around the light
 
 
-def test_a_table_from_two_logs_takes_each_scenes_rows_from_the_last_log_that_has_them(tmp_path, capsys):
-    """``--table-from old.log new.log``: a scene measured again after a change replaces its rows; the others keep
-    theirs, and the table names the commit of each; logs of another resolution are refused."""
+def test_a_table_from_two_logs_takes_each_renderers_rows_from_the_last_log_that_has_them(tmp_path, capsys):
+    """``--table-from old.log new.log``: a scene measured again after a change replaces its rows of the renderers
+    measured again; the others keep theirs, and the table names the commit of each; logs of another resolution are
+    refused."""
     import json
 
     suite = _suite_module()
@@ -193,12 +194,13 @@ def test_a_table_from_two_logs_takes_each_scenes_rows_from_the_last_log_that_has
         _row("mitsuba", "b", 16, "multijitter 1+1", 0.01, 1.0), _row("lightprobe", "b", 16, "defaults", 0.01, 1.0),
     ])  # fmt: skip
     new = log(tmp_path / "new.log", "bbbbbbb", [
-        _row("mitsuba", "b", 16, "multijitter 1+1", 0.01, 1.0), _row("lightprobe", "b", 16, "defaults", 0.005, 1.0),
+        _row("lightprobe", "b", 16, "defaults", 0.005, 1.0), _row("lightprobe", "a", 16, "defaults", 0.002, 1.0),
     ])  # fmt: skip
     args = type("Args", (), {"table_from": [old, new], "write_docs": False, "json": None})()
     assert suite._table_from(args) == 0
     text = capsys.readouterr().out
-    assert "**10.00x**" in text and "**2.00x**" in text and "**1.00x**" not in text  # b's old row is gone
+    # a's and b's lightprobe rows are the new log's (5x, 2x), their Mitsuba rows the old one's
+    assert "**5.00x**" in text and "**2.00x**" in text and "**10.00x**" not in text and "**1.00x**" not in text
     args.table_from = [old, log(tmp_path / "small.log", "ccccccc", [], resolution=(64, 48))]
     with pytest.raises(SystemExit, match="resolution"):
         suite._table_from(args)
