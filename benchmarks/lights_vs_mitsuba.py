@@ -99,7 +99,7 @@ def _mitsuba_worker(args) -> None:
 
     mi.set_variant("llvm_ad_rgb")
     import lightprobe.reference_scenes as rs
-    from lightprobe.io.images import write_image
+    from lightprobe.images import write_image
 
     rs.RESOLUTION = tuple(args.resolution)
     desc = rs.describe(args.scene, lights=_lights(args, args.scene))

@@ -234,7 +234,7 @@ def render(name: str, spp: int, passes: int, out: Path, *, lights: int | None = 
     import mitsuba as mi
 
     mi.set_variant("llvm_ad_rgb")
-    from lightprobe.io.images import write_image
+    from lightprobe.images import write_image
     from lightprobe.reference_scenes import describe, environment_image
 
     desc = describe(name, lights=lights)

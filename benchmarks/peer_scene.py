@@ -53,9 +53,9 @@ def _replace_blob(path: str) -> None:
 def run_one(args) -> dict:
     from lightprobe.analysis.metrics import relmse
     from lightprobe.geometry.raytracer import RayTracer
+    from lightprobe.images import read_image, write_image
     from lightprobe.integrators import wavefront
     from lightprobe.integrators.wavefront import RenderSettings, render
-    from lightprobe.io.images import read_image, write_image
     from lightprobe.peer import peer_scene, reference_floor
 
     if args.mesh:

@@ -323,7 +323,7 @@ def _mitsuba_scene(mi, mr, scene: str, resolution, tmp: str, *, power: bool, spp
         d["sensor"]["film"]["width"], d["sensor"]["film"]["height"] = resolution
         return d
     import lightprobe.reference_scenes as rs
-    from lightprobe.io.images import write_image
+    from lightprobe.images import write_image
 
     desc = rs.describe(scene)
     env_file = None

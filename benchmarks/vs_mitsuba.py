@@ -127,7 +127,7 @@ def _reference(py: str | None, kit: Path, cache: Path, chunks: int = REFERENCE_C
 def _average_chunks(chunks: list[Path], out: Path) -> None:
     """``out``: the mean of independent renders ``chunks`` (equal spp each), with ``out``'s ``_var`` file the
     variance of that mean (the mean of their variances / their number)."""
-    from lightprobe.io.images import read_image, write_image  # importable: _kit() put src on the path
+    from lightprobe.images import read_image, write_image  # importable: _kit() put src on the path
     from lightprobe.peer import variance_file
 
     means = [read_image(str(c))[:, :, :3].astype(np.float64) for c in chunks]

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lightprobe.io.images import linear_to_srgb
+from lightprobe.images import linear_to_srgb
 
 HERE = Path(__file__).resolve().parent
 

@@ -12,7 +12,7 @@ import pytest
 
 from lightprobe.cli import main
 from lightprobe.emitters.procedural import sky_with_sun
-from lightprobe.io.images import read_image, write_image
+from lightprobe.images import read_image, write_image
 
 
 @pytest.fixture

@@ -58,7 +58,7 @@ def _gltf_with_a_bad_index() -> str:
 
 def _damaged_folder(root: Path) -> Path:
     """Every damaged input of the cases below, beside good ones, in ``root``."""
-    from lightprobe.io.images import write_png
+    from lightprobe.images import write_png
     from lightprobe.lab.exercise import init_exercise
 
     (root / "scene.toml").write_text(SCENE)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lightprobe.io.images import write_image
+from lightprobe.images import write_image
 from lightprobe.peer import reference_floor
 
 

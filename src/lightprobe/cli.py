@@ -456,9 +456,9 @@ def compare_command(
 
     from .analysis.report import write_report
     from .experiments.compare import compare
+    from .images import read_image
     from .integrators.settings import RenderSettings
     from .integrators.wavefront import render
-    from .io.images import read_image
 
     if output.suffix.lower() not in (".html", ".htm"):
         raise LightprobeError(f"{output}: the report is an .html file")
@@ -708,7 +708,7 @@ def _write_object_ids(path: Path, scene) -> list[Path]:
     import numpy as np
 
     from .analysis.masks import object_id_pass
-    from .io.images import write_image
+    from .images import write_image
 
     ids, names = object_id_pass(scene)
     written = [write_image(path, ids.astype(np.float32)[:, :, None], channel_names=["object_id"])]
@@ -1112,7 +1112,7 @@ def envmap_convert(
 ) -> None:
     """Convert between lat-long and Debevec's angular light-probe mapping."""
     from .emitters.envmap import EnvironmentMap
-    from .io.images import write_image
+    from .images import write_image
 
     if to not in ("latlong", "angular"):
         raise LightprobeError(f"--to must be latlong or angular, got {to!r}")

@@ -106,7 +106,7 @@ def reference_noise(reference: str | Path) -> np.ndarray | None:
     variance of its mean, from ``NAME_var.exr`` beside ``NAME.exr`` as the kit's ``render.py --variance-out`` writes
     it; None without that file."""
     from .analysis.metrics import RELMSE_EPSILON
-    from .io.images import read_image
+    from .images import read_image
 
     variance = variance_file(reference)
     if not variance.exists():

@@ -53,7 +53,7 @@ def test_an_unreachable_scheduler_is_one_clear_error():
 def test_reference_command_on_a_local_cluster_resumes_a_checkpoint(tmp_path):
     """Half the reference in one process, the rest on Dask: the merged image equals one uninterrupted render."""
     from lightprobe.cli import main
-    from lightprobe.io.images import read_image
+    from lightprobe.images import read_image
     from lightprobe.io.scene_file import load_scene
 
     from .test_reference import SCENE

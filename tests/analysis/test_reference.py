@@ -14,8 +14,8 @@ import pytest
 from lightprobe.analysis.reference import checkpoint_path, render_reference
 from lightprobe.cli import main
 from lightprobe.errors import LightprobeError
+from lightprobe.images import read_image
 from lightprobe.integrators.wavefront import RenderSettings, render
-from lightprobe.io.images import read_image
 from lightprobe.io.scene_file import load_scene
 
 SCENE = (

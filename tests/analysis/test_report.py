@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from lightprobe.cli import main
-from lightprobe.io.images import read_image
+from lightprobe.images import read_image
 
 CHROMIUM = next((shutil.which(n) for n in ("chromium", "chromium-browser", "google-chrome") if shutil.which(n)), None)
 

@@ -13,7 +13,7 @@ from lightprobe.emitters.envmap import EnvironmentMap
 from lightprobe.emitters.mappings import direction_to_latlong
 from lightprobe.emitters.procedural import constant, sky_with_sun
 from lightprobe.errors import ImageError, LightprobeWarning, ParameterError
-from lightprobe.io.images import write_image
+from lightprobe.images import write_image
 
 from ..conftest import load_quietly, real_envmap_paths, requires_data
 
@@ -396,7 +396,7 @@ def _loud_load(path, **options):
     ("width", "height", "warns"), [(96, 32, True), (64, 64, True), (64, 32, False), (65, 32, False)]
 )
 def test_a_latlong_map_that_is_not_two_to_one_warns(tmp_path, width, height, warns):
-    from lightprobe.io.images import write_image
+    from lightprobe.images import write_image
 
     path = write_image(tmp_path / f"map{width}x{height}.exr", np.ones((height, width, 3), np.float32))
     _, messages = _loud_load(path)
@@ -409,7 +409,7 @@ def test_a_latlong_map_that_is_not_two_to_one_warns(tmp_path, width, height, war
 
 def test_a_non_square_angular_map_is_an_error_naming_the_file(tmp_path):
     from lightprobe.errors import ImageError
-    from lightprobe.io.images import write_image
+    from lightprobe.images import write_image
 
     path = write_image(tmp_path / "probe.exr", np.ones((32, 48, 3), np.float32))
     with pytest.raises(ImageError, match=r"probe.exr: an angular .* must be square .*, this one is 48x32"):
@@ -447,7 +447,7 @@ def test_each_warning_is_printed_once_per_file():
     import tempfile
     from pathlib import Path
 
-    from lightprobe.io.images import write_image
+    from lightprobe.images import write_image
 
     with tempfile.TemporaryDirectory() as folder:
         img = np.ones((32, 96, 3), np.float32)

@@ -7,7 +7,7 @@ import pytest
 import trimesh
 
 from lightprobe.errors import SceneError
-from lightprobe.io.images import write_image
+from lightprobe.images import write_image
 from lightprobe.io.scene_file import load_scene
 from lightprobe.scene import Scene
 

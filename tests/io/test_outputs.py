@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from lightprobe.errors import ImageError
+from lightprobe.images import read_image
 from lightprobe.integrators.wavefront import RenderResult
-from lightprobe.io.images import read_image
 from lightprobe.io.outputs import check_output, write_render
 
 

@@ -21,7 +21,7 @@ def _pyplot():
 
 def plot_envmap_pdf(env, output: str | os.PathLike, *, compensated: bool = False) -> Path:
     """Write a PNG: the tone-mapped map above its sampling PDF per steradian (log10 colour scale)."""
-    from ..io.images import linear_to_srgb
+    from ..images import linear_to_srgb
 
     plt = _pyplot()
     image = env.to_array()

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io.images import linear_to_srgb
+from ..images import linear_to_srgb
 
 __all__ = ["write_gallery", "write_report"]
 

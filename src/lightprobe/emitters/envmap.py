@@ -555,10 +555,10 @@ class EnvironmentMap:
         """Read a map (see the class for ``options``: scale, rotation, lookup, pdf, ...).
 
         .exr, .hdr and .pfm hold linear radiance; an 8-bit PNG/JPEG is decoded to linear with a warning (see
-        :func:`~lightprobe.io.images.read_radiance`).  A lat-long map that is not 2:1 loads with a warning (a crop,
+        :func:`~lightprobe.images.read_radiance`).  A lat-long map that is not 2:1 loads with a warning (a crop,
         a cube cross or a mirror ball is the usual cause); an angular map must be square.
         """
-        from ..io.images import read_radiance
+        from ..images import read_radiance
 
         source = str(Path(path))
         pixels = read_radiance(path)

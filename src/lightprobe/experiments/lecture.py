@@ -70,7 +70,7 @@ def _measure(experiment, scene, settings, label, reference, out_dir: Path | None
     mse, rel = _errors(result.image, reference)
     rays = int(result.stats["rays"])
     if out_dir is not None:
-        from ..io.images import write_png
+        from ..images import write_png
 
         write_png(out_dir / f"{experiment}-{label}.png", result.image)
     return Row(experiment, label, settings.light_samples, settings.spp, result.stats["seconds"], rays, mse, rel)
@@ -80,7 +80,7 @@ def _reference(scene, spp: int, seed: int, out_dir: Path | None, name: str, **op
     settings = RenderSettings(spp=spp, strategy="mis", light_sampler="bvh", seed=seed, **options)
     image = render(scene, settings).image.astype(np.float64)
     if out_dir is not None:
-        from ..io.images import write_image, write_png
+        from ..images import write_image, write_png
 
         write_png(out_dir / f"{name}-reference.png", image)
         write_image(out_dir / f"{name}-reference.exr", image)

@@ -22,7 +22,7 @@ import numpy as np
 
 from .. import __version__
 from ..errors import ImageError
-from .images import LINEAR_FORMATS, write_image, write_png
+from ..images import LINEAR_FORMATS, write_image, write_png
 
 __all__ = ["check_output", "write_render"]
 

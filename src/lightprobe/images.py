@@ -17,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..color import linear_to_srgb, srgb_to_linear
-from ..errors import ImageError, ParameterError, library_message, library_output_held, warn_once
+from .color import linear_to_srgb, srgb_to_linear
+from .errors import ImageError, ParameterError, library_message, library_output_held, warn_once
 
 __all__ = [
     "LINEAR_FORMATS",

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from lightprobe.errors import ImageError
-from lightprobe.io.images import linear_to_srgb, read_image, srgb_to_linear, write_image, write_png
+from lightprobe.images import linear_to_srgb, read_image, srgb_to_linear, write_image, write_png
 
 
 @pytest.mark.parametrize("ext", [".exr", ".pfm", ".hdr"])
@@ -108,7 +108,7 @@ def test_display_encoded_images_are_decoded_to_linear_with_the_srgb_curve(tmp_pa
     import warnings
 
     from lightprobe.errors import LightprobeWarning
-    from lightprobe.io.images import read_radiance
+    from lightprobe.images import read_radiance
 
     codes = np.tile(np.array([0, 10, 64, 128, 200, 255], np.uint8)[None, :, None], (2, 1, 3))
     path = _write_8bit(tmp_path / f"ldr{ext}", codes)
@@ -130,7 +130,7 @@ def test_display_encoded_images_are_decoded_to_linear_with_the_srgb_curve(tmp_pa
 def test_linear_formats_are_read_as_stored(tmp_path, ext):
     import warnings
 
-    from lightprobe.io.images import read_radiance
+    from lightprobe.images import read_radiance
 
     img = np.array([[[0.25, 0.5, 4.0], [1e3, 0.0, 0.125]]], np.float32)
     path = write_image(tmp_path / f"lin{ext}", img)
