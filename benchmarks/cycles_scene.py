@@ -323,6 +323,8 @@ def _sphere_light(name: str, center, radius: float, radiance):
     light.use_soft_falloff = False  # a sphere of uniform radiance (Blender 4+), not the legacy soft point light
     ob = bpy.data.objects.new(name, light)
     ob.location = tuple(to_blender(center))
+    # a light object is hidden from camera rays by default; Mitsuba's emitting sphere is seen
+    ob.visible_camera = ob.visible_diffuse = ob.visible_glossy = True
     bpy.context.scene.collection.objects.link(ob)
     return ob
 
