@@ -29,10 +29,11 @@ Translation (as ``../shared/peers/cycles/render.py``, the measured recipe for th
   uniform radiance L: power 4 pi^2 r^2 L, Cycles' eval factor 1 / (4 pi * pi r^2)), plus a black exact sphere of
   radius 0.999 r that occludes as Mitsuba's emitting sphere does.
 * Spheres: exact (a one-point point cloud, which Cycles intersects analytically).
-* Environment: a constant is a Background colour; a lat-long map an Environment Texture (linear) turned +90
-  degrees about Z so that its u is Mitsuba's atan2(d.x, -d.z) / (2 pi), world importance map 4096 x 2048 (the
-  kit's finding: at the map's own resolution the cells beside a small sun miss it and BSDF rays that find it
-  make fireflies).
+* Environment: a constant is a Background colour; a lat-long map is looked up as Mitsuba does (the description's
+  convention: u = atan2(d.x, -d.z) / (2 pi), texel-centred columns, corner-aligned rows) by math nodes and an
+  Image Texture (linear), as the kit's ``--env-lookup mitsuba`` (its Environment Texture, ``lookup="envtex"``,
+  puts rows half a texel off); world importance map 4096 x 2048 (the kit's finding: at the map's own
+  resolution the cells beside a small sun miss it and BSDF rays that find it make fireflies).
 """
 
 from __future__ import annotations
@@ -329,7 +330,7 @@ def _sphere_light(name: str, center, radius: float, radiance):
     return ob
 
 
-def _world(env, map_resolution: int):
+def _world(env, map_resolution: int, lookup: str = "mitsuba"):
     import bpy
 
     world = bpy.data.worlds.new("world")
@@ -348,24 +349,62 @@ def _world(env, map_resolution: int):
         return world
     img = bpy.data.images.load(str(env["file"]), check_existing=False)
     img.colorspace_settings.name = "Linear Rec.709"
-    tex = nt.nodes.new("ShaderNodeTexEnvironment")
-    tex.image = img
-    tex.projection = "EQUIRECTANGULAR"
-    tex.interpolation = "Linear"
     coords = nt.nodes.new("ShaderNodeTexCoord")
-    mapping = nt.nodes.new("ShaderNodeMapping")
-    mapping.vector_type = "POINT"
-    mapping.inputs["Rotation"].default_value = (0.0, 0.0, math.radians(90.0))
-    nt.links.new(coords.outputs["Generated"], mapping.inputs["Vector"])
-    nt.links.new(mapping.outputs["Vector"], tex.inputs["Vector"])
+    if lookup == "envtex":  # Cycles' own lookup: rows texel-centred, half a texel off Mitsuba's in elevation
+        tex = nt.nodes.new("ShaderNodeTexEnvironment")
+        tex.image = img
+        tex.projection = "EQUIRECTANGULAR"
+        tex.interpolation = "Linear"
+        mapping = nt.nodes.new("ShaderNodeMapping")
+        mapping.vector_type = "POINT"
+        mapping.inputs["Rotation"].default_value = (0.0, 0.0, math.radians(90.0))
+        nt.links.new(coords.outputs["Generated"], mapping.inputs["Vector"])
+        nt.links.new(mapping.outputs["Vector"], tex.inputs["Vector"])
+    else:
+        # Mitsuba's lookup (the description's): D = the direction in Blender's frame, the description's
+        # d = (D.x, D.z, -D.y); u = atan2(d.x, -d.z) / (2 pi) = atan2(D.x, D.y) / (2 pi) (periodic: REPEAT; Mitsuba's
+        # columns are texel-centred, as an Image Texture's), v = acos(D.z) / pi with Mitsuba's rows corner-aligned
+        # (row coordinate v (H - 1)) where an Image Texture's are texel-centred (V' H - 0.5): V' = (v (H-1) + 0.5) / H,
+        # and Blender's image V runs bottom-up: V = 1 - V' (../shared/peers/cycles/render.py --env-lookup mitsuba)
+        H = img.size[1]
+
+        def op(name, a, b=None, c=None):
+            n = nt.nodes.new("ShaderNodeMath")
+            n.operation = name
+            for k, v in enumerate((a, b, c)):
+                if v is None:
+                    continue
+                if isinstance(v, (int, float)):
+                    n.inputs[k].default_value = float(v)
+                else:
+                    nt.links.new(v, n.inputs[k])
+            return n.outputs[0]
+
+        unit = nt.nodes.new("ShaderNodeVectorMath")
+        unit.operation = "NORMALIZE"
+        nt.links.new(coords.outputs["Generated"], unit.inputs[0])
+        xyz = nt.nodes.new("ShaderNodeSeparateXYZ")
+        nt.links.new(unit.outputs["Vector"], xyz.inputs[0])
+        u = op("MULTIPLY", op("ARCTAN2", xyz.outputs["X"], xyz.outputs["Y"]), 1.0 / (2.0 * math.pi))
+        v = op("MULTIPLY_ADD", op("ARCCOSINE", xyz.outputs["Z"]), -(H - 1) / (math.pi * H), 1.0 - 0.5 / H)
+        uv = nt.nodes.new("ShaderNodeCombineXYZ")
+        nt.links.new(u, uv.inputs["X"])
+        nt.links.new(v, uv.inputs["Y"])
+        tex = nt.nodes.new("ShaderNodeTexImage")
+        tex.image = img
+        tex.interpolation = "Linear"
+        tex.extension = "REPEAT"
+        tex.projection = "FLAT"
+        nt.links.new(uv.outputs["Vector"], tex.inputs["Vector"])
     nt.links.new(tex.outputs["Color"], bg.inputs["Color"])
     world.cycles.sampling_method = "MANUAL"
     world.cycles.sample_map_resolution = int(map_resolution)
     return world
 
 
-def build(path, *, map_resolution: int = MAP_RESOLUTION) -> dict:
-    """The Blender scene of an exported description (a fresh, empty file first).  Returns its counts."""
+def build(path, *, map_resolution: int = MAP_RESOLUTION, lookup: str = "mitsuba") -> dict:
+    """The Blender scene of an exported description (a fresh, empty file first).  ``lookup``: a lat-long map's,
+    "mitsuba" (the description's convention) or "envtex" (Cycles' Environment Texture).  Returns its counts."""
     import bpy
     from mathutils import Matrix
 
@@ -408,7 +447,7 @@ def build(path, *, map_resolution: int = MAP_RESOLUTION) -> dict:
     ob.matrix_world = Matrix(camera_matrix(cam["origin"], cam["target"]).tolist())
     bpy.context.scene.collection.objects.link(ob)
     bpy.context.scene.camera = ob
-    _world(meta["environment"], map_resolution)
+    _world(meta["environment"], map_resolution, lookup)
     scene = bpy.context.scene
     scene.render.resolution_x, scene.render.resolution_y = meta["resolution"]
     return {"lights": lights, "materials": len(bpy.data.materials), "objects": len(bpy.data.objects)}
