@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Benchmark suite: lightprobe's defaults against Mitsuba 3's configurations on nine varied scenes (issue 57).
+"""Benchmark suite: lightprobe's defaults against Mitsuba 3's and Blender Cycles' configurations on nine varied scenes
+(issue 57).
 
     pip install -e '.[peers]'                      # Mitsuba 3.9.1 (Debian: apt-get install libllvm19)
     python benchmarks/suite.py                     # every scene of reference_scenes.SUITE at 16, 64 and 256 spp
@@ -39,6 +40,23 @@ tests/integrators/test_references.py; plus (2e-4 ref)^2 for float32 round-off an
 the relMSE's scale), pooled as sum(lp - ref) / sqrt(sum(var)) over the image (per channel: the largest |z|) and
 over 8 x 8-pixel blocks (the largest |z| and the share of blocks beyond |z| = 4, about 6e-5 for an unbiased image).
 Then the minimum and the geometric mean of the ratios.  Benchmarks print figures; they never assert speed.
+
+Blender Cycles (``bpy``), the second peer, where its light tree should make it the stronger one: a Python with
+``bpy`` (``--cycles-python``, else $LIGHTPROBE_CYCLES_PYTHON, else :data:`CYCLES_PYTHON` if it exists; none: the
+suite says so once and goes on without Cycles).  The suite's Python writes each scene's description as plain
+arrays into the cache (benchmarks/cycles_scene.py ``export``; the peer kit's scene and the glTF asset are not
+translated and say so) and the Cycles workers, run under that Python, build it in Blender (``cycles_scene.build``).
+Configurations (:data:`CYCLES_CONFIGS`): the light tree on and off, each with one light sample and one BSDF sample
+per camera sample (``max_bounces`` 0: direct light only, MIS), a box filter 1 pixel wide, 2 threads, no denoising,
+adaptive sampling, clamping or light threshold, seeds 1, 2, ... after an untimed render.  Seconds = the median
+path-tracing time (Cycles' first "Sample" status line to "Finished", as ``../shared/peers/cycles/render.py``
+measures it), without bpy's import, the scene build or the scene sync every render does (``sync_s``, printed).
+Cycles' GGX conductor need not converge to Mitsuba's image, so a Cycles row's relMSE is measured against a **Cycles
+reference** (light tree on, passes of :data:`CYCLES_PASS_SPP`, at least :data:`CYCLES_MIN_PASSES`, grown as
+Mitsuba's are until its floor is at most 0.07 x the relMSE of a Cycles pilot image at the run's highest spp; a
+Cycles row whose reference's floor is above a tenth of its error is listed, marked, but never the best peer); the
+two references are compared with each other per scene (:func:`reference_agreement`: relMSE and pooled z, over the
+image and over the pixels where no rough conductor is seen), the translation's check.
 """
 
 from __future__ import annotations
@@ -71,6 +89,11 @@ REFERENCE_MARGIN = 0.07  # a reference grows until its floor is this share of th
 BLOCK = 8
 ABSOLUTE = 1e-4  # the pooled z's absolute tolerance per pixel and channel
 DOCS_BEGIN, DOCS_END = "<!-- suite:begin -->", "<!-- suite:end -->"
+# Blender Cycles (bpy), the second peer: its configurations (light tree on / off), its reference passes
+CYCLES_CONFIGS = (("tree", True), ("notree", False))
+CYCLES_PASS_SPP = 256  # a Cycles reference pass (its sampler is a QMC sequence: longer passes converge faster)
+CYCLES_MIN_PASSES = 8
+CYCLES_PYTHON = "/work/bpyvenv/bin/python"  # the default bpy interpreter (Python 3.11, pip install bpy==5.0.1)
 
 
 # ----------------------------------------------------------------------------------------------- shared helpers
@@ -203,17 +226,20 @@ def parse_options(pairs: list[str]) -> dict:
 
 
 def summarise(rows: list[dict], references: dict) -> list[dict]:
-    """Per (scene, spp): lightprobe's row, the best peer configuration, the ratio of efficiencies, and the floor
-    rule (``refused`` when the reference's floor exceeds a tenth of lightprobe's error)."""
+    """Per (scene, spp): lightprobe's row, the best peer configuration (Mitsuba's or Cycles'), the ratio of
+    efficiencies, and the floor rule (``refused`` when the reference's floor exceeds a tenth of lightprobe's error;
+    a peer row whose own reference fails the rule, a Cycles row with ``floor_ratio`` above it, is listed but never
+    the best)."""
     out = []
     keys = sorted({(r["scene"], r["spp"]) for r in rows}, key=lambda k: (k[0], k[1]))
     for scene, spp in keys:
         mine = [r for r in rows if r["scene"] == scene and r["spp"] == spp]
         ours = next((r for r in mine if r["renderer"] == "lightprobe"), None)
-        peers = [r for r in mine if r["renderer"] == "mitsuba"]
-        if ours is None or not peers:
+        peers = [r for r in mine if r["renderer"] != "lightprobe"]
+        judged = [r for r in peers if (r.get("floor_ratio") or 0.0) <= FLOOR_RULE]
+        if ours is None or not judged:
             continue
-        best = max(peers, key=lambda r: r["efficiency"])
+        best = max(judged, key=lambda r: r["efficiency"])
         floor = references.get(scene, {}).get("floor")
         floor_ratio = floor / ours["relmse"] if floor is not None and ours["relmse"] > 0 else None
         refused = floor_ratio is not None and floor_ratio > FLOOR_RULE
@@ -240,8 +266,8 @@ def _f(x, fmt: str) -> str:
 def table(summary: list[dict], pixels: int) -> str:
     """The suite's table (Markdown)."""
     lines = [
-        "| scene | spp | lightprobe s | relMSE | efficiency | best Mitsuba configuration | s | relMSE | efficiency "
-        "| ratio | ns per camera sample, lp / Mitsuba | M samples/s, lp / Mitsuba | pooled z (image; blocks max, "
+        "| scene | spp | lightprobe s | relMSE | efficiency | best peer configuration | s | relMSE | efficiency "
+        "| ratio | ns per camera sample, lp / peer | M samples/s, lp / peer | pooled z (image; blocks max, "
         "share > 4) | reference floor (/ lp error) |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
@@ -260,19 +286,22 @@ def table(summary: list[dict], pixels: int) -> str:
         )
     lo, geo = ratio_stats([s["ratio"] for s in summary])
     lines.append("")
-    lines.append(f"Ratio of efficiencies, lightprobe / best Mitsuba configuration: minimum {_f(lo, '.2f')}x, "
+    lines.append(f"Ratio of efficiencies, lightprobe / best peer configuration: minimum {_f(lo, '.2f')}x, "
                  f"geometric mean {_f(geo, '.2f')}x over {sum(s['ratio'] is not None for s in summary)} "
                  "scene x spp rows.")  # fmt: skip
     return "\n".join(lines)
 
 
 def peer_table(summary: list[dict]) -> str:
-    """Every configuration's efficiency per (scene, spp), Mitsuba's and lightprobe's (Markdown)."""
-    configs = sorted({r["config"] for s in summary for r in s["peers"]}, key=lambda c: (c.count("power"), c))
+    """Every configuration's efficiency per (scene, spp), lightprobe's, Mitsuba's and Cycles' (Markdown; a Cycles
+    row whose reference fails the floor rule is marked *)."""
+    configs = sorted({r["config"] for s in summary for r in s["peers"]},
+                     key=lambda c: (c.startswith("cycles"), c.count("power"), c))  # fmt: skip
     lines = ["| scene | spp | lightprobe | " + " | ".join(configs) + " |", "|---" * (3 + len(configs)) + "|"]
     for s in summary:
         eff = {r["config"]: r["efficiency"] for r in s["peers"]}
-        cells = [_f(eff.get(c), ".3g") for c in configs]
+        refused = {r["config"] for r in s["peers"] if (r.get("floor_ratio") or 0.0) > FLOOR_RULE}
+        cells = [_f(eff.get(c), ".3g") + ("*" if c in refused else "") for c in configs]
         lines.append(f"| {s['scene']} | {s['spp']} | {s['lightprobe']['efficiency']:.3g} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 
@@ -472,11 +501,254 @@ def occlusion(args) -> None:
                       "seconds": round(time.perf_counter() - start, 1)}), flush=True)  # fmt: skip
 
 
+# ------------------------------------------------------------------------------------ Blender Cycles (bpy) peer
+
+
+def cycles_reference_file(cache: Path, scene: str, resolution) -> Path:
+    w, h = resolution
+    return cache / f"{scene}_{w}x{h}_cycles_1+1.npz"
+
+
+def cycles_scene_file(cache: Path, scene: str, resolution) -> Path:
+    w, h = resolution
+    return cache / f"{scene}_{w}x{h}_cycles_scene.npz"
+
+
+def cycles_python(option: str | None) -> tuple[str | None, str | None]:
+    """(the Python with ``bpy`` to run the Cycles workers, None) or (None, why Cycles is skipped): ``--cycles-python``,
+    else $LIGHTPROBE_CYCLES_PYTHON, else :data:`CYCLES_PYTHON` if it exists; it must import bpy."""
+    path = option or os.environ.get("LIGHTPROBE_CYCLES_PYTHON") or CYCLES_PYTHON
+    if path.lower() in ("", "none", "off"):
+        return None, "turned off (--cycles-python none)"
+    if not Path(path).exists():
+        return None, f"no bpy Python at {path} (--cycles-python; python3.11 -m venv V && V/bin/pip install bpy==5.0.1)"
+    probe = subprocess.run([path, "-c", "import bpy; print(bpy.app.version_string)"], capture_output=True, text=True)
+    if probe.returncode != 0:
+        return None, f"{path} cannot import bpy: {probe.stderr.strip().splitlines()[-1:]}"
+    return path, None
+
+
+def export_cycles_scene(cache: Path, scene: str, resolution) -> Path:
+    """Write the scene's description for the Cycles workers (benchmarks/cycles_scene.py ``export``); raises
+    cycles_scene.NotTranslated for a scene the translation does not make (the peer kit's scene, the glTF asset)."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    import cycles_scene
+    import lightprobe.reference_scenes as rs
+
+    desc = rs.describe(scene)
+    if desc.get("peer_kit"):
+        raise cycles_scene.NotTranslated("the peer kit's scene (its rough plastic has no exact Cycles counterpart)")
+    out = cycles_scene_file(cache, scene, resolution)
+    env_file = None
+    image = rs.environment_image(desc)
+    if image is not None:
+        from lightprobe.images import write_image
+
+        env_file = str(out.with_name(out.stem + "_env.exr"))
+        write_image(env_file, image)
+    cycles_scene.export(desc, out, resolution=resolution, env_file=env_file)
+    return out
+
+
+def conductor_mask(scene: str, resolution) -> np.ndarray:
+    """(H, W) True where a pixel may see a rough conductor (a sphere of one, or the bounding sphere of a mesh of one,
+    grown by two pixels): Cycles' and Mitsuba's conductors need not converge to the same image; elsewhere the
+    references must agree.  Pixel centres' rays from lightprobe's camera."""
+    import lightprobe.reference_scenes as rs
+
+    desc = rs.describe(scene)
+    cam = rs.build(scene, resolution=tuple(resolution)).camera
+    w, h = resolution
+    origins, dirs = cam.rays(np.arange(w * h), np.full((w * h, 2), 0.5))
+    pixel = 2.0 * math.tan(math.radians(desc["camera"]["fov"]) / 2) / w  # a pixel's width at distance 1
+    mask = np.zeros(w * h, bool)
+    for o in desc["objects"]:
+        if "material" not in o or desc["materials"][o["material"]]["model"] == "lambertian":
+            continue
+        if o["shape"] == "sphere":
+            c, r = np.asarray(o["center"], float), float(o["radius"])
+        else:
+            v = np.asarray(o["vertices"], float)
+            c = v.mean(axis=0)
+            r = float(np.linalg.norm(v - c, axis=1).max())
+        t = np.einsum("ij,ij->i", c - origins, dirs)
+        closest = np.linalg.norm(origins + t[:, None] * dirs - c, axis=1)
+        mask |= closest <= r + 2.0 * pixel * np.maximum(t, 0.0)
+    return mask.reshape(h, w)
+
+
+def reference_agreement(cycles: dict, mitsuba: dict, mask: np.ndarray | None = None) -> dict:
+    """How the Cycles reference and the Mitsuba reference of a scene agree (the translation's check): relMSE of the
+    one against the other next to what their noise alone gives (mean((var_c + var_m) / (m^2 + 0.01))), the pooled
+    z per channel over the image (the largest |z|), over 8 x 8 blocks (the largest |z|, the share beyond 4), the
+    ratio of the image means; with ``mask`` (True: a conductor may be seen there) the same over the other pixels."""
+
+    def measure(keep):
+        c, m = cycles["mean"][keep], mitsuba["mean"][keep]
+        var = cycles["variance"][keep] + mitsuba["variance"][keep] + (2e-4 * m) ** 2 + ABSOLUTE**2
+        z = (c - m).sum(axis=0) / np.sqrt(var.sum(axis=0))
+        return {"relmse": relmse(c, m), "noise_relmse": float(np.mean(var / (m**2 + 0.01))),
+                "z_image": float(z[np.argmax(np.abs(z))]),
+                "mean_ratio": [round(float(x), 5) for x in c.sum(axis=0) / np.maximum(m.sum(axis=0), 1e-300)],
+                }  # fmt: skip
+
+    h, w = cycles["mean"].shape[:2]
+    out = measure(np.ones((h, w), bool))
+    diff = cycles["mean"] - mitsuba["mean"]
+    total = cycles["variance"] + mitsuba["variance"] + (2e-4 * mitsuba["mean"]) ** 2 + ABSOLUTE**2
+    hb, wb = h // BLOCK, w // BLOCK
+    d = diff[: hb * BLOCK, : wb * BLOCK].reshape(hb, BLOCK, wb, BLOCK, 3).sum(axis=(1, 3, 4))
+    v = total[: hb * BLOCK, : wb * BLOCK].reshape(hb, BLOCK, wb, BLOCK, 3).sum(axis=(1, 3, 4))
+    block_z = d / np.sqrt(v)
+    out |= {"z_blocks_max": float(np.abs(block_z).max()), "z_blocks_over4": float(np.mean(np.abs(block_z) > 4.0))}
+    if mask is not None and mask.any() and not mask.all():
+        out["lambertian"] = measure(~mask) | {"pixels": int((~mask).sum())}
+    return out
+
+
+def _cycles_setup(args):
+    """bpy and the Blender scene of ``--scene`` (from the file the suite's Python exported)."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    import cycles_scene
+
+    start = time.perf_counter()
+    import bpy
+
+    imported = time.perf_counter() - start
+    info = cycles_scene.build(cycles_scene_file(Path(args.cache), args.scene, args.resolution))
+    built = time.perf_counter() - start - imported
+    clock = cycles_scene.StatsClock()
+    bpy.app.handlers.render_stats.append(clock)
+    return cycles_scene, clock, {"blender": bpy.app.version_string, "import_s": round(imported, 2),
+                                 "build_s": round(built, 2), **info}  # fmt: skip
+
+
+def cycles_reference(args) -> None:
+    """Under bpy: a pilot image (light tree on, ``--spp``, seed 999), then passes of :data:`CYCLES_PASS_SPP` added to
+    the scene's Cycles reference until its floor is at most :data:`REFERENCE_MARGIN` x the pilot's relMSE against it
+    (at least :data:`CYCLES_MIN_PASSES` passes) or ``--reference-minutes`` have passed; one JSON line."""
+    cs, clock, info = _cycles_setup(args)
+    out = cycles_reference_file(Path(args.cache), args.scene, args.resolution)
+    with tempfile.TemporaryDirectory() as tmp:
+        cs.configure(spp=args.spp, seed=999, light_tree=True)
+        pilot, _ = cs.render(clock, tmp)
+        if out.exists():
+            with np.load(out) as f:
+                total, total2, passes, seconds = f["total"], f["total2"], int(f["passes"]), float(f["seconds"])
+        else:
+            total = total2 = 0.0
+            passes, seconds = 0, 0.0
+        start = time.perf_counter()
+        floor = error = math.inf
+        sync = []
+        while True:
+            if passes >= CYCLES_MIN_PASSES and passes % 4 == 0:
+                mean = total / passes
+                var = np.maximum(total2 / passes - mean**2, 0.0) / (passes - 1)
+                floor = float(np.mean(var / (mean**2 + 0.01)))
+                error = relmse(pilot, mean)
+                elapsed = time.perf_counter() - start
+                np.savez(out, total=total, total2=total2, passes=passes, pass_spp=CYCLES_PASS_SPP,
+                         seconds=seconds + elapsed)  # fmt: skip
+                if floor <= REFERENCE_MARGIN * error or elapsed > 60 * args.reference_minutes:
+                    break
+            cs.configure(spp=CYCLES_PASS_SPP, seed=2_000_000 + passes, light_tree=True)
+            x, times = cs.render(clock, tmp)
+            sync.append(times["sync_s"])
+            total, total2, passes = total + x, total2 + x * x, passes + 1
+        seconds += time.perf_counter() - start
+        np.savez(out, total=total, total2=total2, passes=passes, pass_spp=CYCLES_PASS_SPP, seconds=seconds)
+    print(json.dumps({"cycles_reference": args.scene, "spp": passes * CYCLES_PASS_SPP, "seconds": round(seconds, 1),
+                      "floor": floor, "pilot_relmse": error, "pilot_spp": args.spp,
+                      "sync_s": None if not sync else round(float(np.median(sync)), 2),
+                      "config": f"cycles tree 1+1, {CYCLES_PASS_SPP}-spp passes", **info}), flush=True)  # fmt: skip
+
+
+def cycles_runs(args) -> None:
+    """Under bpy: every Cycles configuration (:data:`CYCLES_CONFIGS`) at ``--spp``, ``--seeds`` images each (seeds 1,
+    2, ... after an untimed render with seed 10,000), relMSE against the scene's Cycles reference (and, for the
+    record, against Mitsuba's); seconds = the median path-tracing time (Cycles' first "Sample" status line to
+    "Finished"), ``sync_s`` the median scene sync before it (BVH, light tree, importance map: every render, as a final
+    render); one JSON line per configuration."""
+    cs, clock, info = _cycles_setup(args)
+    cache = Path(args.cache)
+    ref = load_reference(cycles_reference_file(cache, args.scene, args.resolution))
+    mitsuba_file = reference_file(cache, args.scene, args.resolution)
+    mitsuba = load_reference(mitsuba_file)["mean"] if mitsuba_file.exists() else None
+    pixels = args.resolution[0] * args.resolution[1]
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, tree in CYCLES_CONFIGS:
+            cs.configure(spp=args.spp, seed=10_000, light_tree=tree)
+            cs.render(clock, tmp)  # kernels loaded, caches warm
+            errors, against_mitsuba, times = [], [], []
+            for s in range(args.seeds):
+                cs.configure(spp=args.spp, seed=s + 1, light_tree=tree)
+                x, t = cs.render(clock, tmp)
+                errors.append(relmse(x, ref["mean"]))
+                if mitsuba is not None:
+                    against_mitsuba.append(relmse(x, mitsuba))
+                times.append(t)
+            e = float(np.mean(errors))
+            trace = float(np.median([t["trace_s"] if t["trace_s"] is not None else t["wall_s"] for t in times]))
+            cpu = sum(t["cpu_s"] for t in times) / sum(t["wall_s"] for t in times)
+            row = {"renderer": "cycles", "scene": args.scene, "spp": args.spp, "config": f"cycles {name} 1+1",
+                   "relmse": e, "seconds": trace, "efficiency": 1.0 / (e * trace),
+                   "sync_s": round(float(np.median([t["sync_s"] or 0.0 for t in times])), 3),
+                   "wall_s": round(float(np.median([t["wall_s"] for t in times])), 3), "cpu_util": round(cpu, 2),
+                   "samples_per_s": pixels * args.spp / trace, "reference_floor": ref["floor"],
+                   "floor_ratio": ref["floor"] / e if e > 0 else None,
+                   "relmse_mitsuba_ref": float(np.mean(against_mitsuba)) if against_mitsuba else None,
+                   **info}  # fmt: skip
+            print(json.dumps(row), flush=True)
+
+
+def cycles_table(rows: list[dict]) -> str:
+    """The Cycles configurations' rows (Markdown): seconds of path tracing and of scene sync per render, relMSE
+    against Cycles' reference and against Mitsuba's, efficiency, the reference's floor / the error, CPU use."""
+    lines = [
+        "| scene | spp | Cycles configuration | trace s | sync s | relMSE (Cycles ref) | efficiency "
+        "| relMSE (Mitsuba ref) | Cycles ref floor / error | M samples/s | cpu util |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in sorted((r for r in rows if r["renderer"] == "cycles"), key=lambda r: (r["scene"], r["spp"], r["config"])):
+        lines.append(
+            f"| {r['scene']} | {r['spp']} | {r['config']} | {r['seconds']:.2f} | {_f(r.get('sync_s'), '.2f')} | "
+            f"{r['relmse']:.3g} | {r['efficiency']:.3g} | {_f(r.get('relmse_mitsuba_ref'), '.3g')} | "
+            f"{_f(r.get('floor_ratio'), '.3f')} | {_f(r.get('samples_per_s') and r['samples_per_s'] / 1e6, '.2f')} | "
+            f"{_f(r.get('cpu_util'), '.2f')} |"
+        )
+    return "\n".join(lines)
+
+
+def agreement_table(references: dict) -> str:
+    """Cycles' reference against Mitsuba's per scene (Markdown): the translation's check."""
+    lines = [
+        "| scene | Cycles ref spp | floor | relMSE Cycles vs Mitsuba ref (noise alone) | pooled z image "
+        "| blocks max z, share > 4 | mean ratio RGB | Lambertian pixels: relMSE (noise), z, mean ratio |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for scene, ref in sorted(references.items()):
+        c, a = ref.get("cycles"), ref.get("cycles_agreement")
+        if not c or not a:
+            continue
+        lam = a.get("lambertian")
+        lam_text = "-" if lam is None else (
+            f"{lam['relmse']:.3g} ({lam['noise_relmse']:.3g}), {lam['z_image']:+.1f}, "
+            f"{', '.join(f'{x:.4f}' for x in lam['mean_ratio'])}")  # fmt: skip
+        lines.append(
+            f"| {scene} | {c.get('spp', '-')} | {_f(c.get('floor'), '.2g')} | "
+            f"{a['relmse']:.3g} ({a['noise_relmse']:.3g}) | {a['z_image']:+.1f} | "
+            f"{a['z_blocks_max']:.1f}, {a['z_blocks_over4']:.3f} | "
+            f"{', '.join(f'{x:.4f}' for x in a['mean_ratio'])} | {lam_text} |"
+        )
+    return "\n".join(lines)
+
+
 # -------------------------------------------------------------------------------------------------------- main
 
 
-def _run(args, worker: str, scene: str, *extra: str) -> list[dict]:
-    cmd = [sys.executable, __file__, "--worker", worker, "--scene", scene, "--seeds", str(args.seeds),
+def _run(args, worker: str, scene: str, *extra: str, python: str | None = None) -> list[dict]:
+    cmd = [python or sys.executable, __file__, "--worker", worker, "--scene", scene, "--seeds", str(args.seeds),
            "--resolution", *map(str, args.resolution), "--cache", str(args.cache),
            *[x for o in args.lightprobe_option for x in ("--lightprobe-option", o)], *extra]  # fmt: skip
     out = subprocess.run(cmd, capture_output=True, text=True, env=os.environ.copy())
@@ -490,10 +762,15 @@ def _run(args, worker: str, scene: str, *extra: str) -> list[dict]:
 
 def main() -> int:
     sys.path.insert(0, str(ROOT / "src"))
-    from lightprobe.reference_scenes import SUITE, unavailable
+    try:
+        from lightprobe.reference_scenes import SUITE, unavailable
+    except ImportError:  # the Cycles workers run under bpy's Python, which need not have lightprobe's dependencies
+        if "--worker" not in sys.argv:
+            raise
+        SUITE, unavailable = None, None
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--scenes", nargs="*", default=list(SUITE), choices=SUITE)
+    parser.add_argument("--scenes", nargs="*", default=list(SUITE or ()), choices=SUITE)
     parser.add_argument("--spp", type=int, nargs="*", default=[16, 64, 256])
     parser.add_argument("--seeds", type=int, default=2, help="images per configuration and spp [2]")
     parser.add_argument("--resolution", type=int, nargs=2, default=[320, 240])
@@ -507,8 +784,12 @@ def main() -> int:
     parser.add_argument("--json", help="also write every row to this file")
     parser.add_argument("--table-from", metavar="LOG", nargs="+",
                         help="no renders: the table (and --write-docs) from a run's printed output; with several "
-                             "logs, each scene's rows from the last log that has them")  # fmt: skip
-    parser.add_argument("--worker", choices=["mitsuba", "reference", "lightprobe", "pilot", "occlusion"],
+                             "logs, each renderer's rows of a scene from the last log that has them")  # fmt: skip
+    parser.add_argument("--cycles-python", metavar="PYTHON",
+                        help="the Python with bpy for the Cycles peer [$LIGHTPROBE_CYCLES_PYTHON, else "
+                             f"{CYCLES_PYTHON} if it exists]; 'none': no Cycles")  # fmt: skip
+    parser.add_argument("--worker", choices=["mitsuba", "reference", "lightprobe", "pilot", "occlusion", "cycles",
+                                             "cycles-reference"],
                         help=argparse.SUPPRESS)  # fmt: skip
     parser.add_argument("--scene", help=argparse.SUPPRESS)
     parser.add_argument("--pilot", help=argparse.SUPPRESS)
@@ -519,7 +800,8 @@ def main() -> int:
         os.environ.setdefault("LIGHTPROBE_SUITE_CACHE", args.cache)
         args.spp = args.spp[0]
         {"mitsuba": mitsuba_runs, "reference": mitsuba_reference, "lightprobe": lightprobe_runs,
-         "pilot": lightprobe_pilot, "occlusion": occlusion}[args.worker](args)  # fmt: skip
+         "pilot": lightprobe_pilot, "occlusion": occlusion, "cycles": cycles_runs,
+         "cycles-reference": cycles_reference}[args.worker](args)  # fmt: skip
         return 0
 
     if args.table_from:
@@ -528,11 +810,14 @@ def main() -> int:
     cache.mkdir(parents=True, exist_ok=True)
     os.environ["LIGHTPROBE_SUITE_CACHE"] = str(cache)  # the workers' (the peer kit's assets)
     started = time.perf_counter()
+    bpy_python, no_cycles = cycles_python(args.cycles_python)
     header = {"cores": os.cpu_count(), "spp": args.spp, "seeds": args.seeds, "resolution": args.resolution,
               "lightprobe_options": parse_options(args.lightprobe_option), "commit": _commit(),
-              "date": datetime.date.today().isoformat()}  # fmt: skip
+              "date": datetime.date.today().isoformat(), "cycles": no_cycles or "yes"}  # fmt: skip
     print(json.dumps(header), flush=True)
     rows, references, notes = [], {}, {}
+    if no_cycles:
+        print(f"cycles: skipped: {no_cycles}", flush=True)
     for scene in args.scenes:
         reason = unavailable(scene)
         if reason is not None:
@@ -551,9 +836,12 @@ def main() -> int:
             shown = _run(args, "occlusion", scene)[0]
             if shown.get("unoccluded") is not None:
                 references[scene]["unoccluded"] = shown["unoccluded"]
+            cycles = bpy_python and _cycles_reference(args, scene, top, bpy_python, references, notes)
             for spp in args.spp:
                 rows += _run(args, "mitsuba", scene, "--spp", str(spp))
                 rows += _run(args, "lightprobe", scene, "--spp", str(spp))
+                if cycles:
+                    rows += _run(args, "cycles", scene, "--spp", str(spp), python=bpy_python)
         except RuntimeError as exc:
             print(f"{scene}: failed: {exc}", flush=True)
             notes[scene] = "failed (see the run's output)"
@@ -561,6 +849,30 @@ def main() -> int:
     minutes = (time.perf_counter() - started) / 60
     _report(args, header, rows, references, notes, minutes)
     return 0
+
+
+def _cycles_reference(args, scene: str, top: str, python: str, references: dict, notes: dict) -> bool:
+    """Export the scene for Cycles, make (or extend) its Cycles reference and compare it with Mitsuba's; False (with
+    a printed reason) where the scene is not translated."""
+    sys.path.insert(0, str(ROOT / "benchmarks"))
+    import cycles_scene
+
+    cache = Path(args.cache)
+    try:
+        export_cycles_scene(cache, scene, args.resolution)
+    except cycles_scene.NotTranslated as exc:
+        print(f"{scene}: cycles skipped: not translated: {exc}", flush=True)
+        notes[scene] = f"Cycles skipped: not translated: {exc}"
+        return False
+    made = _run(args, "cycles-reference", scene, "--spp", top, "--reference-minutes", str(args.reference_minutes),
+                python=python)[0]  # fmt: skip
+    references[scene]["cycles"] = made
+    agreement = reference_agreement(load_reference(cycles_reference_file(cache, scene, args.resolution)),
+                                    load_reference(reference_file(cache, scene, args.resolution)),
+                                    conductor_mask(scene, args.resolution))  # fmt: skip
+    references[scene]["cycles_agreement"] = agreement
+    print(json.dumps({"agreement": scene, **agreement}), flush=True)
+    return True
 
 
 def _commit() -> str:
@@ -597,6 +909,10 @@ def _table_from(args) -> int:
                 got.append(item)
             elif "reference" in item:
                 refs.setdefault(item["reference"], {}).update(item)
+            elif "cycles_reference" in item:
+                refs.setdefault(item["cycles_reference"], {})["cycles"] = item
+            elif "agreement" in item:
+                refs.setdefault(item["agreement"], {})["cycles_agreement"] = item
             elif "occlusion" in item and item.get("unoccluded") is not None:
                 refs.setdefault(item["occlusion"], {})["unoccluded"] = item["unoccluded"]
         if this is None:
@@ -634,6 +950,14 @@ def _report(args, header: dict, rows: list[dict], references: dict, notes: dict,
     print()
     print(peer_table(summary))
     print()
+    cycles = cycles_table(rows)
+    if any(r["renderer"] == "cycles" for r in rows):
+        print(cycles)
+        print()
+    agreement = agreement_table(references)
+    if any(ref.get("cycles_agreement") for ref in references.values()):
+        print(agreement)
+        print()
     for scene, ref in references.items():
         print(f"{scene}: " + json.dumps(ref))
     took = "" if minutes is None else f"; the run took {minutes:.0f} minutes"
@@ -666,6 +990,12 @@ def _report(args, header: dict, rows: list[dict], references: dict, notes: dict,
         for scene, note in notes.items():
             lines.append(f"\n{scene}: {note}")
         lines += ["", "Efficiency of every configuration:", "", peer_table(summary)]
+        if any(r["renderer"] == "cycles" for r in rows):
+            lines += ["", "Blender Cycles (bpy; seconds = path tracing, sync = the scene's sync before it in every "
+                      "render; relMSE against Cycles' own reference):", "", cycles]  # fmt: skip
+        if any(ref.get("cycles_agreement") for ref in references.values()):
+            lines += ["", "Cycles' reference against Mitsuba's (the translation's check; Lambertian pixels: where "
+                      "no rough conductor is seen):", "", agreement]  # fmt: skip
         write_docs("\n".join(lines))
         print("wrote docs/performance.md", flush=True)
 

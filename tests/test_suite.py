@@ -204,3 +204,149 @@ def test_a_table_from_two_logs_takes_each_renderers_rows_from_the_last_log_that_
     args.table_from = [old, log(tmp_path / "small.log", "ccccccc", [], resolution=(64, 48))]
     with pytest.raises(SystemExit, match="resolution"):
         suite._table_from(args)
+
+
+# ------------------------------------------------------------------ the Cycles peer's translation (no bpy needed)
+
+
+def _cycles_module():
+    spec = importlib.util.spec_from_file_location("cycles_scene", SUITE_SCRIPT.parent / "cycles_scene.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _triangle_areas(vertices, faces):
+    v = np.asarray(vertices)[np.asarray(faces)]
+    return np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]) / 2  # area-weighted normals (winding)
+
+
+@pytest.mark.parametrize("name", ["area", "ceiling", "dome", "window", "building", "glossy", "city"])
+def test_cycles_export_keeps_every_emitters_side_radiance_and_power_and_every_surface(name):
+    """The file the Cycles worker builds from holds every emitter facing its described side with its radiance (one
+    level per distinct radiance), the same emitted power per radiance, the same area of every material's surfaces
+    and the same spheres as the description."""
+    cs = _cycles_module()
+    desc = describe(name)
+    meta, arrays = cs.flatten(desc)
+    objects = []
+    for o in desc["objects"]:
+        if o["shape"] == "rectangles":
+            from lightprobe.reference_scenes import expand_rectangles
+
+            objects += expand_rectangles(o)
+        else:
+            objects.append(o)
+
+    def vector_area(o):  # the area-weighted normal of a flat described shape
+        if o["shape"] == "rectangle":
+            return np.cross(o["edge_u"], o["edge_v"])[None, :]
+        return _triangle_areas(o["vertices"], o["faces"])
+
+    # emitters: per radiance, the summed area-weighted normal (their side) and the summed area (their power)
+    want_normal, want_area = {}, {}
+    for o in objects:
+        if "emission" in o and o["shape"] != "sphere":
+            key = tuple(np.round(np.broadcast_to(o["emission"], 3), 9))
+            n = vector_area(o)
+            want_normal[key] = want_normal.get(key, 0.0) + n.sum(axis=0)
+            want_area[key] = want_area.get(key, 0.0) + np.linalg.norm(n, axis=1).sum()
+    if want_area:
+        n = _triangle_areas(arrays["emitters_vertices"], arrays["emitters_faces"])
+        levels = arrays["emitters_levels"][arrays["emitters_level"]]
+        assert len(arrays["emitters_levels"]) == len(want_area)  # one material per distinct radiance
+        for key, area in want_area.items():
+            mine = np.all(np.isclose(levels, key, rtol=1e-12), axis=1)
+            assert np.linalg.norm(n[mine], axis=1).sum() == pytest.approx(area, rel=1e-9)
+            assert np.allclose(n[mine].sum(axis=0), want_normal[key], rtol=1e-9, atol=1e-9 * area)
+    else:
+        assert "emitters_vertices" not in arrays
+    spheres = [o for o in objects if o["shape"] == "sphere"]
+    assert len(meta["sphere_lights"]) == sum("emission" in o for o in spheres)
+    assert len(meta["spheres"]) == sum("emission" not in o for o in spheres)
+    # surfaces: every (material, sidedness)'s area and area-weighted normal
+    want = {}
+    for o in objects:
+        if "emission" in o or o["shape"] == "sphere":
+            continue
+        key = (o["material"], bool(o.get("two_sided", False)))
+        n = vector_area(o)
+        a, s = want.get(key, (0.0, 0.0))
+        want[key] = (a + np.linalg.norm(n, axis=1).sum(), s + n.sum(axis=0))
+    got = {}
+    for i, s in enumerate(meta["surfaces"]):
+        key = (s["material"], s["two_sided"])
+        n = _triangle_areas(arrays[f"surface{i}_vertices"], arrays[f"surface{i}_faces"])
+        a, t = got.get(key, (0.0, 0.0))
+        got[key] = (a + np.linalg.norm(n, axis=1).sum(), t + n.sum(axis=0))
+        assert s["smooth"] == (f"surface{i}_normals" in arrays)
+    assert got.keys() == want.keys()
+    for key, (area, normal) in want.items():
+        assert got[key][0] == pytest.approx(area, rel=1e-9)
+        assert np.allclose(got[key][1], normal, rtol=1e-9, atol=1e-9 * area)
+
+
+def test_cycles_frame_camera_and_sphere_light_conventions():
+    """Y up -> Blender's Z up is a rotation; Blender's camera looks along its local -Z at the target with the
+    description's right (forward x up) as its +X; a point light's power gives the sphere's radiance back."""
+    cs = _cycles_module()
+    rot = cs.to_blender(np.eye(3))
+    assert np.allclose(rot @ rot.T, np.eye(3)) and np.linalg.det(rot) == pytest.approx(1.0)
+    assert np.allclose(cs.to_blender([0.0, 1.0, 0.0]), [0.0, 0.0, 1.0])  # up is +Z
+    origin, target = np.array([0.4, 2.2, 6.4]), np.array([0.0, 0.5, 0.0])
+    m = cs.camera_matrix(origin, target)
+    local = np.linalg.inv(m) @ np.append(cs.to_blender(target), 1.0)
+    assert local[0] == pytest.approx(0.0, abs=1e-12) and local[1] == pytest.approx(0.0, abs=1e-12) and local[2] < 0
+    forward = (target - origin) / np.linalg.norm(target - origin)
+    right = np.cross(forward, [0.0, 1.0, 0.0])
+    local = np.linalg.inv(m) @ np.append(cs.to_blender(origin + forward + 0.1 * right), 1.0)
+    assert local[0] > 0  # right of the view is the image's right (Mitsuba's look_at)
+    assert np.linalg.inv(m)[:3, :3] @ cs.to_blender([0.0, 1.0, 0.0]) @ [0.0, 1.0, 0.0] > 0  # up is up in the image
+    power = cs.sphere_light_power(0.12, [60.0, 45.0, 30.0])
+    assert np.allclose(power / (4 * math.pi * math.pi * 0.12**2), [60.0, 45.0, 30.0])
+
+
+def test_cycles_export_refuses_what_it_does_not_translate(tmp_path):
+    cs = _cycles_module()
+    with pytest.raises(cs.NotTranslated):
+        cs.flatten({"camera": {}, "environment": None, "materials": {}, "objects": [{"shape": "gltf", "file": "x"}]})
+    suite = _suite_module()
+    with pytest.raises(ValueError, match="peer kit"):  # NotTranslated of the suite's own import of cycles_scene
+        suite.export_cycles_scene(tmp_path, "peer", (16, 12))
+    out = suite.export_cycles_scene(tmp_path, "window", (16, 12))  # a procedural sky: written beside as an image
+    meta, _ = cs.load(out)
+    assert meta["resolution"] == [16, 12] and Path(meta["environment"]["file"]).exists()
+    assert suite.cycles_python("none")[0] is None and suite.cycles_python(str(tmp_path / "no-python"))[0] is None
+
+
+def test_the_best_peer_may_be_cycles_but_never_one_whose_reference_fails_the_floor_rule():
+    suite = _suite_module()
+    rows = [
+        _row("mitsuba", "a", 16, "multijitter 1+1", 0.01, 1.0),  # 100
+        _row("cycles", "a", 16, "cycles tree 1+1", 0.002, 1.0) | {"floor_ratio": 0.01},  # 500: the best
+        _row("lightprobe", "a", 16, "defaults", 0.001, 1.0),  # 1000: ratio 2
+        _row("mitsuba", "b", 16, "multijitter 1+1", 0.01, 1.0),  # 100: the best judged
+        _row("cycles", "b", 16, "cycles tree 1+1", 0.001, 1.0) | {"floor_ratio": 0.5},  # its reference too noisy
+        _row("lightprobe", "b", 16, "defaults", 0.001, 1.0),  # ratio 10
+    ]
+    by_scene = {s["scene"]: s for s in suite.summarise(rows, {})}
+    assert by_scene["a"]["best"]["config"] == "cycles tree 1+1" and by_scene["a"]["ratio"] == pytest.approx(2.0)
+    assert by_scene["b"]["best"]["config"] == "multijitter 1+1" and by_scene["b"]["ratio"] == pytest.approx(10.0)
+    assert "1e+03*" in suite.peer_table(suite.summarise(rows, {}))  # listed, marked
+    assert "cycles tree 1+1" in suite.cycles_table(rows)
+
+
+def test_reference_agreement_finds_a_two_percent_difference_and_passes_an_equal_image():
+    suite = _suite_module()
+    rng = np.random.default_rng(4)
+    truth = rng.uniform(0.2, 1.0, (48, 64, 3))
+    var = np.full(truth.shape, 1e-6)
+    a = {"mean": truth + rng.normal(0, 1e-3, truth.shape), "variance": var}
+    b = {"mean": truth + rng.normal(0, 1e-3, truth.shape), "variance": var}
+    mask = np.zeros((48, 64), bool)
+    mask[:8] = True
+    same = suite.reference_agreement(a, b, mask)
+    assert abs(same["z_image"]) < 4 and same["z_blocks_over4"] < 0.05
+    assert same["relmse"] == pytest.approx(same["noise_relmse"], rel=0.2) and same["lambertian"]["pixels"] == 40 * 64
+    off = suite.reference_agreement({"mean": a["mean"] * 1.02, "variance": var}, b, mask)
+    assert abs(off["z_image"]) > 10 and off["mean_ratio"][0] == pytest.approx(1.02, abs=1e-3)
