@@ -893,13 +893,16 @@ def _table_from(args) -> int:
     renderer's rows of it (a run of some scenes after a change replaces lightprobe's and the peers' rows there and
     keeps another peer's), references merge, and the table says which commit measured what; the logs must share
     resolution, seeds and lightprobe options."""
+    from lightprobe.reference_scenes import SUITE
+
     rows, references, notes, header, measured = [], {}, {}, None, {}
     for log in args.table_from:
         got, refs, this = [], {}, None
         for line in Path(log).read_text().splitlines():
             if line.endswith(": skipped") or ": skipped: " in line or ": failed: " in line:
                 scene, _, note = line.partition(": ")
-                notes[scene] = note
+                if scene in SUITE:  # not a peer's line ("cycles: skipped: ..."), whose rows may come from another log
+                    notes[scene] = note
             if not line.startswith("{"):
                 continue
             item = json.loads(line)
