@@ -86,7 +86,7 @@ def _slab_test(context, builder, signature, args):
 def nearest_boxes(typingctx, boxes, node, ox, oy, oz, ix, iy, iz, tmax, among, children):
     """Of the children in ``among`` (bits 0-7) whose boxes the segment [0, tmax] enters: bits 0-7, the one (or the
     ones, on a tie) whose box it enters first; bits 8-15, all of them; bits 16-23, those that are leaves (``children``:
-    ShapeTree.child, (W, 8) int64, a leaf below -1).  The nearest-first walk of ``intersect._next_leaf``: with
+    ShapeTree.child, (W, 8) int64, a leaf below -1).  The nearest-first walk of ``intersect._next_leaves``: with
     ``tmax`` the nearest hit so far, a child is tested again when the walk comes back to it, so one whose box lies
     beyond a hit found meanwhile is never entered."""
     f64 = types.float64
