@@ -36,23 +36,8 @@ def boxes_entered(typingctx, boxes, node, ox, oy, oz, ix, iy, iz, tmax):
         return None
 
     def codegen(context, builder, signature, args):
-        (boxes_a,) = array_structs(context, builder, signature, args, 1)
         v, b = Lanes(builder), builder
-        node_i = context.cast(b, args[1], signature.args[1], types.int64)
-
-        def corner(column):
-            return row_vector(v, boxes_a, node_i, BOXES_WIDTH, column * LANES)
-
-        o = [v.splat(context.cast(b, args[2 + a], signature.args[2 + a], f64), VF64) for a in range(3)]
-        inv = [v.splat(context.cast(b, args[5 + a], signature.args[5 + a], f64), VF64) for a in range(3)]
-        far_end = v.splat(context.cast(b, args[8], signature.args[8], f64), VF64)
-        near, far = v.f(0.0), far_end
-        for a in range(3):
-            t_lo = v.mul(v.sub(corner(a), o[a]), inv[a])
-            t_hi = v.mul(v.sub(corner(3 + a), o[a]), inv[a])
-            near = v.fmax(near, v.fmin(t_lo, t_hi))
-            far = v.fmin(far, v.fmax(t_lo, t_hi))
-        present = b.fcmp_ordered("ord", corner(0), corner(0))  # a missing child's corners are NaN
+        near, far, present = _slab_test(context, builder, signature, args)  # a missing child's corners are NaN
         entered = b.and_(v.le(near, far), present)
         bits = b.bitcast(entered, ir.IntType(LANES))
         return b.zext(bits, I64)
