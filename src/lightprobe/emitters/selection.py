@@ -57,7 +57,7 @@ import numpy as np
 from .._numba import jit, jit_alloc, jit_inline, jit_parallel, prange
 from ..color import luminance
 from ..errors import ParameterError
-from ..geometry.shape_bvh import sort_along_widest_axis
+from ..geometry.shape_bvh import push_halves, sort_along_widest_axis
 from ..geometry.wide_tree import PATH_BITS, collapse
 from .area import area_power
 from .kinds import (
@@ -436,14 +436,7 @@ def _build_tree(
             sort_along_widest_axis(centroid, order, start, end)
             half = (end - start) // 2
         second[node] = node + 2 * half
-        stack[top, 0], stack[top, 1], stack[top, 2], stack[top, 3] = node + 2 * half, start + half, end, depth + 1
-        stack[top + 1, 0], stack[top + 1, 1], stack[top + 1, 2], stack[top + 1, 3] = (
-            node + 1,
-            start,
-            start + half,
-            depth + 1,
-        )
-        top += 2
+        top = push_halves(stack, top, node, start, end, half, depth)
     for node in range(m - 1, -1, -1):  # children have larger indices than their parent
         b = second[node]
         if b < 0:

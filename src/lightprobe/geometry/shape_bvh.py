@@ -162,6 +162,29 @@ def box_entered(ox, oy, oz, ix, iy, iz, lo, hi, i, tmax):
 
 
 @jit_inline
+def _bin(x, lo, extent, bins):
+    """The bin, of ``bins`` equal ones over [lo, lo + extent], that holds centroid coordinate x: the same expression
+    where the build counts a node's shapes and where it partitions them."""
+    return min(int(bins * ((x - lo) / extent)), bins - 1)
+
+
+@jit_inline
+def push_halves(stack, top, node, start, end, half, depth):
+    """Push a node's two halves on a depth-first build's stack of (node, start, end, depth) rows, the first
+    ``half`` items on top (popped first: its subtree takes the slots right after ``node``, 2 half - 1 of them, so
+    the second half's node is node + 2 half); returns the new top.  This tree and the light BVH
+    (emitters/selection.py) both number their nodes so."""
+    stack[top, 0], stack[top, 1], stack[top, 2], stack[top, 3] = node + 2 * half, start + half, end, depth + 1
+    stack[top + 1, 0], stack[top + 1, 1], stack[top + 1, 2], stack[top + 1, 3] = (
+        node + 1,
+        start,
+        start + half,
+        depth + 1,
+    )
+    return top + 2
+
+
+@jit_inline
 def _area(lo_x, lo_y, lo_z, hi_x, hi_y, hi_z):
     """Half the surface area of a box: a ray's chance of entering it, up to a factor shared by all boxes."""
     x, y, z = hi_x - lo_x, hi_y - lo_y, hi_z - lo_z
@@ -230,7 +253,7 @@ def _build_sah(lo, hi, max_depth, bins):
                     bin_lo[b, k], bin_hi[b, k] = np.inf, -np.inf
             for j in range(start, end):
                 p = prims[j]
-                b = min(int(bins * ((centroid[p, a] - c_lo[a]) / extent)), bins - 1)
+                b = _bin(centroid[p, a], c_lo[a], extent, bins)
                 bin_n[b] += 1
                 for k in range(3):
                     bin_lo[b, k] = min(bin_lo[b, k], lo[p, k])
@@ -264,22 +287,15 @@ def _build_sah(lo, hi, max_depth, bins):
             half = 0
             for j in range(start, end):  # a stable partition: the left side's shapes first, each side in order
                 p = prims[j]
-                if min(int(bins * ((centroid[p, a] - c_lo[a]) / extent)), bins - 1) <= best_plane:
+                if _bin(centroid[p, a], c_lo[a], extent, bins) <= best_plane:
                     scratch[start + half] = p
                     half += 1
             right = start + half
             for j in range(start, end):
                 p = prims[j]
-                if min(int(bins * ((centroid[p, a] - c_lo[a]) / extent)), bins - 1) > best_plane:
+                if _bin(centroid[p, a], c_lo[a], extent, bins) > best_plane:
                     scratch[right] = p
                     right += 1
             prims[start:end] = scratch[start:end]
-        stack[top, 0], stack[top, 1], stack[top, 2], stack[top, 3] = node + 2 * half, start + half, end, depth + 1
-        stack[top + 1, 0], stack[top + 1, 1], stack[top + 1, 2], stack[top + 1, 3] = (
-            node + 1,
-            start,
-            start + half,
-            depth + 1,
-        )
-        top += 2
+        top = push_halves(stack, top, node, start, end, half, depth)
     return node_lo, node_hi, skip, first, count, prims
