@@ -373,6 +373,15 @@ def _integrator(mi, n: int):
     return mi.load_dict({"type": "direct", "emitter_samples": n, "bsdf_samples": n})
 
 
+def _running_sums(path: Path) -> tuple:
+    """(sum, sum of squares, passes, seconds) of a reference kept at ``path`` (Mitsuba's or Cycles'), zeros when
+    there is none yet: a reference grows from where an earlier run left it."""
+    if not path.exists():
+        return 0.0, 0.0, 0, 0.0
+    with np.load(path) as f:
+        return f["total"], f["total2"], int(f["passes"]), float(f["seconds"])
+
+
 def mitsuba_reference(args) -> None:
     """Add passes to the scene's reference until its floor is at most :data:`REFERENCE_MARGIN` x the relMSE of
     lightprobe's pilot image against it (``--pilot``; at least 16 passes), or ``--reference-minutes`` have passed;
@@ -389,12 +398,7 @@ def mitsuba_reference(args) -> None:
         scene = mi.load_dict(d)
         load = time.perf_counter() - start
         outline = outline_variance(_lightprobe_build(args))
-        if out.exists():
-            with np.load(out) as f:
-                total, total2, passes, seconds = f["total"], f["total2"], int(f["passes"]), float(f["seconds"])
-        else:
-            total = total2 = 0.0
-            passes, seconds = 0, 0.0
+        total, total2, passes, seconds = _running_sums(out)
         start = time.perf_counter()
         floor = error = math.inf
         while True:
@@ -632,12 +636,7 @@ def cycles_reference(args) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         cs.configure(spp=args.spp, seed=999, light_tree=True)
         pilot, _ = cs.render(clock, tmp)
-        if out.exists():
-            with np.load(out) as f:
-                total, total2, passes, seconds = f["total"], f["total2"], int(f["passes"]), float(f["seconds"])
-        else:
-            total = total2 = 0.0
-            passes, seconds = 0, 0.0
+        total, total2, passes, seconds = _running_sums(out)
         start = time.perf_counter()
         floor = error = math.inf
         sync = []
