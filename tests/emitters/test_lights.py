@@ -125,9 +125,23 @@ def test_rays_that_escape_see_the_environment_and_the_suns_disc():
     table = light_arrays([SUN], environment=True)
     inside = -SUN.direction
     outside = np.array([0.0, 1.0, 0.0])
-    seen = escaped_batch(table, 0, np.array([inside, outside]), env=env)
+    seen = escaped_batch(table, np.array([inside, outside]), env=env)
     np.testing.assert_allclose(seen[0], 0.5 + SUN.radiance, rtol=1e-6)
     np.testing.assert_allclose(seen[1], 0.5, rtol=1e-6)
+
+
+def test_escaping_rays_see_only_the_infinite_rows_that_close_the_table():
+    """escaped_radiance finds the infinite lights from the table's end: bounded lights before them (a bright
+    rectangle, a point and a spot light here) add nothing, however many there are."""
+    lights, env = _one_of_each()
+    bounded = [lights[k] for k in ("rectangle", "sphere", "triangle", "point", "spot")]
+    table = light_arrays([*bounded, SUN], environment=True)
+    alone = light_arrays([SUN], environment=True)
+    dirs = np.array([-SUN.direction, [0.0, 1.0, 0.0], [0.6, -0.8, 0.0]])
+    np.testing.assert_array_equal(escaped_batch(table, dirs, env=env), escaped_batch(alone, dirs, env=env))
+    assert escaped_batch(table, dirs, env=env)[0].sum() > escaped_batch(table, dirs, env=env)[1].sum()
+    no_infinite = light_arrays(bounded)
+    np.testing.assert_array_equal(escaped_batch(no_infinite, dirs, env=env), 0.0)
 
 
 @pytest.mark.parametrize(

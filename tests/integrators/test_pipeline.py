@@ -30,6 +30,39 @@ def test_stage_names_are_unique_and_twins_are_stages():
         assert pipeline.stage_id(stage.name) == NAMES.index(stage.name)
 
 
+def test_each_stage_body_takes_the_records_it_uses_and_no_more_than_nine_arguments():
+    """A body's signature is the declaration of its data: names of the pass records in their order, then the loop's
+    facts; the widest (the setup stage and the BSDF rays' weighing) read six records and the claimed items."""
+    for stage in pipeline.STAGES:
+        names = stage.parameters
+        assert names[-2:] == ("lo", "hi"), stage.name
+        assert set(names) <= set(pipeline.RECORDS + pipeline.CLAIM), stage.name
+        assert len(names) <= 9, (stage.name, names)
+    assert pipeline.STAGES[pipeline.stage_id("environment_radiance")].parameters == ("env", "slots", "lo", "hi")
+    assert "acc" not in pipeline.STAGES[pipeline.stage_id("setup")].parameters
+    assert pipeline.STAGES[pipeline.stage_id("accumulate")].parameters == ("c", "cams", "slots", "acc", "lo", "hi")
+
+
+@pytest.mark.parametrize(
+    "signature", ["slots, env, lo, hi", "env, slots", "env, light_table, lo, hi", "env, slots, lo, hi, worker"]
+)
+def test_a_body_whose_parameters_are_not_records_in_order_is_refused_by_name(signature):
+    namespace = {}
+    exec(f"def odd_stage({signature}):\n    pass\n", namespace)
+    with pytest.raises(TypeError, match="odd_stage"):
+        pipeline.body_parameters(namespace["odd_stage"])
+
+
+def test_a_groups_loop_calls_each_body_with_the_records_it_names():
+    plan = next(p for p in _plans() if p.environment_alone and not p.environment_radiance_in_lanes)
+    names = plan.stages()
+    source = pipeline.group_loop_source(pipeline.group_id(tuple(pipeline.stage_id(n) for n in names)))
+    radiance, finish = names.index("environment_radiance"), names.index("finish")
+    assert f"body_{radiance}(env, slots, lo, hi)" in source
+    assert f"body_{finish}(s, lights, c, cams, slots, lo, hi)" in source
+    assert source.count("claim_range(counter, n)") == 2 * len(names)  # a first claim and the next, per stage
+
+
 def test_every_plan_runs_known_stages_in_the_estimators_order():
     order = ["camera", "setup", "samples", "bsdf rays", "finish", "shadows", "accumulate"]
 

@@ -20,6 +20,7 @@ def test_a_helper_compiles_the_stage_the_render_then_loads(tmp_path):
     script = """
 import json
 import numpy as np
+from numba import typeof
 from lightprobe.integrators import pipeline, precompile
 from lightprobe.integrators.accumulation import Accumulator
 from lightprobe.integrators.schedule import pass_pixels
@@ -33,8 +34,9 @@ work.make_buffers()
 records = work.records(Accumulator(40), pass_pixels(0, 1), 1, 0)
 helpers = precompile.start(("accumulate",), records)
 codes = [helper.wait(timeout=600) for helper in helpers]
-body = pipeline.STAGES[pipeline.stage_id("accumulate")].body
-body.compile(precompile.record_signature(records))
+stage = pipeline.STAGES[pipeline.stage_id("accumulate")]
+body = stage.body
+body.compile(precompile.record_signature(tuple(typeof(x) for x in records), stage.parameters))
 print(json.dumps({"helpers": len(helpers), "codes": codes, "hits": sum(body._cache_hits.values()),
                   "misses": sum(body._cache_misses.values())}))
 """

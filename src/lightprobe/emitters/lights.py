@@ -8,8 +8,8 @@ For a shading point p with normal n:
   per steradian (1 for a delta light), and whether it is a delta light;
 * ``light_pdf(lights, env, l, strategy, compensated, p, n, w)``: the density with which ``light_sample`` produces
   direction w (0 for a delta light: no given direction is ever its);
-* ``escaped_radiance(lights, env, first, w)``: what a ray that leaves the scene along w sees: the environment's and
-  every directional light's radiance (rows ``first`` on are the infinite lights), each ``infinite_radiance``;
+* ``escaped_radiance(lights, env, w)``: what a ray that leaves the scene along w sees: the environment's and
+  every directional light's radiance (the table's last rows, :func:`first_infinite` on), each ``infinite_radiance``;
 * for area lights a BSDF ray has hit at a known point, ``emitted`` and ``area_pdf_at`` (module ``area``).
 
 ``strategy`` is how area lights are sampled (:data:`~.area.STRATEGIES`); ``compensated`` whether the environment is
@@ -49,8 +49,10 @@ __all__ = [
     "emitted",
     "escaped_batch",
     "escaped_radiance",
+    "first_infinite",
     "infinite_radiance",
     "is_delta",
+    "is_infinite",
     "is_positional",
     "light_arrays",
     "light_pdf_of",
@@ -65,6 +67,23 @@ def is_delta(lights, l):
     """Whether row l is a delta light: a point or spot light, or a directional light of angle 0."""
     kind = lights.kind[l]
     return kind == LIGHT_POINT or kind == LIGHT_SPOT or (kind == LIGHT_DIRECTIONAL and lights.geom[l, 4] <= 0.0)
+
+
+@jit_inline
+def is_infinite(lights, l):
+    """Whether row l is infinitely far (a directional light or the environment): no distance, no surface."""
+    kind = lights.kind[l]
+    return kind == LIGHT_DIRECTIONAL or kind == LIGHT_ENVIRONMENT
+
+
+@jit_inline
+def first_infinite(lights):
+    """The first row of the infinite lights, which close the table (kinds.py): found from its end, a step per
+    infinite light (a few), so that code that reads the table needs no count kept beside it."""
+    first = lights.kind.shape[0]
+    while first > 0 and is_infinite(lights, first - 1):
+        first -= 1
+    return first
 
 
 @jit_inline
@@ -127,11 +146,11 @@ def infinite_radiance(lights, env, l, wx, wy, wz):
 
 
 @jit_inline
-def escaped_radiance(lights, env, first, wx, wy, wz):
-    """Radiance a ray leaving the scene along unit direction w sees: every infinite light's (rows ``first`` on),
-    the environment's from its map."""
+def escaped_radiance(lights, env, wx, wy, wz):
+    """Radiance a ray leaving the scene along unit direction w sees: every infinite light's, the environment's from
+    its map."""
     r = g = b = 0.0
-    for l in range(first, lights.kind.shape[0]):
+    for l in range(first_infinite(lights), lights.kind.shape[0]):
         lr, lg, lb = infinite_radiance(lights, env, l, wx, wy, wz)
         r += lr
         g += lg
@@ -198,10 +217,10 @@ def _pdf_batch(lights, env, l, strategy, compensated, points, normals, dirs):
 
 
 @jit_parallel
-def _escaped_batch(lights, env, first, dirs):
+def _escaped_batch(lights, env, dirs):
     out = np.empty((dirs.shape[0], 3))
     for i in prange(dirs.shape[0]):
-        out[i, 0], out[i, 1], out[i, 2] = escaped_radiance(lights, env, first, dirs[i, 0], dirs[i, 1], dirs[i, 2])
+        out[i, 0], out[i, 1], out[i, 2] = escaped_radiance(lights, env, dirs[i, 0], dirs[i, 1], dirs[i, 2])
     return out
 
 
@@ -243,10 +262,10 @@ def pdf_batch(lights: LightArrays, l: int, points, normals, dirs, *, env=None, s
     )
 
 
-def escaped_batch(lights: LightArrays, first: int, dirs, *, env=None) -> np.ndarray:
-    """What rays leaving the scene along ``dirs`` see from the infinite lights (rows ``first`` on)."""
+def escaped_batch(lights: LightArrays, dirs, *, env=None) -> np.ndarray:
+    """What rays leaving the scene along ``dirs`` see from the infinite lights (the table's last rows)."""
     d = np.ascontiguousarray(np.asarray(dirs, dtype=np.float64).reshape(-1, 3))
-    return _escaped_batch(lights, _env_kernel(env), int(first), d)
+    return _escaped_batch(lights, _env_kernel(env), d)
 
 
 def light_arrays(lights, *, environment: bool = False) -> LightArrays:

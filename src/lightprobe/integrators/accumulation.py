@@ -30,7 +30,7 @@ def pass_pixels_count(c, cams, slots):
 
 
 @jit_body
-def accumulate(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
+def accumulate(c, cams, slots, acc, lo, hi):
     """Pixels lo .. hi - 1 of the pass: their samples, in order."""
     m, spp_pass = c.m, c.spp_pass
     mean, m2, count, nonfinite = acc.mean, acc.m2, acc.count, acc.nonfinite

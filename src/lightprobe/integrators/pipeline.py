@@ -11,7 +11,8 @@ with emissive surfaces a BSDF ray finds its nearest hit (analytic shapes, then E
 camera, BSDF and shadow rays meet the analytic shapes 8 at a time (vector IR) wherever the scene has no shape
 hierarchy (with one, the BSDF and shadow rays walk it in the scalar stages); the setup stage carries texture code
 only for scenes with textured materials.  :data:`STAGES` is the one registry: each stage's body, what it counts
-(camera samples, slots, blocks of 8), and the scalar twin of a vector stage.
+(camera samples, slots, blocks of 8), and the scalar twin of a vector stage.  A body's parameters are the pass
+records it reads and writes (:data:`RECORDS`, ``pass_state.py``), so its signature says what data it touches.
 
 :func:`run_stage` is the loop over a stage's items, written once (pbrt-v4's ``ForAllQueued``): a worker claims chunks
 of the items from a shared counter (``_worksharing.py``) and calls the stage's body on each; :class:`Launcher` runs
@@ -22,13 +23,14 @@ alone), so a render compiles its plan's stages and no others; a body compiles on
 
 from __future__ import annotations
 
+import functools
+import inspect
 import itertools
 import os
-import warnings
 from concurrent.futures import ThreadPoolExecutor, wait
 from dataclasses import dataclass, fields
 
-from numba import literal_unroll, literally, njit, typeof, types
+from numba import literally, njit, typeof, types
 from numba.core.errors import TypingError
 from numba.extending import overload
 
@@ -66,13 +68,17 @@ from .stages.shadows import (
 )
 
 __all__ = [
+    "CLAIM",
     "GROUPS",
     "LOOPS_ENVIRONMENT",
+    "RECORDS",
     "STAGES",
     "Launcher",
     "Plan",
     "Stage",
+    "body_parameters",
     "group_id",
+    "group_loop_source",
     "loop_groups",
     "loop_per_stage",
     "run_stage",
@@ -102,15 +108,40 @@ def loop_groups(stages: tuple[int, ...]) -> tuple[tuple[int, ...], ...]:
     return tuple((i,) for i in stages) if loop_per_stage() else (tuple(stages),)
 
 
+# The records of a pass (pass_state.py) in the order the stage loop receives them, then the loop's own facts: the
+# worker (its scratch rows) and the claimed items [lo, hi).  A stage body's parameters are the ones it reads or
+# writes, in this order: its signature is the declaration of its data (pbrt-v4's wavefront/workitems.soa).
+RECORDS = ("s", "env", "lights", "sel", "c", "cams", "slots", "acc")
+CLAIM = ("worker", "lo", "hi")
+
+
+def body_parameters(body) -> tuple[str, ...]:
+    """The names of a stage body's parameters: some of :data:`RECORDS`, then ``worker`` if it uses its scratch rows,
+    then ``lo, hi``, in that order (a TypeError naming the body otherwise)."""
+    names = tuple(inspect.signature(getattr(body, "py_func", body)).parameters)
+    order = RECORDS + CLAIM
+    if (
+        names[-2:] != ("lo", "hi")
+        or any(n not in order for n in names)
+        or list(names) != sorted(names, key=order.index)
+    ):
+        raise TypeError(f"stage body {body.__name__}{names}: expected some of {order[:-2]} in that order, then lo, hi")
+    return names
+
+
 @dataclass(frozen=True)
 class Stage:
-    """One stage: its body ``body(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi)`` over items [lo, hi), the
-    number of items of a pass ``items(c, cams, slots)``, and for a vector stage the name of its scalar twin."""
+    """One stage: its body over items [lo, hi), whose parameters (:func:`body_parameters`) name the records it uses,
+    the number of items of a pass ``items(c, cams, slots)``, and for a vector stage the name of its scalar twin."""
 
     name: str
     body: object
     items: object
     twin: str | None = None
+
+    @property
+    def parameters(self) -> tuple[str, ...]:
+        return body_parameters(self.body)
 
 
 STAGES: tuple[Stage, ...] = (
@@ -139,13 +170,6 @@ STAGES: tuple[Stage, ...] = (
     Stage("accumulate", accumulate, pass_pixels_count),
 )
 _IDS = {stage.name: i for i, stage in enumerate(STAGES)}
-_BODIES = tuple(stage.body for stage in STAGES)
-_ITEMS = tuple(stage.items for stage in STAGES)
-
-
-# The stage loop's tuples of the stages' functions are Numba's "first-class functions", typed per stage by
-# literal_unroll, so that each iteration calls its body directly; Numba warns that the feature is experimental.
-warnings.filterwarnings("ignore", message="First-class function type feature is experimental")
 
 
 def jit_stage_loop(func):
@@ -163,39 +187,51 @@ def _run_group(group, position, s, env, lights, sel, c, cams, slots, acc, counte
 
 @overload(_run_group, prefer_literal=True, inline="always")
 def _run_group_overload(group, position, s, env, lights, sel, c, cams, slots, acc, counter, worker):
-    """The loop for the group whose index ``group`` is a compile-time constant: the group's own table of bodies and
-    item counts, unrolled (only its stages are typed and compiled; indexing a global table of every group made Numba
-    lower all of it, 4.8 s)."""
+    """The loop for the group whose index ``group`` is a compile-time constant: its own stages only, each called with
+    the records it declares (:func:`group_loop_source`), so only they are typed and compiled (indexing a global
+    table of every group made Numba lower all of it, 4.8 s)."""
     if not isinstance(group, types.IntegerLiteral):
         raise TypingError("run_stage's group must be a compile-time constant")
-    bodies, counts = _GROUP_BODIES[group.literal_value], _GROUP_ITEMS[group.literal_value]
+    return _group_loop(group.literal_value)
 
-    def loop(group, position, s, env, lights, sel, c, cams, slots, acc, counter, worker):
-        n = 0
-        i = 0
-        for items in literal_unroll(counts):
-            if i == position:
-                n = items(c, cams, slots)
-            i += 1
-        lo, hi = claim_range(counter, n)
-        while lo < hi:
-            i = 0
-            for body in literal_unroll(bodies):
-                if i == position:
-                    body(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi)
-                i += 1
-            lo, hi = claim_range(counter, n)
 
-    return loop
+def group_loop_source(group: int) -> str:
+    """The Python source of group ``group``'s loop: for the stage at ``position``, claim chunks of its items from the
+    shared counter and call its body on each, with the records its signature names.  Written out per group (as
+    pbrt-v4's wavefront integrator instantiates a kernel per work queue) so that each body's call lists what it
+    reads: a reader finds a stage's data in its signature, not in 11 arguments every stage received."""
+    lines = ["def loop(group, position, s, env, lights, sel, c, cams, slots, acc, counter, worker):"]
+    for position, stage in enumerate(GROUPS[group]):
+        lines += [
+            f"    {'if' if position == 0 else 'elif'} position == {position}:  # {STAGES[stage].name}",
+            f"        n = items_{position}(c, cams, slots)",
+            "        lo, hi = claim_range(counter, n)",
+            "        while lo < hi:",
+            f"            body_{position}({', '.join(STAGES[stage].parameters)})",
+            "            lo, hi = claim_range(counter, n)",
+        ]
+    return "\n".join(lines) + "\n"
+
+
+@functools.cache
+def _group_loop(group: int):
+    """Group ``group``'s loop, compiled from :func:`group_loop_source` (one function object per group, so that
+    Numba types it once)."""
+    namespace = {"claim_range": claim_range}
+    for position, stage in enumerate(GROUPS[group]):
+        namespace[f"items_{position}"] = STAGES[stage].items
+        namespace[f"body_{position}"] = STAGES[stage].body
+    exec(compile(group_loop_source(group), f"<stage loop of group {group}>", "exec"), namespace)
+    return namespace["loop"]
 
 
 @jit_stage_loop
 def run_stage(group, position, s, env, lights, sel, c, cams, slots, acc, counter, worker):
     """Worker ``worker``'s share of the stage at ``position`` of stage group ``group`` (an index into
     :data:`GROUPS`): chunks of the stage's items claimed from ``counter`` until none is left.  ``group`` is a
-    compile-time constant (``literally``): each group, a plan's stages, compiles one loop whose table is its own
-    stages' bodies and item counts, unrolled (the table is the dispatch), so a render compiles the stages its plan
-    runs and no others (decisions.md 104)."""
+    compile-time constant (``literally``): each group, a plan's stages, compiles one loop written for its own stages
+    (:func:`group_loop_source`: each body called with the records it names), so a render compiles the stages its
+    plan runs and no others (decisions.md 104)."""
     literally(group)
     _run_group(group, position, s, env, lights, sel, c, cams, slots, acc, counter, worker)
 
@@ -316,8 +352,6 @@ def _groups() -> tuple[tuple[int, ...], ...]:
 
 GROUPS = _groups()
 _GROUP_IDS = {group: i for i, group in enumerate(GROUPS)}
-_GROUP_BODIES = tuple(tuple(_BODIES[i] for i in group) for group in GROUPS)
-_GROUP_ITEMS = tuple(tuple(_ITEMS[i] for i in group) for group in GROUPS)
 
 
 def group_id(stages: tuple[int, ...]) -> int:

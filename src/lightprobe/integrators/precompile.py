@@ -50,7 +50,7 @@ def start(stages: tuple[str, ...], records: tuple) -> list[subprocess.Popen]:
 
     from numba import typeof
 
-    signatures = pickle.dumps((record_signature(records), tuple(typeof(x) for x in records[4:7])))
+    signatures = pickle.dumps((tuple(typeof(x) for x in records), tuple(typeof(x) for x in records[4:7])))
     backwards = list(reversed(stages))
     helpers = []
     for i in range(count):
@@ -82,12 +82,16 @@ def stop(helpers: list[subprocess.Popen]) -> None:
             pass
 
 
-def record_signature(records: tuple) -> tuple:
-    """The argument types of a stage body called with the pass ``records`` (s, env, lights, sel, c, cams, slots,
-    acc), then worker, lo and hi."""
-    from numba import typeof, types
+def record_signature(record_types: tuple, parameters: tuple[str, ...]) -> tuple:
+    """The argument types of a stage body whose parameters are ``parameters`` (``pipeline.body_parameters``: some
+    of the pass records, then worker, lo, hi), from the types of the pass's records (s, env, lights, sel, c, cams,
+    slots, acc)."""
+    from numba import types
 
-    return (*(typeof(x) for x in records), types.int64, types.int64, types.int64)
+    from .pipeline import CLAIM, RECORDS
+
+    by_name = dict(zip(RECORDS, record_types, strict=True)) | dict.fromkeys(CLAIM, types.int64)
+    return tuple(by_name[name] for name in parameters)
 
 
 def main(names: list[str]) -> None:
@@ -96,11 +100,11 @@ def main(names: list[str]) -> None:
 
     from . import pipeline
 
-    body_signature, items_signature = pickle.loads(sys.stdin.buffer.read())
+    record_types, items_signature = pickle.loads(sys.stdin.buffer.read())
     for name in names:
         stage = pipeline.STAGES[pipeline.stage_id(name)]
         stage.items.compile(items_signature)
-        stage.body.compile(body_signature)
+        stage.body.compile(record_signature(record_types, stage.parameters))
 
 
 if __name__ == "__main__":

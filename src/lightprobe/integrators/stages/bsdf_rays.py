@@ -57,7 +57,7 @@ def non_light_blocks(c, cams, slots):
 
 
 @jit_body
-def environment_coords_lanes(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
+def environment_coords_lanes(env, c, cams, slots, lo, hi):
     """Blocks lo .. hi - 1 of 8 BSDF or hemisphere slots: lat-long coordinates and, under MIS, the environment's
     bilinear density."""
     count = c.n_bsdf if c.strategy == MIS else (0 if c.strategy == ENV else c.m)
@@ -71,7 +71,7 @@ def environment_coords_lanes(s, env, lights, sel, c, cams, slots, acc, worker, l
 
 
 @jit_body
-def environment_coords(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
+def environment_coords(env, c, cams, slots, lo, hi):
     """Slots lo .. hi - 1: lat-long coordinates of every live slot's direction (light samples have theirs already),
     and the environment's density for BSDF samples under MIS."""
     mis = c.strategy == MIS
@@ -87,7 +87,7 @@ def environment_coords(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi)
 
 
 @jit_body
-def infinite_lights(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
+def infinite_lights(env, lights, sel, c, cams, slots, lo, hi):
     """Slots lo .. hi - 1: a BSDF or hemisphere ray that may escape sees every infinite light, each weighed with
     its own density (the selector's probability x the light's pdf there); the shadow stages decide whether it
     escapes.  Rays no infinite light meets are dropped."""
@@ -153,7 +153,7 @@ def _bsdf_ray_into(c, cams, slots, r):
 
 
 @jit_body
-def nearest_analytic(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
+def nearest_analytic(s, c, cams, slots, lo, hi):
     """Slots lo .. hi - 1: a BSDF or hemisphere ray's origin (offset from the surface by the point's error bound)
     and its nearest analytic hit; ``hit_mesh`` where a mesh may be nearer."""
     if slots.hit_t.shape[0] == 0:  # never without the hit record (pass_state.py)
@@ -171,7 +171,7 @@ def nearest_analytic(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
 
 
 @jit_body
-def nearest_analytic_lanes(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
+def nearest_analytic_lanes(s, c, cams, slots, worker, lo, hi):
     """Blocks lo .. hi - 1 of 8 slots: as ``nearest_analytic``, the rays built one at a time and their shape tests
     made 8 at a time (``ray_lanes.ray_block``).  Not for a scene with a shape hierarchy, whose rays walk it one at a
     time in ``nearest_analytic`` (the plan picks that stage there: ``pipeline.Plan.shape_tree``)."""
@@ -206,7 +206,7 @@ def nearest_analytic_lanes(s, env, lights, sel, c, cams, slots, acc, worker, lo,
 
 
 @jit_body
-def nearest_mesh(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
+def nearest_mesh(c, slots, worker, lo, hi):
     """Slots lo .. hi - 1 flagged ``hit_mesh``: the nearest mesh hit through Embree, where it is nearer than the
     analytic one (the flagged slots are found as the chunk is scanned: decisions.md 60)."""
     if slots.hit_t.shape[0] == 0:  # never without the hit record (pass_state.py)
@@ -226,7 +226,7 @@ def nearest_mesh(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
 
 
 @jit_body
-def what_bsdf_rays_see(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
+def what_bsdf_rays_see(s, env, lights, sel, c, cams, slots, lo, hi):
     """Slots lo .. hi - 1: the radiance each BSDF or hemisphere ray sees at its nearest hit, weighed for MIS; rays
     that hit an ordinary surface are dropped."""
     if slots.hit_t.shape[0] == 0:  # never without the hit record (pass_state.py)

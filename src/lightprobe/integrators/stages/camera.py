@@ -75,7 +75,7 @@ def _nearest_hit_into(s, c, cams, worker, k):
 
 
 @jit_body
-def camera_lanes(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
+def camera_lanes(s, c, cams, worker, lo, hi):
     """Blocks lo .. hi - 1 of 8 camera samples."""
     n = cams.t.shape[0]
     dirs = cams.dirs
@@ -110,7 +110,7 @@ def camera_lanes(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
 
 
 @jit_body
-def camera_scalar(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
+def camera_scalar(s, c, cams, worker, lo, hi):
     """Camera samples lo .. hi - 1, one ray at a time."""
     for k in range(lo, hi):
         _ray_into(c, cams, k)

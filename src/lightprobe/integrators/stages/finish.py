@@ -39,7 +39,7 @@ __all__ = ["finish"]
 
 
 @jit_body
-def finish(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
+def finish(s, lights, c, cams, slots, lo, hi):
     """Camera samples lo .. hi - 1."""
     m = c.m
     bsdf_rays_hit = slots.hit_t.shape[0] > 0  # BSDF rays found their nearest hit: nothing left to test

@@ -54,7 +54,7 @@ def slots_of_pass(c, cams, slots):
 
 
 @jit_body
-def light_samples(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
+def light_samples(env, lights, sel, c, cams, slots, lo, hi):
     """Slots lo .. hi - 1: a light and a direction toward it for each light slot."""
     m = c.m
     if slots.light.shape[0] == 0:  # never without its record of the picks (pass_state.py)
@@ -101,7 +101,7 @@ def environment_blocks(c, cams, slots):
 
 
 @jit_body
-def environment_lanes(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
+def environment_lanes(env, c, cams, slots, lo, hi):
     """Blocks lo .. hi - 1 of 8 environment samples (the bilinear density, emitters/envmap_bilinear.py)."""
     first = c.n_bsdf if c.strategy == MIS else 0
     count = c.m - first if c.strategy == MIS or c.strategy == ENV else 0
@@ -115,7 +115,7 @@ def environment_lanes(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
 
 
 @jit_body
-def environment_scalar(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
+def environment_scalar(env, c, cams, slots, lo, hi):
     """Slots lo .. hi - 1: directions, densities and lat-long coordinates of environment samples; those below the
     surface are dropped."""
     m = c.m
@@ -136,7 +136,7 @@ def environment_scalar(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi)
 
 
 @jit_body
-def environment_resampled(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
+def environment_resampled(s, env, c, cams, slots, lo, hi):
     """Environment samples by resampled importance sampling (Talbot, Cline and Egbert 2005): M candidates x_i from
     the environment's PDF p, one kept with probability proportional to w_i = p^(x_i) / p(x_i), where the target
     p^ = luminance(f L) cos is the product the light sample estimates (map x BSDF x cosine, without visibility).

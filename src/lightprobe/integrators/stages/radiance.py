@@ -27,14 +27,14 @@ def slot_blocks(c, cams, slots):
 
 
 @jit_body
-def environment_radiance_lanes(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
+def environment_radiance_lanes(env, slots, lo, hi):
     """Blocks lo .. hi - 1 of 8 slots."""
     for block in range(lo, hi):
         radiance_block(slots.radiance, env.image, slots.uv, slots.state, block * LANES)
 
 
 @jit_body
-def environment_radiance(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
+def environment_radiance(env, slots, lo, hi):
     """Slots lo .. hi - 1, one lookup at a time."""
     for r in range(lo, hi):
         if slots.state[r] != SLOT_NONE:

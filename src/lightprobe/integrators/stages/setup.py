@@ -97,19 +97,19 @@ def _textures_if_overload(textured, s, cams, k, dx, dy, dz):
 
 
 @jit_body
-def shading_setup(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
+def shading_setup(s, env, lights, c, cams, slots, worker, lo, hi):
     """Camera samples lo .. hi - 1 of a scene without textures."""
-    _shading_setup(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi, False)
+    _shading_setup(s, env, lights, c, cams, slots, worker, lo, hi, False)
 
 
 @jit_body
-def shading_setup_textured(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
+def shading_setup_textured(s, env, lights, c, cams, slots, worker, lo, hi):
     """Camera samples lo .. hi - 1 of a scene with textured materials."""
-    _shading_setup(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi, True)
+    _shading_setup(s, env, lights, c, cams, slots, worker, lo, hi, True)
 
 
 @jit_inline
-def _shading_setup(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi, textured):
+def _shading_setup(s, env, lights, c, cams, slots, worker, lo, hi, textured):
     """Camera samples lo .. hi - 1 (``textured``: a compile-time constant, whether their materials may be)."""
     m, n_bsdf = c.m, c.n_bsdf
     ox, oy, oz = c.cam[0], c.cam[1], c.cam[2]
@@ -121,9 +121,7 @@ def _shading_setup(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi, tex
             state[base + j] = SLOT_NONE
         dx, dy, dz = cams.dirs[k, 0], cams.dirs[k, 1], cams.dirs[k, 2]
         if cams.kind[k] == MISS:
-            cams.direct[k, 0], cams.direct[k, 1], cams.direct[k, 2] = escaped_radiance(
-                lights, env, sel.n_bounded, dx, dy, dz
-            )
+            cams.direct[k, 0], cams.direct[k, 1], cams.direct[k, 2] = escaped_radiance(lights, env, dx, dy, dz)
             _add_outlines(c, cams, k, dx, dy, dz)
             continue
         hit = (cams.kind[k], cams.index[k], cams.prim[k], cams.b1[k], cams.b2[k], cams.t[k])

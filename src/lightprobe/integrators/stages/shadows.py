@@ -86,7 +86,7 @@ def shadow_ray(lights, c, cams, slots, r):
 
 
 @jit_body
-def analytic_shadows(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
+def analytic_shadows(s, lights, c, cams, slots, lo, hi):
     """Slots lo .. hi - 1 flagged TEST_ANALYTIC, one at a time: BLOCKED by a sphere, a rectangle or a closed
     mesh's inner ball, else TEST_MESH where a mesh's bounds are crossed, else VISIBLE."""
     for r in range(lo, hi):
@@ -102,7 +102,7 @@ def analytic_shadows(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
 
 
 @jit_body
-def analytic_shadows_lanes(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
+def analytic_shadows_lanes(s, lights, c, cams, slots, worker, lo, hi):
     """Blocks lo .. hi - 1 of 8 slots, shadow rays of any kind (to a light's sampled point or unbounded): as
     ``analytic_shadows``, each ray built by ``shadow_ray`` and the shape tests made 8 rays at a time
     (``ray_lanes.ray_block``).  Not for a scene with a shape hierarchy, whose rays walk it one at a time in
@@ -135,7 +135,7 @@ def analytic_shadows_lanes(s, env, lights, sel, c, cams, slots, acc, worker, lo,
 
 
 @jit_body
-def mesh_shadows(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
+def mesh_shadows(lights, c, cams, slots, worker, lo, hi):
     """Slots lo .. hi - 1 flagged TEST_MESH through Embree 8 at a time: each becomes VISIBLE or BLOCKED."""
     packet = packet_words(c.scratch[worker])
     floats = packet.view(np.float32)
@@ -158,7 +158,7 @@ def mesh_shadows(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
 
 
 @jit_body
-def mesh_shadows_single(s, env, lights, sel, c, cams, slots, acc, worker, lo, hi):
+def mesh_shadows_single(lights, c, cams, slots, worker, lo, hi):
     """``mesh_shadows`` one ray at a time: where Embree's 8-ray packets are not native."""
     for r in range(lo, hi):
         if slots.flags[r] != TEST_MESH:
