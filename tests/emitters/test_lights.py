@@ -220,3 +220,31 @@ def test_no_kind_is_known_by_its_number_outside_emitters():
         if pattern.search(line)
     ]
     assert found == []
+
+
+def test_kinds_are_tested_by_their_flags_never_by_their_order():
+    """The compiled flag tests read tables built from KINDS, so a new kind with a flag is counted everywhere the
+    flag is asked; and no code in the package compares a kind's number by its order (``kind >= LIGHT_POINT`` took
+    a new kind numbered after the point light for a light without a surface, whatever it was)."""
+    import re
+    from pathlib import Path
+
+    import lightprobe
+    from lightprobe.emitters import kinds
+
+    for kind in KINDS.values():
+        assert kinds.is_area_kind.py_func(kind.code) == kind.area, kind.name
+        assert kinds.is_infinite_kind.py_func(kind.code) == kind.infinite, kind.name
+        assert kinds.is_positional_kind.py_func(kind.code) == (kind.delta and not kind.infinite), kind.name
+    codes = np.array([kind.code for kind in KINDS.values()])
+    assert kinds.flag_rows(codes, "infinite").tolist() == [kind.infinite for kind in KINDS.values()]
+    assert kinds.area_rows(codes).tolist() == [kind.area for kind in KINDS.values()]
+    ordered = re.compile(r"[<>]=?\s*LIGHT_[A-Z]+\b|\bLIGHT_[A-Z]+\s*[<>]")
+    package = Path(lightprobe.__file__).parent
+    found = [
+        f"{path.relative_to(package)}:{number + 1}: {line.strip()}"
+        for path in sorted(package.rglob("*.py"))
+        for number, line in enumerate(path.read_text().splitlines())
+        if ordered.search(line)
+    ]
+    assert found == []

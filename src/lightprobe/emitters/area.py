@@ -72,7 +72,7 @@ from ..sampling.kernels import (
     square_to_uniform_hemisphere,
     square_to_uniform_triangle,
 )
-from .kinds import LIGHT_POINT, LIGHT_RECT, LIGHT_SPHERE, LIGHT_TRIANGLE, LightArrays
+from .kinds import LIGHT_RECT, LIGHT_SPHERE, LIGHT_TRIANGLE, LightArrays, is_area_kind
 
 __all__ = [
     "STRATEGIES",
@@ -143,7 +143,7 @@ def light_intersect(lights, l, ox, oy, oz, dx, dy, dz):
     between the light's normal at the hit and -d (> 0: the front)."""
     g = lights.geom[l]
     kind = lights.kind[l]
-    if kind >= LIGHT_POINT:  # no surface: no ray meets it
+    if not is_area_kind(kind):  # no surface: no ray meets it
         return math.inf, 0.0
     if kind == LIGHT_SPHERE:
         t = sphere_hit(ox, oy, oz, dx, dy, dz, g[0], g[1], g[2], g[3], math.inf)
@@ -533,7 +533,7 @@ def _hemisphere_pdf(strategy, nx, ny, nz, wx, wy, wz):
 @jit
 def light_pdf(lights, l, strategy, px, py, pz, nx, ny, nz, wx, wy, wz):
     """Density per steradian with which ``light_sample(..., strategy, ...)`` produces unit direction w."""
-    if lights.kind[l] >= LIGHT_POINT:
+    if not is_area_kind(lights.kind[l]):
         return 0.0
     if strategy == HEMISPHERE or strategy == COSINE:
         return _hemisphere_pdf(strategy, nx, ny, nz, wx, wy, wz)
@@ -551,7 +551,7 @@ def light_pdf_at(lights, l, strategy, px, py, pz, nx, ny, nz, x, y, z):
     point (x, y, z) of light l, a point a ray is known to have hit: the density of *that* point, with no second
     intersection (a BSDF ray leaves an offset origin, and from p itself its twin may miss a small light's edge;
     weighing it with a density of 0 there counted that band twice under MIS)."""
-    if lights.kind[l] >= LIGHT_POINT:
+    if not is_area_kind(lights.kind[l]):
         return 0.0
     dx, dy, dz = x - px, y - py, z - pz
     dist = math.sqrt(dx * dx + dy * dy + dz * dz)

@@ -19,6 +19,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .._numba import jit_inline
 from ..geometry.intersect import RECT_WIDTH
 
 __all__ = [
@@ -36,6 +37,10 @@ __all__ = [
     "LightSample",
     "area_rows",
     "concatenate",
+    "flag_rows",
+    "is_area_kind",
+    "is_infinite_kind",
+    "is_positional_kind",
     "light_counts",
     "rows_of",
 ]
@@ -70,6 +75,50 @@ KINDS = {
         Kind(LIGHT_ENVIRONMENT, "environment", "envmap", area=False, delta=False, infinite=True),
     )
 }
+
+
+# the flags a row's kind is tested for: what the code asks, never a kind's number or order
+_FLAGS = {
+    "area": lambda k: k.area,  # a surface rays can hit
+    "infinite": lambda k: k.infinite,  # infinitely far: rows after every bounded light's
+    "positional": lambda k: k.delta and not k.infinite,  # a position with no surface: a shadow ray ends at it
+}
+
+
+def _flag_table(name: str) -> np.ndarray:
+    """Entry ``code`` is whether the kind of that code has the flag ``name``: built from :data:`KINDS`, so that a
+    new kind with the flag set is counted with no other line changed (compiled code reads the table as a constant)."""
+    table = np.zeros(max(kind.code for kind in KINDS.values()) + 1, np.bool_)
+    for kind in KINDS.values():
+        table[kind.code] = _FLAGS[name](kind)
+    return table
+
+
+_AREA, _INFINITE, _POSITIONAL = _flag_table("area"), _flag_table("infinite"), _flag_table("positional")
+
+
+@jit_inline
+def is_area_kind(kind):
+    """Whether a light table's kind code is an area light's (a surface rays can hit)."""
+    return _AREA[kind]
+
+
+@jit_inline
+def is_infinite_kind(kind):
+    """Whether a light table's kind code is an infinite light's (no distance, no surface)."""
+    return _INFINITE[kind]
+
+
+@jit_inline
+def is_positional_kind(kind):
+    """Whether a light table's kind code is a position with no surface around it (a point or spot light)."""
+    return _POSITIONAL[kind]
+
+
+def flag_rows(kinds: np.ndarray, name: str) -> np.ndarray:
+    """Which rows of a light table's ``kind`` column have the flag ``name`` (``area``, ``infinite``,
+    ``positional``): a boolean mask, for NumPy code."""
+    return _flag_table(name)[kinds]
 
 
 class LightArrays(NamedTuple):
@@ -108,7 +157,7 @@ def rows_of(kinds: np.ndarray, name: str) -> np.ndarray:
 
 def area_rows(kinds: np.ndarray) -> np.ndarray:
     """Which rows of a light table's ``kind`` column are area lights (surfaces rays can hit): a boolean mask."""
-    return np.isin(kinds, [kind.code for kind in KINDS.values() if kind.area])
+    return flag_rows(kinds, "area")
 
 
 def light_counts(kinds: np.ndarray) -> dict:

@@ -41,6 +41,8 @@ from .kinds import (
     LightArrays,
     LightSample,
     concatenate,
+    is_infinite_kind,
+    is_positional_kind,
 )
 from .punctual import punctual_sample
 
@@ -66,14 +68,13 @@ __all__ = [
 def is_delta(lights, l):
     """Whether row l is a delta light: a point or spot light, or a directional light of angle 0."""
     kind = lights.kind[l]
-    return kind == LIGHT_POINT or kind == LIGHT_SPOT or (kind == LIGHT_DIRECTIONAL and lights.geom[l, 4] <= 0.0)
+    return is_positional_kind(kind) or (kind == LIGHT_DIRECTIONAL and lights.geom[l, 4] <= 0.0)
 
 
 @jit_inline
 def is_infinite(lights, l):
     """Whether row l is infinitely far (a directional light or the environment): no distance, no surface."""
-    kind = lights.kind[l]
-    return kind == LIGHT_DIRECTIONAL or kind == LIGHT_ENVIRONMENT
+    return is_infinite_kind(lights.kind[l])
 
 
 @jit_inline
@@ -89,8 +90,7 @@ def first_infinite(lights):
 @jit_inline
 def is_positional(lights, l):
     """Whether row l is a point or spot light: a position with no surface around it (a shadow ray ends at it)."""
-    kind = lights.kind[l]
-    return kind == LIGHT_POINT or kind == LIGHT_SPOT
+    return is_positional_kind(lights.kind[l])
 
 
 @jit

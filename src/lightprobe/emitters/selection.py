@@ -61,7 +61,6 @@ from ..geometry.shape_bvh import push_halves, sort_along_widest_axis
 from ..geometry.wide_tree import PATH_BITS, collapse
 from .area import area_power
 from .kinds import (
-    LIGHT_DIRECTIONAL,
     LIGHT_ENVIRONMENT,
     LIGHT_POINT,
     LIGHT_RECT,
@@ -71,6 +70,7 @@ from .kinds import (
     ROW_WIDTH,
     LightArrays,
     concatenate,
+    flag_rows,
 )
 from .light_tree_lanes import (
     B_AXIS,
@@ -178,11 +178,11 @@ def power_of_lights(lights: LightArrays) -> np.ndarray:
     4 pi I for a point light, 2 pi I (1 - (cos_start + cos_total) / 2) for a spot (pbrt-v4's ``Phi``); 0 for the
     infinite lights (chosen by their irradiance, not their power)."""
     power = area_power(lights)
-    punctual = (lights.kind == LIGHT_POINT) | (lights.kind == LIGHT_SPOT)
+    punctual = flag_rows(lights.kind, "positional")
     power[punctual] = punctual_power(
         lights.kind[punctual] == LIGHT_SPOT, lights.geom[punctual], lights.radiance[punctual]
     )
-    power[lights.kind >= LIGHT_DIRECTIONAL] = 0.0
+    power[flag_rows(lights.kind, "infinite")] = 0.0
     return power
 
 
@@ -743,7 +743,7 @@ def build_selector(
     if env_irradiance is not None and not np.any(kinds == LIGHT_ENVIRONMENT):
         lights = concatenate([lights, _environment_row()])
         kinds = lights.kind
-    infinite = kinds >= LIGHT_DIRECTIONAL
+    infinite = flag_rows(kinds, "infinite")
     n = kinds.shape[0]
     n_bounded = int(np.count_nonzero(~infinite))
     if np.any(infinite[:n_bounded]) or np.count_nonzero(kinds == LIGHT_ENVIRONMENT) > 1:
