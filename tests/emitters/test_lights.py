@@ -248,3 +248,25 @@ def test_kinds_are_tested_by_their_flags_never_by_their_order():
         if ordered.search(line)
     ]
     assert found == []
+
+
+def test_the_dispatchers_are_written_from_the_kinds_table():
+    """Each kind's module has the contract (row_sample, row_pdf, and row_radiance for infinite kinds), and each
+    dispatcher tests every kind's code once and calls its module: a new kind is a module and a line of KINDS."""
+    import importlib
+    import re
+
+    from lightprobe.emitters import lights
+
+    for kind in KINDS.values():
+        module = importlib.import_module(f"lightprobe.emitters.{kind.module}")
+        names = ("row_sample", "row_pdf") + (("row_radiance",) if kind.infinite else ())
+        assert all(callable(getattr(module, name, None)) for name in names), kind.name
+    for function, infinite_only in (("row_sample", False), ("row_pdf", False), ("row_radiance", True)):
+        source = lights.dispatch_source(function, "dispatch")
+        wanted = [k for k in KINDS.values() if k.infinite or not infinite_only]
+        tested = [int(code) for code in re.findall(r"kind == (\d+)", source)]
+        last_module = wanted[-1].module  # the last module's call is unconditional
+        assert sorted(tested) == sorted(k.code for k in wanted if k.module != last_module), function
+        for kind in wanted:
+            assert f"return {kind.module}.{function}(" in source, (function, kind.name)

@@ -73,6 +73,7 @@ from ..sampling.kernels import (
     square_to_uniform_triangle,
 )
 from .kinds import LIGHT_RECT, LIGHT_SPHERE, LIGHT_TRIANGLE, LightArrays, is_area_kind
+from .kinds import LightSample as SampleRecord  # this module's LightSample is the Python API's batch
 
 __all__ = [
     "STRATEGIES",
@@ -773,3 +774,19 @@ def area_power(lights: LightArrays) -> np.ndarray:
     from ..color import luminance
 
     return math.pi * lights.area * luminance(lights.radiance) * np.where(lights.two_sided == 1, 2.0, 1.0)
+
+
+# --- the light contract (lights.py's dispatchers call these, generated from kinds.KINDS) ------------------------------
+# Every kind's module has the same three functions, inlined into the dispatchers; each calls the kind's own sampler
+# with only its own data (a call taking the environment's record cost a light sample 30-70 ns: decisions.md 91).
+@jit_inline
+def row_sample(lights, env, l, strategy, compensated, px, py, pz, nx, ny, nz, u0, u1):
+    """Area light l's :class:`~.kinds.LightSample` from p (normal n): :func:`light_sample`."""
+    wx, wy, wz, dist, r, g, b, pdf = light_sample(lights, l, strategy, px, py, pz, nx, ny, nz, u0, u1)
+    return SampleRecord(wx, wy, wz, dist, r, g, b, pdf, False)
+
+
+@jit_inline
+def row_pdf(lights, env, l, strategy, compensated, px, py, pz, nx, ny, nz, wx, wy, wz):
+    """Area light l's density per steradian of direction w from p: :func:`light_pdf`."""
+    return light_pdf(lights, l, strategy, px, py, pz, nx, ny, nz, wx, wy, wz)

@@ -25,7 +25,7 @@ from .._numba import jit, jit_inline
 from ..errors import ParameterError
 from ..geometry.frame import coordinate_system, to_world
 from ..sampling.kernels import TWO_PI
-from .kinds import ROW_WIDTH
+from .kinds import ROW_WIDTH, LightSample
 
 __all__ = ["DirectionalLight", "directional_pdf", "directional_radiance", "directional_sample"]
 
@@ -141,3 +141,25 @@ class DirectionalLight:
             f"DirectionalLight(direction={self.direction.tolist()}, irradiance={self.irradiance.tolist()}, "
             f"angle={self.angle})"
         )
+
+
+# --- the light contract (lights.py's dispatchers call these, generated from kinds.KINDS) ------------------------------
+# Every kind's module has the same three functions, inlined into the dispatchers; each calls the kind's own sampler
+# with only its own data (a call taking the environment's record cost a light sample 30-70 ns: decisions.md 91).
+@jit_inline
+def row_sample(lights, env, l, strategy, compensated, px, py, pz, nx, ny, nz, u0, u1):
+    """Directional light l's :class:`~.kinds.LightSample`: :func:`directional_sample`."""
+    wx, wy, wz, dist, r, g, b, pdf, delta = directional_sample(lights.geom[l], lights.radiance[l], u0, u1)
+    return LightSample(wx, wy, wz, dist, r, g, b, pdf, delta)
+
+
+@jit_inline
+def row_pdf(lights, env, l, strategy, compensated, px, py, pz, nx, ny, nz, wx, wy, wz):
+    """Directional light l's density of direction w: :func:`directional_pdf`."""
+    return directional_pdf(lights.geom[l], wx, wy, wz)
+
+
+@jit_inline
+def row_radiance(lights, env, l, wx, wy, wz):
+    """What directional light l sends toward a ray leaving the scene along w: :func:`directional_radiance`."""
+    return directional_radiance(lights.geom[l], lights.radiance[l], wx, wy, wz)

@@ -74,6 +74,7 @@ from .envmap_bilinear import (
     sample_angles,
 )
 from .envmap_pdf import build_distributions, luminance_f32
+from .kinds import LightSample
 from .mappings import bilinear_latlong, direction_to_latlong, nearest_latlong
 
 __all__ = ["EnvKernel", "EnvironmentMap", "placeholder_environment"]
@@ -752,3 +753,33 @@ def placeholder_environment() -> EnvironmentMap:
     from .procedural import constant
 
     return EnvironmentMap.from_array(constant(1.0, width=2, height=1), source="none")
+
+
+# --- the light contract (lights.py's dispatchers call these, generated from kinds.KINDS) ------------------------------
+# Every kind's module has the same three functions, inlined into the dispatchers; each calls the kind's own sampler
+# with only its own data (a call taking the environment's record cost a light sample 30-70 ns: decisions.md 91).
+@jit
+def _environment_sample(env, compensated, u0, u1):
+    """A direction from the map's density and the radiance along it: a call of its own, as the other kinds' are."""
+    wx, wy, wz, pdf = env_sample(env, compensated, u0, u1)
+    r, g, b = env_eval(env, wx, wy, wz)
+    return wx, wy, wz, r, g, b, pdf
+
+
+@jit_inline
+def row_sample(lights, env, l, strategy, compensated, px, py, pz, nx, ny, nz, u0, u1):
+    """The environment's :class:`~.kinds.LightSample`: a direction from its (``compensated``) density."""
+    wx, wy, wz, r, g, b, pdf = _environment_sample(env, compensated, u0, u1)
+    return LightSample(wx, wy, wz, math.inf, r, g, b, pdf, False)
+
+
+@jit_inline
+def row_pdf(lights, env, l, strategy, compensated, px, py, pz, nx, ny, nz, wx, wy, wz):
+    """The environment's density of direction w (inlined: every BSDF ray that escapes asks for it)."""
+    return env_pdf(env, compensated, wx, wy, wz)
+
+
+@jit_inline
+def row_radiance(lights, env, l, wx, wy, wz):
+    """What the map shows a ray leaving the scene along w."""
+    return env_eval(env, wx, wy, wz)

@@ -21,30 +21,24 @@ which: :data:`~.kinds.KINDS`, the one table; ``tests/emitters/test_lights.py`` r
 
 from __future__ import annotations
 
-import math
+import importlib
 
 import numpy as np
+from numba.extending import overload
 
-from .._numba import jit, jit_inline, jit_parallel, prange
-from .area import light_normal, light_pdf, light_radiance
+from .._numba import jit_inline, jit_parallel, prange
+from .area import light_normal, light_radiance
 from .area import light_pdf_at as area_pdf_at
-from .area import light_sample as area_sample
-from .directional import directional_pdf, directional_radiance, directional_sample
-from .envmap import env_eval, env_pdf, env_sample
 from .kinds import (
     KINDS,
     LIGHT_DIRECTIONAL,
     LIGHT_ENVIRONMENT,
-    LIGHT_POINT,
-    LIGHT_SPOT,
     ROW_WIDTH,
     LightArrays,
-    LightSample,
     concatenate,
     is_infinite_kind,
     is_positional_kind,
 )
-from .punctual import punctual_sample
 
 __all__ = [
     "area_pdf_at",
@@ -93,56 +87,73 @@ def is_positional(lights, l):
     return is_positional_kind(lights.kind[l])
 
 
-@jit
-def _environment_sample(env, compensated, u0, u1):
-    wx, wy, wz, pdf = env_sample(env, compensated, u0, u1)
-    r, g, b = env_eval(env, wx, wy, wz)
-    return wx, wy, wz, r, g, b, pdf
+# The contract's three dispatchers are written out from KINDS (:func:`dispatch_source`): for each module that samples
+# some kinds, a test of the row's kind code and a call of that module's row_sample / row_pdf / row_radiance, which
+# are inlined and call the kind's own sampler with only its own data.  A new kind is a module with those functions
+# and a line of KINDS; no dispatcher is edited.  Compiled code only (an overload, inlined into its callers).
+_CONTRACT = {
+    "row_sample": "lights, env, l, strategy, compensated, px, py, pz, nx, ny, nz, u0, u1",
+    "row_pdf": "lights, env, l, strategy, compensated, px, py, pz, nx, ny, nz, wx, wy, wz",
+    "row_radiance": "lights, env, l, wx, wy, wz",  # the infinite kinds': what an escaping ray sees
+}
 
 
-# The two dispatchers are inlined into their callers and each kind's work is a call that takes only that kind's
-# data: a call taking the environment's record (about 25 arrays, passed by value, decision 23) cost a light sample of
-# any kind 30-70 ns; so split, a sample costs what the kind's own sampler called directly does.  The environment's
-# density is inlined (every BSDF ray that escapes asks for it; the compile took no longer: decisions.md 91).
-@jit_inline
+def dispatch_source(function: str, name: str) -> str:
+    """The Python source of the dispatcher ``name`` for the contract function ``function`` of :data:`_CONTRACT`:
+    the kinds' modules in the order of :data:`~.kinds.KINDS` (``row_radiance``: the infinite kinds' only), each
+    behind a test of its kinds' codes, the last one unconditional."""
+    groups: dict[str, list[int]] = {}
+    for kind in KINDS.values():
+        if function != "row_radiance" or kind.infinite:
+            groups.setdefault(kind.module, []).append(kind.code)
+    parameters = _CONTRACT[function]
+    lines = [f"def {name}({parameters}):", "    kind = lights.kind[l]"]
+    for i, (module, codes) in enumerate(groups.items()):
+        call = f"return {module}.{function}({parameters})"
+        if i == len(groups) - 1:
+            lines.append(f"    {call}")
+        else:
+            lines += [f"    if {' or '.join(f'kind == {code}' for code in codes)}:", f"        {call}"]
+    return "\n".join(lines) + "\n"
+
+
+def _dispatcher(function: str, name: str):
+    modules = {kind.module for kind in KINDS.values()}
+    namespace = {module: importlib.import_module(f"{__package__}.{module}") for module in modules}
+    exec(compile(dispatch_source(function, name), f"<lights.{name}>", "exec"), namespace)
+    return namespace[name]
+
+
 def light_sample_of(lights, env, l, strategy, compensated, px, py, pz, nx, ny, nz, u0, u1):
-    """A :class:`LightSample` of light l from point p (normal n) with the pair (u0, u1)."""
-    kind = lights.kind[l]
-    if kind == LIGHT_ENVIRONMENT:
-        wx, wy, wz, r, g, b, pdf = _environment_sample(env, compensated, u0, u1)
-        return LightSample(wx, wy, wz, math.inf, r, g, b, pdf, False)
-    if kind == LIGHT_DIRECTIONAL:
-        wx, wy, wz, dist, r, g, b, pdf, delta = directional_sample(lights.geom[l], lights.radiance[l], u0, u1)
-        return LightSample(wx, wy, wz, dist, r, g, b, pdf, delta)
-    if kind == LIGHT_POINT or kind == LIGHT_SPOT:
-        wx, wy, wz, dist, r, g, b, pdf = punctual_sample(
-            kind == LIGHT_SPOT, lights.geom[l], lights.radiance[l], px, py, pz
-        )
-        return LightSample(wx, wy, wz, dist, r, g, b, pdf, True)
-    wx, wy, wz, dist, r, g, b, pdf = area_sample(lights, l, strategy, px, py, pz, nx, ny, nz, u0, u1)
-    return LightSample(wx, wy, wz, dist, r, g, b, pdf, False)
+    """A :class:`LightSample` of light l from point p (normal n) with the pair (u0, u1); compiled code only."""
+    raise TypeError("light_sample_of is compiled code's (sample_batch calls it from Python)")
 
 
-@jit_inline
+@overload(light_sample_of, inline="always")
+def _light_sample_of(lights, env, l, strategy, compensated, px, py, pz, nx, ny, nz, u0, u1):
+    return _dispatcher("row_sample", "light_sample_of")
+
+
 def light_pdf_of(lights, env, l, strategy, compensated, px, py, pz, nx, ny, nz, wx, wy, wz):
-    """Density per steradian with which :func:`light_sample_of` produces unit direction w (0 for a delta light)."""
-    kind = lights.kind[l]
-    if kind == LIGHT_ENVIRONMENT:
-        return env_pdf(env, compensated, wx, wy, wz)
-    if kind == LIGHT_DIRECTIONAL:
-        return directional_pdf(lights.geom[l], wx, wy, wz)
-    if kind == LIGHT_POINT or kind == LIGHT_SPOT:
-        return 0.0
-    return light_pdf(lights, l, strategy, px, py, pz, nx, ny, nz, wx, wy, wz)
+    """Density per steradian with which :func:`light_sample_of` produces unit direction w (0 for a delta light);
+    compiled code only."""
+    raise TypeError("light_pdf_of is compiled code's (pdf_batch calls it from Python)")
 
 
-@jit_inline
+@overload(light_pdf_of, inline="always")
+def _light_pdf_of(lights, env, l, strategy, compensated, px, py, pz, nx, ny, nz, wx, wy, wz):
+    return _dispatcher("row_pdf", "light_pdf_of")
+
+
 def infinite_radiance(lights, env, l, wx, wy, wz):
     """Radiance that infinite light l (the environment or a directional light) sends along -w, toward a ray leaving
-    the scene along unit direction w."""
-    if lights.kind[l] == LIGHT_ENVIRONMENT:
-        return env_eval(env, wx, wy, wz)
-    return directional_radiance(lights.geom[l], lights.radiance[l], wx, wy, wz)
+    the scene along unit direction w; compiled code only."""
+    raise TypeError("infinite_radiance is compiled code's (escaped_batch calls it from Python)")
+
+
+@overload(infinite_radiance, inline="always")
+def _infinite_radiance(lights, env, l, wx, wy, wz):
+    return _dispatcher("row_radiance", "infinite_radiance")
 
 
 @jit_inline

@@ -24,9 +24,9 @@ import math
 
 import numpy as np
 
-from .._numba import jit
+from .._numba import jit, jit_inline
 from ..errors import ParameterError
-from .kinds import ROW_WIDTH
+from .kinds import LIGHT_SPOT, ROW_WIDTH, LightSample
 
 __all__ = ["PointLight", "SpotLight", "punctual_power", "punctual_sample", "spot_falloff"]
 
@@ -160,3 +160,21 @@ class SpotLight(PointLight):
             f"SpotLight(position={self.position.tolist()}, axis={self.axis.tolist()}, "
             f"intensity={self.radiance.tolist()}, cone_angle={self.cone_angle}, falloff_start={self.falloff_start})"
         )
+
+
+# --- the light contract (lights.py's dispatchers call these, generated from kinds.KINDS) ------------------------------
+# Every kind's module has the same three functions, inlined into the dispatchers; each calls the kind's own sampler
+# with only its own data (a call taking the environment's record cost a light sample 30-70 ns: decisions.md 91).
+@jit_inline
+def row_sample(lights, env, l, strategy, compensated, px, py, pz, nx, ny, nz, u0, u1):
+    """Point or spot light l's one direction from p: :func:`punctual_sample`, a delta light."""
+    wx, wy, wz, dist, r, g, b, pdf = punctual_sample(
+        lights.kind[l] == LIGHT_SPOT, lights.geom[l], lights.radiance[l], px, py, pz
+    )
+    return LightSample(wx, wy, wz, dist, r, g, b, pdf, True)
+
+
+@jit_inline
+def row_pdf(lights, env, l, strategy, compensated, px, py, pz, nx, ny, nz, wx, wy, wz):
+    """0: no given direction is ever a delta light's."""
+    return 0.0
