@@ -37,12 +37,14 @@ from .kinds import (
     LIGHT_ENVIRONMENT,
     LIGHT_POINT,
     LIGHT_SPOT,
+    LIGHT_SUN,
     ROW_WIDTH,
     LightArrays,
     LightSample,
     concatenate,
 )
 from .punctual import punctual_sample
+from .sun import sun_disc_radiance, sun_pdf, sun_sample
 
 __all__ = [
     "area_pdf_at",
@@ -95,6 +97,9 @@ def light_sample_of(lights, env, l, strategy, compensated, px, py, pz, nx, ny, n
     if kind == LIGHT_DIRECTIONAL:
         wx, wy, wz, dist, r, g, b, pdf, delta = directional_sample(lights.geom[l], lights.radiance[l], u0, u1)
         return LightSample(wx, wy, wz, dist, r, g, b, pdf, delta)
+    if kind == LIGHT_SUN:
+        wx, wy, wz, dist, r, g, b, pdf = sun_sample(lights.geom[l], u0, u1)
+        return LightSample(wx, wy, wz, dist, r, g, b, pdf, False)
     if kind == LIGHT_POINT or kind == LIGHT_SPOT:
         wx, wy, wz, dist, r, g, b, pdf = punctual_sample(
             kind == LIGHT_SPOT, lights.geom[l], lights.radiance[l], px, py, pz
@@ -112,6 +117,8 @@ def light_pdf_of(lights, env, l, strategy, compensated, px, py, pz, nx, ny, nz, 
         return env_pdf(env, compensated, wx, wy, wz)
     if kind == LIGHT_DIRECTIONAL:
         return directional_pdf(lights.geom[l], wx, wy, wz)
+    if kind == LIGHT_SUN:
+        return sun_pdf(lights.geom[l], wx, wy, wz)
     if kind == LIGHT_POINT or kind == LIGHT_SPOT:
         return 0.0
     return light_pdf(lights, l, strategy, px, py, pz, nx, ny, nz, wx, wy, wz)
@@ -119,10 +126,12 @@ def light_pdf_of(lights, env, l, strategy, compensated, px, py, pz, nx, ny, nz, 
 
 @jit_inline
 def infinite_radiance(lights, env, l, wx, wy, wz):
-    """Radiance that infinite light l (the environment or a directional light) sends along -w, toward a ray leaving
-    the scene along unit direction w."""
+    """Radiance that infinite light l (the environment, a directional light or the sun) sends along -w, toward a ray
+    leaving the scene along unit direction w."""
     if lights.kind[l] == LIGHT_ENVIRONMENT:
         return env_eval(env, wx, wy, wz)
+    if lights.kind[l] == LIGHT_SUN:
+        return sun_disc_radiance(lights.geom[l], wx, wy, wz)
     return directional_radiance(lights.geom[l], lights.radiance[l], wx, wy, wz)
 
 
@@ -251,7 +260,8 @@ def escaped_batch(lights: LightArrays, first: int, dirs, *, env=None) -> np.ndar
 
 def light_arrays(lights, *, environment: bool = False) -> LightArrays:
     """The table of Python light objects (:class:`~.area.AreaLight`, :class:`~.punctual.PointLight`,
-    :class:`~.punctual.SpotLight`, :class:`~.directional.DirectionalLight`), in order, with a last row for the
+    :class:`~.punctual.SpotLight`, :class:`~.directional.DirectionalLight`, :class:`~.sun.SunLight`), in order,
+    with a last row for the
     scene's environment map when ``environment``."""
     rows = [
         LightArrays(
