@@ -51,9 +51,8 @@ def test_every_kind_of_the_table_goes_through_the_contract():
     for name, light in lights.items():
         table = light_arrays([light])
         seen.add(light.kind)
-        _check_kind(
-            table, 0, env=None, delta=name in ("point", "spot", "delta directional"), infinite=KINDS[light.kind].infinite
-        )
+        delta = name in ("point", "spot", "delta directional")
+        _check_kind(table, 0, env=None, delta=delta, infinite=KINDS[light.kind].infinite)
     table = light_arrays([], environment=True)
     _check_kind(table, 0, env=env, delta=False, infinite=True)
     seen.add("environment")

@@ -93,7 +93,8 @@ def test_the_suns_mean_radiance_gives_its_irradiance():
     of the disc's radiance over uniform samples of the cone."""
     sun = SunLight(sun_direction(35.0, 60.0), turbidity=3.0)
     n = 100_000
-    out = sample_batch(light_arrays([sun]), 0, np.zeros((n, 3)), np.tile(NORMAL, (n, 1)), np.random.default_rng(5).random((n, 2)))  # fmt: skip
+    u = np.random.default_rng(5).random((n, 2))
+    out = sample_batch(light_arrays([sun]), 0, np.zeros((n, 3)), np.tile(NORMAL, (n, 1)), u)
     np.testing.assert_allclose(out[:, 4:7].mean(axis=0), sun.radiance, rtol=2e-3)
 
 
