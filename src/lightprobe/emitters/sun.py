@@ -31,7 +31,7 @@ from .._numba import jit, jit_inline
 from ..errors import ParameterError
 from .directional import _inside, directional_pdf, directional_sample
 from .kinds import ROW_WIDTH
-from .sunsky import SUN_APERTURE, SUN_SEGMENTS, TURBIDITY_RANGE, _tables, sun_radiance, sun_scale_factor
+from .sunsky import SUN_APERTURE, SUN_SEGMENTS, TURBIDITY_RANGE, _tables, disc_angles, sun_radiance, sun_scale_factor
 
 __all__ = ["SunLight", "sun_disc_radiance", "sun_pdf", "sun_sample"]
 
@@ -135,19 +135,25 @@ class SunLight:
 
     @property
     def half_angle(self) -> float:
-        return math.radians(self.aperture) / 2.0
+        """alpha in radians (:func:`~lightprobe.emitters.sunsky.disc_angles`: Mitsuba's float32 value)."""
+        return disc_angles(self.aperture)[0]
+
+    @property
+    def cos_half_angle(self) -> float:
+        """cos alpha as Mitsuba's disc has it, rounded to float32 (:func:`~lightprobe.emitters.sunsky.disc_angles`)."""
+        return disc_angles(self.aperture)[1]
 
     @property
     def solid_angle(self) -> float:
         """Omega = 2 pi (1 - cos alpha)."""
-        return 2.0 * math.pi * 2.0 * math.sin(self.half_angle / 2.0) ** 2
+        return 2.0 * math.pi * (1.0 - self.cos_half_angle)
 
     @property
     def geom(self) -> np.ndarray:
         g = np.zeros(ROW_WIDTH)
         g[0:3] = self.sun_direction
-        g[3] = math.cos(self.half_angle)
-        g[4] = 2.0 * math.sin(self.half_angle / 2.0) ** 2
+        g[3] = self.cos_half_angle
+        g[4] = 1.0 - self.cos_half_angle  # exact: a float32 near 1 less 1
         g[5] = self.solid_angle
         g[6] = min(max(self.turbidity - 1.0, 0.0), float(_TURBIDITY_STEPS))
         g[7] = 1.0 / math.sin(self.half_angle) ** 2
@@ -162,7 +168,7 @@ class SunLight:
     def radiance(self) -> np.ndarray:
         """The disc's mean radiance (3,): the midpoint rule over 48 rings of equal solid angle x 48 azimuths."""
         rings, around = 48, 48
-        one_minus_cos = (np.arange(rings) + 0.5) / rings * (1.0 - math.cos(self.half_angle))
+        one_minus_cos = (np.arange(rings) + 0.5) / rings * (1.0 - self.cos_half_angle)
         cos_t = 1.0 - one_minus_cos
         sin_t = np.sqrt(np.maximum(0.0, one_minus_cos * (2.0 - one_minus_cos)))
         phi = 2.0 * math.pi * (np.arange(around) + 0.5) / around
