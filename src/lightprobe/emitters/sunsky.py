@@ -147,7 +147,7 @@ def disc_angles(aperture_deg: float) -> tuple[float, float]:
     cone sampling and its density.  Near 1, float32 keeps cos alpha to 6e-8, so Mitsuba's standard disc has
     1 - cos alpha 0.2 % below the exact one (1.0908e-5 for 1.0931e-5), and with it 0.2 % less of the sun's
     irradiance: with the exact disc, lightprobe's render of the sunsky reference scene was 0.09 % brighter than
-    Mitsuba's (4.6 sigma at 1024 spp; decisions.md 107).  Kept, to give Mitsuba's sun."""
+    Mitsuba's (4.6 sigma at 1024 spp; decisions.md 108).  Kept, to give Mitsuba's sun."""
     f32 = np.float32
     alpha = f32(f32(0.5) * f32(aperture_deg)) * f32(math.pi / 180.0)
     return float(alpha), float(np.cos(alpha))
