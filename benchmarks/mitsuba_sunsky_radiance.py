@@ -9,8 +9,9 @@ limb-darkened sun, ``to_world`` = a -90 degree rotation about +X so that its Z-u
 ``sun_direction`` the world direction of ``lightprobe.emitters.procedural.sun_direction``) is evaluated
 (``emitter.eval`` with ``si.wi = -direction``) with ``sun_scale = 0`` (the sky alone) at ``SKY_DIRECTIONS`` directions
 (uniform on the sphere, some below the horizon, plus rings 0.5-20 degrees around the sun) and with ``sky_scale = 0``
-(the sun alone) at points of the sun's disc (its centre and rings at 0.2-0.95 of its radius).  The tests
-(tests/emitters/test_sunsky.py) compare lightprobe's sky and sun with these values; they need no Mitsuba.
+(the sun alone) at points of the sun's disc (its centre and rings at 0.2-0.95 of its radius); and for each date,
+time and place of :data:`PLACES_AND_TIMES`, the world direction of Mitsuba's sun (its read-only ``sun_direction``).
+The tests (tests/emitters/test_sunsky.py) compare lightprobe's sky and sun with these values; they need no Mitsuba.
 """
 
 from __future__ import annotations
@@ -33,6 +34,17 @@ SETTINGS = (
     (10.0, (0.1, 0.5, 0.9), 3.0, 120.0, 0.5358),
     (2.2, 0.5, 84.0, 300.0, 2.0),
 )
+# dates, times and places (Mitsuba's keys; the others its defaults): its sun's world direction for each
+PLACES_AND_TIMES = (
+    {"hour": 10.0},
+    {"hour": 15.0},
+    {"year": 2024, "month": 1, "day": 3, "hour": 9.25, "latitude": -33.9, "longitude": 18.4, "timezone": 2.0},
+    {"year": 1999, "month": 12, "day": 31, "hour": 23.5, "minute": 30.0, "latitude": 64.1, "longitude": -21.9,
+     "timezone": 0.0},
+    {"year": 2031, "month": 3, "day": 20, "hour": 12.0, "second": 30.0, "latitude": 0.0, "longitude": -78.5,
+     "timezone": -5.0},
+    {"year": 2026, "month": 6, "day": 21, "hour": 17.75, "latitude": 51.5, "longitude": -0.1, "timezone": 1.0},
+)  # fmt: skip
 SKY_DIRECTIONS = 240
 SUN_RINGS = (0.0, 0.2, 0.5, 0.8, 0.95)
 SUN_RING_POINTS = 8
@@ -98,8 +110,14 @@ def main() -> int:
             {"turbidity": turbidity, "albedo": albedo, "sun_elevation": elevation, "sun_azimuth": azimuth,
              "sun_aperture": aperture, "sun_direction": d_sun.tolist()}
         )  # fmt: skip
+    positions = []
+    for when in PLACES_AND_TIMES:
+        keys = {k: (int(v) if k in ("year", "month", "day") else float(v)) for k, v in when.items()}
+        em = mi.load_dict({"type": "sunsky", **keys, "to_world": mi.ScalarTransform4f().rotate([1, 0, 0], -90)})
+        positions.append(np.array(mi.traverse(em)["sun_direction"], dtype=np.float64).ravel())
     out = ROOT / "tests" / "data" / "mitsuba_sunsky_radiance.npz"
-    record = {"mitsuba": mi.__version__, "variant": mi.variant(), "complex_sun": True, "settings": settings}
+    record = {"mitsuba": mi.__version__, "variant": mi.variant(), "complex_sun": True, "settings": settings,
+              "places_and_times": list(PLACES_AND_TIMES)}  # fmt: skip
     np.savez_compressed(
         out,
         settings=json.dumps(record),
@@ -107,6 +125,7 @@ def main() -> int:
         sky=np.array(sky, np.float32),
         sun_directions=np.array(sun_dirs, np.float32),
         sun=np.array(sun, np.float32),
+        sun_positions=np.array(positions, np.float32),
     )
     print(out, out.stat().st_size, "bytes")
     return 0

@@ -11,7 +11,7 @@ import pytest
 
 from lightprobe.cli import main
 from lightprobe.emitters.procedural import sun_direction
-from lightprobe.emitters.sunsky import SunSky
+from lightprobe.emitters.sunsky import SunSky, sun_position
 from lightprobe.errors import SceneError
 from lightprobe.io.scene_file import load_scene
 
@@ -44,6 +44,15 @@ def test_a_sunsky_table_gives_its_parameters_to_the_sky_and_the_sun(tmp_path):
     assert "1 sun light" in scene.summary()
 
 
+def test_a_sunsky_at_a_date_time_and_place(tmp_path):
+    scene, _ = load_scene(
+        _scene(tmp_path, 'type = "sunsky"\nyear = 2024\nmonth = 1\nday = 3\nhour = 9.25\nlatitude = -33.9\n'
+                         "longitude = 18.4\ntimezone = 2.0\nwidth = 32\n")
+    )  # fmt: skip
+    when = {"year": 2024, "month": 1, "day": 3, "hour": 9.25, "latitude": -33.9, "longitude": 18.4, "timezone": 2.0}
+    np.testing.assert_allclose(scene.lights[0].sun_direction, sun_position(**when), atol=1e-15)
+
+
 def test_a_sunsky_with_a_sun_direction_and_no_sky(tmp_path):
     scene, _ = load_scene(_scene(tmp_path, 'type = "sunsky"\nsun_direction = [1, 1, 0]\nsky_scale = 0\n'))
     assert scene.environment is None
@@ -64,6 +73,9 @@ def test_a_sunsky_with_a_sun_direction_and_no_sky(tmp_path):
         ('type = "sunsky"\nwidth = 4\n', "width must be >= 8"),
         ('type = "sunsky"\nfile = "sky.exr"\n', "unknown key(s) file"),
         ('type = "sky"\nconstant = 1\n', "type must be 'sunsky'"),
+        ('type = "sunsky"\nmonth = 7.5\n', "[environment]: month must be an integer"),
+        ('type = "sunsky"\nhour = 12\nsun_elevation = 30\n', "not both"),
+        ('type = "sunsky"\nhour = 23\n', "the sun is below the horizon at 2010-07-10 23:00:00"),
     ],
 )
 def test_sunsky_mistakes_are_one_line(tmp_path, environment, message):

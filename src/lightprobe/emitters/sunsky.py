@@ -52,6 +52,7 @@ __all__ = [
     "sky_image",
     "sky_radiance",
     "sky_state",
+    "sun_position",
     "sun_radiance",
     "sun_table",
 ]
@@ -191,6 +192,100 @@ def sky_image(sun, params: np.ndarray, scale: np.ndarray, *, width: int, height:
     return sky_radiance(d, sun, params, scale).reshape(height, width, 3).astype(np.float32)
 
 
+# Mitsuba's defaults for the time-and-place form (Tokyo, 10 July 2010, 15:00 local time)
+PLACE_AND_TIME = {"year": 2010, "month": 7, "day": 10, "hour": 15.0, "minute": 0.0, "second": 0.0,
+                  "latitude": 35.6894, "longitude": 139.6917, "timezone": 9.0}  # fmt: skip
+EARTH_MEAN_RADIUS = 6371.01  # km
+ASTRONOMICAL_UNIT = 149597890.0  # km
+
+
+def _c_divide(a: int, b: int) -> int:
+    """Integer division truncated toward zero, as C's (and Mitsuba's Int32) ``/``; Python's // floors."""
+    q = abs(a) // abs(b)
+    return q if (a >= 0) == (b > 0) else -q
+
+
+def sun_position(**when) -> np.ndarray:
+    """The world direction toward the sun (Y up) at a date, time and place, as Mitsuba's: keys of
+    :data:`PLACE_AND_TIME` (``year``, ``month``, ``day``, ``hour``, ``minute``, ``second`` of local time,
+    ``latitude`` and ``longitude`` in degrees (north and east positive), ``timezone`` in hours from UTC; Mitsuba's
+    defaults for the others).
+
+    Blanco-Muriel et al. 2001, "Computing the Solar Vector" (Solar Energy 70(5)), as Mitsuba 3.9.1's
+    ``BaseSunskyEmitter::sun_coordinates`` computes it, including its float32 Julian date (float32 holds a date of
+    about 2.46e6 days to a quarter of a day, which moves the sun by up to about 0.2 degrees from the exact
+    position; kept, to give Mitsuba's sun).  Frame, measured on Mitsuba's own sun directions with its sunsky stood
+    on lightprobe's +Y (``to_world`` -90 degrees about +X; its documentation calls its local +X north): the
+    northern hemisphere's noon sun stands toward +X, the morning sun toward +Z, the evening sun toward -Z (Tokyo,
+    10 July 2010: 10:00 (0.17, 0.89, 0.41), 15:00 (0.05, 0.72, -0.69)).
+    """
+    unknown = set(when) - set(PLACE_AND_TIME)
+    if unknown:
+        raise ParameterError(f"sunsky: unknown time or place key(s) {', '.join(sorted(unknown))}")
+    t = {**PLACE_AND_TIME, **when}
+    for key in ("year", "month", "day"):
+        if isinstance(t[key], bool) or not isinstance(t[key], numbers.Integral):
+            raise ParameterError(f"sunsky: {key} must be an integer, got {t[key]!r}")
+    if not 1 <= t["month"] <= 12 or not 1 <= t["day"] <= 31:
+        raise ParameterError(f"sunsky: month must be 1-12 and day 1-31, got {t['month']!r} and {t['day']!r}")
+    _number(t["latitude"], "latitude", -90.0, 90.0, " degrees")
+    _number(t["longitude"], "longitude", -360.0, 360.0, " degrees")
+    _number(t["timezone"], "timezone", -24.0, 24.0, " hours")
+    for key in ("hour", "minute", "second"):
+        _number(t[key], key, -1e6, 1e6)
+    year, month, day = int(t["year"]), int(t["month"]), int(t["day"])
+    f32 = np.float32
+    dec_hours = t["hour"] - t["timezone"] + (t["minute"] + t["second"] / 60.0) / 60.0
+    aux1 = _c_divide(month - 14, 12)
+    aux2 = (
+        _c_divide(1461 * (year + 4800 + aux1), 4)
+        + _c_divide(367 * (month - 2 - 12 * aux1), 12)
+        - _c_divide(3 * _c_divide(year + 4900 + aux1, 100), 4)
+        + day
+        - 32075
+    )
+    julian_date = f32(f32(f32(aux2) - f32(0.5)) + f32(dec_hours / 24.0))  # float32, as Mitsuba's Float
+    days = float(f32(julian_date - f32(2451545.0)))
+    # ecliptic coordinates (radians)
+    omega = 2.1429 - 0.0010394594 * days
+    mean_longitude = 4.8950630 + 0.017202791698 * days
+    anomaly = 6.2400600 + 0.0172019699 * days
+    ecliptic_longitude = (mean_longitude + 0.03341607 * math.sin(anomaly) + 0.00034894 * math.sin(2 * anomaly)
+                          - 0.0001134 - 0.0000203 * math.sin(omega))  # fmt: skip
+    obliquity = 0.4090928 - 6.2140e-9 * days + 0.0000396 * math.cos(omega)
+    # celestial coordinates
+    sin_longitude = math.sin(ecliptic_longitude)
+    right_ascension = math.atan2(math.cos(obliquity) * sin_longitude, math.cos(ecliptic_longitude))
+    if right_ascension < 0.0:
+        right_ascension += 2.0 * math.pi
+    declination = math.asin(math.sin(obliquity) * sin_longitude)
+    # local coordinates: zenith angle and azimuth
+    sidereal = math.radians((6.6974243242 + 0.0657098283 * days + dec_hours) * 15.0 + t["longitude"])
+    latitude = math.radians(t["latitude"])
+    hour_angle = sidereal - right_ascension
+    zenith = math.acos(math.cos(latitude) * math.cos(hour_angle) * math.cos(declination)
+                       + math.sin(declination) * math.sin(latitude))  # fmt: skip
+    toward_north = math.tan(declination) * math.cos(latitude) - math.sin(latitude) * math.cos(hour_angle)
+    azimuth = math.atan2(-math.sin(hour_angle), toward_north)
+    if azimuth < 0.0:
+        azimuth += 2.0 * math.pi
+    zenith += EARTH_MEAN_RADIUS / ASTRONOMICAL_UNIT * math.sin(zenith)  # parallax
+    phi = azimuth - math.pi
+    # Mitsuba's sph_to_dir(zenith, phi) in its Z-up frame, turned onto lightprobe's Y up: (x, y, z) -> (x, z, -y)
+    return np.array([math.sin(zenith) * math.cos(phi), math.cos(zenith), -math.sin(zenith) * math.sin(phi)])
+
+
+def _describe_when(when: dict) -> str:
+    """The date, local time (hh:mm:ss of hour + minute + second) and place, for a message."""
+    t = {**PLACE_AND_TIME, **when}
+    seconds = round(3600.0 * t["hour"] + 60.0 * t["minute"] + t["second"])
+    clock = f"{seconds // 3600:02d}:{seconds // 60 % 60:02d}:{seconds % 60:02d}"
+    return (
+        f"{t['year']:04d}-{t['month']:02d}-{t['day']:02d} {clock} (UTC{t['timezone']:+g}), "
+        f"latitude {t['latitude']:g}, longitude {t['longitude']:g}"
+    )
+
+
 def _number(value, name: str, lo: float, hi: float, unit: str = "") -> float:
     if isinstance(value, bool) or not isinstance(value, numbers.Real) or not lo <= float(value) <= hi:
         raise ParameterError(f"sunsky: {name} must be a number from {lo:g} to {hi:g}{unit}, got {value!r}")
@@ -201,7 +296,8 @@ class SunSky:
     """A Hosek-Wilkie sun and sky (Mitsuba 3.9.1's ``sunsky`` with ``complex_sun = true``).
 
     ``turbidity`` 1-10; ``albedo`` the ground's, 0-1 (a number or RGB); the sun at ``sun_elevation`` degrees above
-    the horizon (0-90) and lat-long ``sun_azimuth`` degrees, or along the world ``sun_direction`` toward it (y >= 0);
+    the horizon (0-90) and lat-long ``sun_azimuth`` degrees, or along the world ``sun_direction`` toward it (y >= 0),
+    or where it stands at the date, time and place ``when`` (a dict of :func:`sun_position`'s keys);
     ``sun_scale`` and ``sky_scale`` (>= 0, not both 0) multiply the two; ``sun_aperture`` is the sun's angular
     diameter in degrees (0-90, exclusive; its irradiance is kept).  :meth:`environment` is the sky as a lat-long
     environment map (``width`` x ``width / 2 + 1``), :meth:`sun` the sun's light.
@@ -219,6 +315,7 @@ class SunSky:
         sky_scale: float = 1.0,
         sun_aperture: float = SUN_APERTURE,
         width: int = 1024,
+        when: dict | None = None,
     ):
         self.turbidity = _number(turbidity, "turbidity", *TURBIDITY_RANGE)
         a = np.asarray(albedo, dtype=np.float64) if not isinstance(albedo, str | bool) else None
@@ -237,6 +334,14 @@ class SunSky:
         if isinstance(width, bool) or not isinstance(width, int) or width < 8:
             raise ParameterError(f"sunsky: width must be an integer of at least 8, got {width!r}")
         self.width = width
+        if when is not None:
+            if sun_direction is not None or sun_elevation is not None:
+                raise ParameterError("sunsky: give the sun's date, time and place or its direction, not both")
+            sun_direction = sun_position(**when)
+            if sun_direction[1] < 0.0:
+                raise ParameterError(
+                    f"sunsky: the sun is below the horizon at {_describe_when(when)}; Mitsuba's sky is then black"
+                )
         if sun_direction is not None:
             if sun_elevation is not None:
                 raise ParameterError("sunsky: give the sun's sun_direction or its sun_elevation, not both")

@@ -30,6 +30,13 @@ Example (every key shown; optional ones have their default)::
     # sun_elevation = 45.0              #   degrees above the horizon, 0-90 (Mitsuba's sky is black below it)
     # sun_azimuth = 0.0                 #   degrees, as the sky's u = azimuth / 360 (0: toward -Z, 90: toward +X)
     # sun_direction = [0.3, 1.0, -0.2]  #   or the world direction toward the sun (not with sun_elevation)
+    # year = 2010                       #   or where the sun stands at a date, time and place (Mitsuba's: noon
+    # month = 7                         #   sun toward +X in the north, morning sun +Z); any of these keys, the
+    # day = 10                          #   others Mitsuba's defaults (Tokyo, 10 July 2010, 15:00)
+    # hour = 15.0                       #   local time: hour, minute, second
+    # latitude = 35.6894                #   degrees, north positive; longitude east positive
+    # longitude = 139.6917
+    # timezone = 9.0                    #   hours from UTC
     # sun_scale = 1.0                   #   multiplies the sun (0: no sun)
     # sky_scale = 1.0                   #   multiplies the sky (0: no sky)
     # sun_aperture = 0.5358             #   the sun's angular diameter in degrees (its irradiance is kept)
@@ -257,6 +264,7 @@ def _camera(t: _Table) -> Camera:
 
 
 _SUNSKY_NUMBERS = ("turbidity", "sun_elevation", "sun_azimuth", "sun_scale", "sky_scale", "sun_aperture")
+_SUNSKY_WHEN = ("hour", "minute", "second", "latitude", "longitude", "timezone")
 
 
 def _sunsky(t: _Table) -> SunSky:
@@ -268,6 +276,10 @@ def _sunsky(t: _Table) -> SunSky:
         options["sun_direction"] = numeric_array(t.get("sun_direction"), f"{t.where}: sun_direction", SceneError)
     if "width" in t.data:
         options["width"] = t.integer("width", minimum=8)
+    when = {key: t.integer(key) for key in ("year", "month", "day") if key in t.data}
+    when |= {key: t.number(key) for key in _SUNSKY_WHEN if key in t.data}
+    if when:
+        options["when"] = when
     t.done()
     return SunSky(**options)
 
