@@ -9,7 +9,8 @@ For a shading point p with normal n:
 * ``light_pdf(lights, env, l, strategy, compensated, p, n, w)``: the density with which ``light_sample`` produces
   direction w (0 for a delta light: no given direction is ever its);
 * ``escaped_radiance(lights, env, first, w)``: what a ray that leaves the scene along w sees: the environment's and
-  every directional light's radiance (rows ``first`` on are the infinite lights), each ``infinite_radiance``;
+  every directional light's and sun's radiance (rows ``first`` on are the infinite lights), each
+  ``infinite_radiance``;
 * for area lights a BSDF ray has hit at a known point, ``emitted`` and ``area_pdf_at`` (module ``area``).
 
 ``strategy`` is how area lights are sampled (:data:`~.area.STRATEGIES`); ``compensated`` whether the environment is

@@ -36,7 +36,8 @@ from .sunsky import SUN_APERTURE, SUN_SEGMENTS, TURBIDITY_RANGE, _tables, disc_a
 __all__ = ["SunLight", "sun_disc_radiance", "sun_pdf", "sun_sample"]
 
 # (10 turbidities, 45 elevation segments, 3 channels, 4 powers of x, 6 powers of mu): a global array, which Numba
-# compiles in as a constant (the table is fixed data, the same for every sun)
+# compiles in as a constant (the table is fixed data, the same for every sun; the kernel cache is stamped by the
+# sources, not by the data file, so a new table needs a fresh cache)
 SUN_TABLE = np.ascontiguousarray(_tables()["sun_radiance"])
 _HALF_PI = 0.5 * math.pi
 _TURBIDITY_STEPS = SUN_TABLE.shape[0] - 1
