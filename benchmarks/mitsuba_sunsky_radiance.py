@@ -9,7 +9,8 @@ limb-darkened sun, ``to_world`` = a -90 degree rotation about +X so that its Z-u
 ``sun_direction`` the world direction of ``lightprobe.emitters.procedural.sun_direction``) is evaluated
 (``emitter.eval`` with ``si.wi = -direction``) with ``sun_scale = 0`` (the sky alone) at ``SKY_DIRECTIONS`` directions
 (uniform on the sphere, some below the horizon, plus rings 0.5-20 degrees around the sun) and with ``sky_scale = 0``
-(the sun alone) at points of the sun's disc (its centre and rings at 0.2-0.95 of its radius); and for each date,
+(the sun alone) at points of the sun's disc (its centre and rings at 0.2-0.95 of its radius), also with
+``complex_sun = false`` (Mitsuba's default uniform sun, ``sun_uniform``); and for each date,
 time and place of :data:`PLACES_AND_TIMES`, the world direction of Mitsuba's sun (its read-only ``sun_direction``).
 The tests (tests/emitters/test_sunsky.py) compare lightprobe's sky and sun with these values; they need no Mitsuba.
 """
@@ -80,7 +81,7 @@ def main() -> int:
 
     mi.set_variant("llvm_ad_rgb")
     rng = np.random.default_rng(58)
-    settings, sky_dirs, sky, sun_dirs, sun = [], [], [], [], []
+    settings, sky_dirs, sky, sun_dirs, sun, uniform = [], [], [], [], [], []
     for turbidity, albedo, elevation, azimuth, aperture in SETTINGS:
         d_sun = sun_direction(elevation, azimuth)
         z = rng.normal(size=(SKY_DIRECTIONS, 3))
@@ -88,11 +89,12 @@ def main() -> int:
         dirs = np.concatenate([z, _ring(d_sun, [0.5, 1.0, 2.0, 5.0, 10.0, 20.0], 6)])
         disc = _ring(d_sun, np.array(SUN_RINGS) * aperture / 2.0, SUN_RING_POINTS)
 
-        def emitter(sun_scale, sky_scale, turbidity=turbidity, albedo=albedo, aperture=aperture, d_sun=d_sun):
+        def emitter(sun_scale, sky_scale, turbidity=turbidity, albedo=albedo, aperture=aperture, d_sun=d_sun,
+                    complex_sun=True):  # fmt: skip
             a = {"type": "rgb", "value": list(map(float, albedo))} if isinstance(albedo, tuple) else float(albedo)
             return mi.load_dict({
                 "type": "sunsky", "turbidity": float(turbidity), "albedo": a, "sun_aperture": float(aperture),
-                "sun_direction": mi.ScalarVector3f(*map(float, d_sun)), "complex_sun": True,
+                "sun_direction": mi.ScalarVector3f(*map(float, d_sun)), "complex_sun": complex_sun,
                 "sun_scale": float(sun_scale), "sky_scale": float(sky_scale),
                 "to_world": mi.ScalarTransform4f().rotate([1, 0, 0], -90),
             })  # fmt: skip
@@ -106,6 +108,7 @@ def main() -> int:
         sky.append(evaluate(emitter(0.0, 1.0), dirs))
         sun_dirs.append(disc)
         sun.append(evaluate(emitter(1.0, 0.0), disc))
+        uniform.append(evaluate(emitter(1.0, 0.0, complex_sun=False), disc))
         settings.append(
             {"turbidity": turbidity, "albedo": albedo, "sun_elevation": elevation, "sun_azimuth": azimuth,
              "sun_aperture": aperture, "sun_direction": d_sun.tolist()}
@@ -116,8 +119,8 @@ def main() -> int:
         em = mi.load_dict({"type": "sunsky", **keys, "to_world": mi.ScalarTransform4f().rotate([1, 0, 0], -90)})
         positions.append(np.array(mi.traverse(em)["sun_direction"], dtype=np.float64).ravel())
     out = ROOT / "tests" / "data" / "mitsuba_sunsky_radiance.npz"
-    record = {"mitsuba": mi.__version__, "variant": mi.variant(), "complex_sun": True, "settings": settings,
-              "places_and_times": list(PLACES_AND_TIMES)}  # fmt: skip
+    record = {"mitsuba": mi.__version__, "variant": mi.variant(), "complex_sun": {"sun": True, "sun_uniform": False},
+              "settings": settings, "places_and_times": list(PLACES_AND_TIMES)}  # fmt: skip
     np.savez_compressed(
         out,
         settings=json.dumps(record),
@@ -126,6 +129,7 @@ def main() -> int:
         sun_directions=np.array(sun_dirs, np.float32),
         sun=np.array(sun, np.float32),
         sun_positions=np.array(positions, np.float32),
+        sun_uniform=np.array(uniform, np.float32),
     )
     print(out, out.stat().st_size, "bytes")
     return 0

@@ -31,15 +31,17 @@ def test_a_sunsky_table_gives_its_parameters_to_the_sky_and_the_sun(tmp_path):
     path = _scene(
         tmp_path,
         'type = "sunsky"\nturbidity = 4.5\nalbedo = [0.1, 0.2, 0.3]\nsun_elevation = 30\nsun_azimuth = 120\n'
-        "sun_scale = 2.0\nsky_scale = 0.5\nsun_aperture = 1.0\nwidth = 64\n",
+        "sun_scale = 2.0\nsky_scale = 0.5\nsun_aperture = 1.0\nwidth = 64\nlimb_darkening = false\n",
     )
     scene, _ = load_scene(path)
     same = SunSky(turbidity=4.5, albedo=[0.1, 0.2, 0.3], sun_elevation=30, sun_azimuth=120, sun_scale=2.0,
-                  sky_scale=0.5, sun_aperture=1.0, width=64)  # fmt: skip
+                  sky_scale=0.5, sun_aperture=1.0, width=64, limb_darkening=False)  # fmt: skip
     assert scene.environment.resolution == (64, 33)
     np.testing.assert_allclose(scene.environment.kernel.image, same.sky_image(), rtol=1e-6)
     (sun,) = scene.lights
     assert sun.kind == "sun" and sun.turbidity == 4.5 and sun.aperture == 1.0 and sun.scale == 2.0
+    assert sun.limb_darkening is False and SunSky(width=8).sun().limb_darkening is True
+    np.testing.assert_allclose(sun.radiance, same.sun().radiance, rtol=1e-15)
     np.testing.assert_allclose(sun.sun_direction, sun_direction(30, 120), atol=1e-12)
     assert "1 sun light" in scene.summary()
 
@@ -74,6 +76,7 @@ def test_a_sunsky_with_a_sun_direction_and_no_sky(tmp_path):
         ('type = "sunsky"\nfile = "sky.exr"\n', "unknown key(s) file"),
         ('type = "sky"\nconstant = 1\n', "type must be 'sunsky'"),
         ('type = "sunsky"\nmonth = 7.5\n', "[environment]: month must be an integer"),
+        ('type = "sunsky"\nlimb_darkening = "yes"\n', "limb_darkening must be true or false"),
         ('type = "sunsky"\nhour = 12\nsun_elevation = 30\n', "not both"),
         ('type = "sunsky"\nhour = 23\n', "the sun is below the horizon at 2010-07-10 23:00:00"),
     ],

@@ -99,7 +99,7 @@ def light_sample_of(lights, env, l, strategy, compensated, px, py, pz, nx, ny, n
         wx, wy, wz, dist, r, g, b, pdf, delta = directional_sample(lights.geom[l], lights.radiance[l], u0, u1)
         return LightSample(wx, wy, wz, dist, r, g, b, pdf, delta)
     if kind == LIGHT_SUN:
-        wx, wy, wz, dist, r, g, b, pdf = sun_sample(lights.geom[l], u0, u1)
+        wx, wy, wz, dist, r, g, b, pdf = sun_sample(lights.geom[l], lights.radiance[l], u0, u1)
         return LightSample(wx, wy, wz, dist, r, g, b, pdf, False)
     if kind == LIGHT_POINT or kind == LIGHT_SPOT:
         wx, wy, wz, dist, r, g, b, pdf = punctual_sample(
@@ -132,7 +132,7 @@ def infinite_radiance(lights, env, l, wx, wy, wz):
     if lights.kind[l] == LIGHT_ENVIRONMENT:
         return env_eval(env, wx, wy, wz)
     if lights.kind[l] == LIGHT_SUN:
-        return sun_disc_radiance(lights.geom[l], wx, wy, wz)
+        return sun_disc_radiance(lights.geom[l], lights.radiance[l], wx, wy, wz)
     return directional_radiance(lights.geom[l], lights.radiance[l], wx, wy, wz)
 
 

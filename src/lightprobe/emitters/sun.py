@@ -14,8 +14,9 @@ Row of the light table (:class:`~lightprobe.emitters.kinds.LightArrays`): ``geom
 (unit direction toward the sun, cos alpha, 1 - cos alpha, Omega), so the cone's sampling and density are
 directional.py's own functions; ``geom[6]`` the turbidity less 1 (the table's index, interpolated linearly as
 Mitsuba's); ``geom[7]`` 1 / sin^2 alpha (for mu); ``geom[8]`` the factor the polynomial is multiplied by
-(:func:`~lightprobe.emitters.sunsky.sun_scale_factor`).  ``radiance`` holds the disc's mean radiance, so that the
-light selector's irradiance of a directional row, pi L sin^2 alpha, is the sun's.
+(:func:`~lightprobe.emitters.sunsky.sun_scale_factor`); ``geom[9]`` 1 for the limb-darkened sun, 0 for Mitsuba's
+uniform one.  ``radiance`` holds the disc's mean radiance (the uniform sun's radiance), so that the light
+selector's irradiance of a directional row, pi L sin^2 alpha, is the sun's.
 
 Mitsuba's values can be slightly negative in blue near the limb of a sun a few degrees up at high turbidity (its RGB
 fit; its documentation leaves such values unclamped): so are these.
@@ -31,7 +32,16 @@ from .._numba import jit, jit_inline
 from ..errors import ParameterError
 from .directional import _inside, directional_pdf, directional_sample
 from .kinds import ROW_WIDTH
-from .sunsky import SUN_APERTURE, SUN_SEGMENTS, TURBIDITY_RANGE, _tables, disc_angles, sun_radiance, sun_scale_factor
+from .sunsky import (
+    SUN_APERTURE,
+    SUN_SEGMENTS,
+    TURBIDITY_RANGE,
+    _tables,
+    disc_angles,
+    sun_radiance,
+    sun_scale_factor,
+    uniform_sun_radiance,
+)
 
 __all__ = ["SunLight", "sun_disc_radiance", "sun_pdf", "sun_sample"]
 
@@ -59,11 +69,14 @@ def _channel(i, f, segment, c, x, mu):
 
 
 @jit
-def sun_disc_radiance(g, wx, wy, wz):
+def sun_disc_radiance(g, radiance, wx, wy, wz):
     """RGB radiance of the sun with row ``g`` seen along unit direction w: zero outside its disc and below the
-    horizon; inside, the solar radiance polynomial of emitters/sunsky.py at w's elevation and limb cosine."""
+    horizon; inside, the solar radiance polynomial of emitters/sunsky.py at w's elevation and limb cosine, or, for
+    the uniform sun (``g[9]`` 0), its row's ``radiance``."""
     if wy < 0.0 or not _inside(g, wx, wy, wz):
         return 0.0, 0.0, 0.0
+    if g[9] == 0.0:
+        return radiance[0], radiance[1], radiance[2]
     dx, dy, dz = wx - g[0], wy - g[1], wz - g[2]
     gamma = 2.0 * math.asin(min(1.0, 0.5 * math.sqrt(dx * dx + dy * dy + dz * dz)))  # accurate near 0
     sin_gamma = math.sin(gamma)
@@ -82,11 +95,11 @@ def sun_disc_radiance(g, wx, wy, wz):
 
 
 @jit
-def sun_sample(g, u0, u1):
+def sun_sample(g, radiance, u0, u1):
     """(wx, wy, wz, distance, r, g, b, pdf) of a sample of the sun with row ``g``: uniform in its cone (the
     directional light's sampler), with the disc's radiance at the sampled direction."""
-    wx, wy, wz, dist, _, _, _, pdf, _ = directional_sample(g, g[0:3], u0, u1)
-    r, gg, b = sun_disc_radiance(g, wx, wy, wz)
+    wx, wy, wz, dist, _, _, _, pdf, _ = directional_sample(g, radiance, u0, u1)
+    r, gg, b = sun_disc_radiance(g, radiance, wx, wy, wz)
     return wx, wy, wz, dist, r, gg, b, pdf
 
 
@@ -109,13 +122,23 @@ def _vector(value, name: str) -> np.ndarray:
 class SunLight:
     """The Hosek-Wilkie sun toward world direction ``sun_direction`` (y >= 0: above the horizon), at
     ``turbidity`` 1-10, a disc of angular diameter ``aperture`` degrees (its irradiance kept that of the standard
-    0.5358-degree sun, as Mitsuba's) times ``scale``."""
+    0.5358-degree sun, as Mitsuba's) times ``scale``; ``limb_darkening`` (Mitsuba's ``complex_sun``) its radiance
+    over the disc from the solar radiance function, else Mitsuba's default uniform disc
+    (:func:`~lightprobe.emitters.sunsky.uniform_sun_radiance`)."""
 
     kind = "sun"
     two_sided = False
     area = 0.0
 
-    def __init__(self, sun_direction, *, turbidity: float = 3.0, aperture: float = SUN_APERTURE, scale: float = 1.0):
+    def __init__(
+        self,
+        sun_direction,
+        *,
+        turbidity: float = 3.0,
+        aperture: float = SUN_APERTURE,
+        scale: float = 1.0,
+        limb_darkening: bool = True,
+    ):
         d = _vector(sun_direction, "sun_direction")
         length = float(np.linalg.norm(d))
         if not length > 0.0:
@@ -129,6 +152,9 @@ class SunLight:
             raise ParameterError(f"sun: aperture must be in (0, 90) degrees, got {aperture!r}")
         if isinstance(scale, bool) or not isinstance(scale, int | float) or not 0.0 < scale < math.inf:
             raise ParameterError(f"sun: scale must be a finite number > 0, got {scale!r}")
+        if not isinstance(limb_darkening, bool):
+            raise ParameterError(f"sun: limb_darkening must be true or false, got {limb_darkening!r}")
+        self.limb_darkening = limb_darkening
         self.sun_direction = d / length
         self.turbidity = float(turbidity)
         self.aperture = float(aperture)
@@ -159,15 +185,27 @@ class SunLight:
         g[6] = min(max(self.turbidity - 1.0, 0.0), float(_TURBIDITY_STEPS))
         g[7] = 1.0 / math.sin(self.half_angle) ** 2
         g[8] = sun_scale_factor(self.aperture, self.scale)
+        g[9] = 1.0 if self.limb_darkening else 0.0
         return g
 
     def radiance_at(self, dirs) -> np.ndarray:
         """Radiance (N, 3) seen along unit directions (NumPy: the reference the kernel is tested against)."""
-        return sun_radiance(dirs, self.sun_direction, self.turbidity, self.aperture, self.scale)
+        if self.limb_darkening:
+            return sun_radiance(dirs, self.sun_direction, self.turbidity, self.aperture, self.scale)
+        d = np.asarray(dirs, dtype=np.float64).reshape(-1, 3)
+        seen = (d @ self.sun_direction >= self.cos_half_angle) & (d[:, 1] >= 0.0)
+        return np.where(seen[:, None], self._uniform_radiance()[None, :], 0.0)
+
+    def _uniform_radiance(self) -> np.ndarray:
+        elevation = math.pi / 2.0 - math.acos(min(1.0, float(self.sun_direction[1])))
+        return uniform_sun_radiance(self.turbidity, elevation, self.aperture, self.scale)
 
     @property
     def radiance(self) -> np.ndarray:
-        """The disc's mean radiance (3,): the midpoint rule over 48 rings of equal solid angle x 48 azimuths."""
+        """The disc's mean radiance (3,): the uniform sun's own; the limb-darkened one's by the midpoint rule over
+        48 rings of equal solid angle x 48 azimuths."""
+        if not self.limb_darkening:
+            return self._uniform_radiance()
         rings, around = 48, 48
         one_minus_cos = (np.arange(rings) + 0.5) / rings * (1.0 - self.cos_half_angle)
         cos_t = 1.0 - one_minus_cos

@@ -23,7 +23,7 @@ Example (every key shown; optional ones have their default)::
     #         width = 1024, height = 512 }     # the procedural sky with a sun
     # constant = [1.0, 1.0, 1.0]              # a uniform white furnace
 
-    # [environment]                     # or: the Hosek-Wilkie sun and sky (Mitsuba 3.9.1's sunsky, complex_sun)
+    # [environment]                     # or: the Hosek-Wilkie sun and sky (Mitsuba 3.9.1's sunsky)
     # type = "sunsky"                   #   radiance in W m^-2 sr^-1 nm^-1 times Mitsuba's RGB normalisation
     # turbidity = 3.0                   #   1 (clear, arctic) to 10 (hazy)
     # albedo = 0.3                      #   the ground's, 0-1: a number or [r, g, b]
@@ -40,6 +40,7 @@ Example (every key shown; optional ones have their default)::
     # sun_scale = 1.0                   #   multiplies the sun (0: no sun)
     # sky_scale = 1.0                   #   multiplies the sky (0: no sky)
     # sun_aperture = 0.5358             #   the sun's angular diameter in degrees (its irradiance is kept)
+    # limb_darkening = true             #   Mitsuba's complex_sun; false: its default disc of uniform radiance
     # width = 1024                      #   the sky's lat-long map: width x (width / 2 + 1)
 
     [materials.floor]
@@ -276,6 +277,8 @@ def _sunsky(t: _Table) -> SunSky:
         options["sun_direction"] = numeric_array(t.get("sun_direction"), f"{t.where}: sun_direction", SceneError)
     if "width" in t.data:
         options["width"] = t.integer("width", minimum=8)
+    if "limb_darkening" in t.data:
+        options["limb_darkening"] = t.boolean("limb_darkening")
     when = {key: t.integer(key) for key in ("year", "month", "day") if key in t.data}
     when |= {key: t.number(key) for key in _SUNSKY_WHEN if key in t.data}
     if when:
