@@ -146,6 +146,28 @@ def _gltf_shapes(mi, path: str, folder: str, index: int) -> dict:
     return shapes
 
 
+def _sunsky(mi, sky: dict) -> dict:
+    """Mitsuba's ``sunsky`` for lightprobe's :class:`~lightprobe.emitters.sunsky.SunSky` parameters: its Z-up sky
+    stood on +Y (``to_world`` -90 degrees about +X), the sun along the same world direction, and ``complex_sun``
+    (the limb-darkened sun lightprobe implements; ../shared/notes/sunsky-mitsuba.md)."""
+    from lightprobe.emitters.procedural import sun_direction
+
+    d = sun_direction(sky["sun_elevation"], sky.get("sun_azimuth", 0.0))
+    out = {
+        "type": "sunsky",
+        "turbidity": float(sky.get("turbidity", 3.0)),
+        "sun_direction": mi.ScalarVector3f(*map(float, d)),
+        "complex_sun": True,
+        "to_world": mi.ScalarTransform4f().rotate([1, 0, 0], -90),
+    }
+    albedo = sky.get("albedo", 0.3)
+    out["albedo"] = float(albedo) if np.ndim(albedo) == 0 else _rgb(albedo)
+    for key in ("sun_scale", "sky_scale", "sun_aperture"):
+        if key in sky:
+            out[key] = float(sky[key])
+    return out
+
+
 def scene_dict(
     mi,
     desc: dict,
@@ -191,6 +213,8 @@ def scene_dict(
     env = desc["environment"]
     if env is not None and "file" in env:
         d["environment"] = {"type": "envmap", "filename": env["file"]}
+    elif env is not None and "sunsky" in env:
+        d["environment"] = _sunsky(mi, env["sunsky"])
     elif env_file is not None:
         d["environment"] = {"type": "envmap", "filename": env_file}
     for i, o in enumerate(desc["objects"]):

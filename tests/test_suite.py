@@ -28,7 +28,7 @@ def _suite_module():
 
 
 def test_the_suite_names_nine_scenes_and_keeps_the_references():
-    assert NAMES == ("sky", "area", "many")  # the test references' scenes are unchanged
+    assert NAMES[:3] == ("sky", "area", "many")  # the test references' scenes are unchanged (sunsky joined them)
     assert len(SUITE) == len(set(SUITE)) >= 9
     assert {"peer", "area", "ceiling", "dome", "window", "building", "gltf", "glossy", "city"} <= set(SUITE)
 

@@ -200,6 +200,28 @@ def _parse_light(spec: str):
     raise LightprobeError(f"--light {spec!r}: expected {LIGHT_SPECS}")
 
 
+SUNSKY_SPEC = "ELEVATION[:AZIMUTH[:TURBIDITY]]"
+
+
+def _parse_sunsky(spec: str):
+    """A :class:`~lightprobe.emitters.sunsky.SunSky` from ``--sunsky``'s :data:`SUNSKY_SPEC` (degrees; azimuth 0
+    and turbidity 3 when left out)."""
+    from .emitters.sunsky import SunSky
+
+    fields = spec.split(":")
+    try:
+        values = [float(x) for x in fields]
+    except ValueError:
+        values = []
+    if not 1 <= len(values) <= 3:
+        raise LightprobeError(f"--sunsky {spec!r}: expected {SUNSKY_SPEC}, numbers (degrees; turbidity 1-10)")
+    names = ("sun_elevation", "sun_azimuth", "turbidity")
+    try:
+        return SunSky(**dict(zip(names, values, strict=False)))
+    except LightprobeError as exc:
+        raise LightprobeError(f"--sunsky {spec!r}: {exc}") from None
+
+
 @app.command("render")
 @render_options(*RENDER_COMMAND_OPTIONS)
 def render_command(
@@ -220,6 +242,17 @@ def render_command(
             "at (TX, TY, TZ) (I a number or R,G,B in W/sr; angles in degrees, ANGLE 30, START ANGLE - 5) or a "
             "directional light 'directional:DX,DY,DZ:E[:ANGLE]' shining along (DX, DY, DZ) with irradiance E "
             "(W/m^2) from a disc ANGLE degrees wide (0: a delta light, the default); repeatable.",
+        ),
+    ] = None,
+    sunsky: Annotated[
+        str | None,
+        typer.Option(
+            "--sunsky",
+            metavar=SUNSKY_SPEC,
+            help="Light the scene by the Hosek-Wilkie sun and sky (Mitsuba 3's sunsky with complex_sun), the sun "
+            "ELEVATION degrees up at lat-long AZIMUTH (0: toward -Z, 90: toward +X; default 0) and TURBIDITY 1-10 "
+            "(default 3); it replaces the scene's environment (and a sunsky's sun).  Scene files: [environment] "
+            'type = "sunsky".',
         ),
     ] = None,
     width: Annotated[int | None, typer.Option(help="Override the image width (height keeps the aspect).")] = None,
@@ -253,6 +286,7 @@ def render_command(
     if not demo and scene_file is None:
         raise LightprobeError("give a SCENE file or --demo [NAME]")
     lamps = [_parse_light(spec) for spec in light or []]
+    sky = _parse_sunsky(sunsky) if sunsky is not None else None
     check_output(output, variance=variance, png=png)
     if object_ids is not None and object_ids.suffix.lower() != ".exr":
         raise LightprobeError(f"{object_ids}: the object-id pass is written as .exr")
@@ -266,9 +300,14 @@ def render_command(
     else:
         from .io.scene_file import load_scene
 
-        scene, defaults = load_scene(scene_file, require_light=not lamps)
+        scene, defaults = load_scene(scene_file, require_light=not lamps and sky is None)
     for lamp in lamps:
         scene.add_light(lamp)
+    if sky is not None:
+        scene.lights = [x for x in scene.lights if x.kind != "sun"]
+        scene.environment = sky.environment()
+        if (sun := sky.sun()) is not None:
+            scene.add_light(sun)
     if camera is not None:
         if camera not in scene.cameras:
             known = ", ".join(scene.cameras) or "none (no glTF object has one)"

@@ -1,10 +1,10 @@
 """Scenes described once, without reference to a renderer, and rendered by lightprobe and by Mitsuba 3.
 
-Two sets: :data:`NAMES`, the test suite's three small references, and :data:`SUITE`, the benchmark suite's nine
+Two sets: :data:`NAMES`, the test suite's four small references, and :data:`SUITE`, the benchmark suite's nine
 scenes (``benchmarks/suite.py``, docs/performance.md), described at the end of this docstring.
 
 The convergence tests of the suite compare lightprobe with itself: a bias that every strategy shares would pass
-them.  These three scenes are described here once, without reference to a renderer (camera, environment,
+them.  These four scenes are described here once, without reference to a renderer (camera, environment,
 materials, objects as plain numbers); :func:`build` makes the lightprobe scene and ``benchmarks/mitsuba_references.py``
 makes Mitsuba 3's from the same description and writes the per-pixel mean and variance of its ``direct``
 integrator's image to ``tests/data/mitsuba_<name>.npz`` (64 x 48 pixels, float32).  The tests z-test lightprobe's
@@ -18,7 +18,13 @@ strategies and light selectors against those images without needing Mitsuba.
     with a rough aluminium sphere, a diffuse sphere and a mesh (issue 33's area-light scene, small);
 ``many``
     600 small rectangle lights (``lights=`` another count) facing down, their radiances spread over three decades,
-    over a ground, a rough aluminium sphere and a diffuse sphere; no environment.
+    over a ground, a rough aluminium sphere and a diffuse sphere; no environment;
+``sunsky``
+    the Hosek-Wilkie sun and sky (:class:`~lightprobe.emitters.sunsky.SunSky`: turbidity 3, the sun 35 degrees up
+    in front of the camera on its right) over a 40 m ground, the blob, a rough aluminium sphere and a diffuse
+    sphere; the camera looks down, so the horizon (where the baked map's last row of sky blurs into the black below
+    it over a third of a degree) and the sun are out of view.  Mitsuba's side is its ``sunsky`` emitter with
+    ``complex_sun`` (benchmarks/mitsuba_references.py).
 
 The benchmark suite (:data:`SUITE`, 320 x 240; each stresses something else):
 
@@ -63,7 +69,8 @@ import numpy as np
 
 __all__ = ["NAMES", "SUITE", "build", "describe", "unavailable", "unoccluded_power_fraction"]
 
-NAMES = ("sky", "area", "many")
+NAMES = ("sky", "area", "many", "sunsky")
+SUNSKY = {"turbidity": 3.0, "albedo": 0.3, "sun_elevation": 35.0, "sun_azimuth": 60.0}
 SUITE = ("peer", "area", "ceiling", "dome", "window", "building", "gltf", "glossy", "city")
 RESOLUTION = (64, 48)
 SUITE_RESOLUTION = (320, 240)
@@ -482,6 +489,19 @@ def describe(name: str, *, lights: int | None = None) -> dict:
                 {**_ring(16, 0.9, 2.3, 0.12), "emission": [6.0, 7.0, 9.0]},
             ],
         }
+    if name == "sunsky":
+        return {
+            "name": name,
+            "camera": {"origin": [0.0, 2.6, 4.2], "target": [0.0, 0.3, 0.0], "fov": 45.0},
+            "environment": {"sunsky": dict(SUNSKY)},
+            "materials": materials,
+            "objects": [
+                {**_ground(40.0), "material": "ground"},
+                {**_blob(0.5, [0.15, 0.55, -0.4]), "material": "red"},
+                {"shape": "sphere", "center": [-1.1, 0.45, 0.2], "radius": 0.45, "material": "aluminium"},
+                {"shape": "sphere", "center": [1.1, 0.3, 0.4], "radius": 0.3, "material": "green"},
+            ],
+        }
     if name == "many":
         return {
             "name": name,
@@ -617,7 +637,7 @@ def environment_image(desc: dict) -> np.ndarray | None:
     from .emitters.procedural import constant, sky_with_sun
 
     env = desc["environment"]
-    if env is None or "file" in env:
+    if env is None or "file" in env or "sunsky" in env:  # a sunsky's map is its own (build())
         return None
     if "constant" in env:
         return constant(env["constant"], width=8, height=4)
@@ -673,12 +693,20 @@ def build(
     cam = desc["camera"]
     camera = Camera(cam["origin"], cam["target"], fov=cam["fov"], fov_axis="x", resolution=tuple(resolution))
     env = desc["environment"]
+    sun = None
     if env is not None and "file" in env:
         environment = EnvironmentMap.load(env["file"])
+    elif env is not None and "sunsky" in env:
+        from .emitters.sunsky import SunSky
+
+        sky = SunSky(**env["sunsky"])
+        environment, sun = sky.environment(), sky.sun()
     else:
         image = environment_image(desc)
         environment = None if image is None else EnvironmentMap.from_array(image)
     scene = Scene(camera, environment, name=f"reference {name}")
+    if sun is not None:
+        scene.add_light(sun)
     for key, m in desc["materials"].items():
         if m["model"] == "lambertian":
             scene.add_material(key, Lambert(m["reflectance"]))

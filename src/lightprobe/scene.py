@@ -123,13 +123,17 @@ class Scene:
         return obj
 
     def add_light(self, light):
-        """Add a :class:`~lightprobe.emitters.punctual.PointLight`, :class:`~lightprobe.emitters.punctual.SpotLight`
-        or :class:`~lightprobe.emitters.directional.DirectionalLight` (an emitter without a surface)."""
+        """Add a :class:`~lightprobe.emitters.punctual.PointLight`, :class:`~lightprobe.emitters.punctual.SpotLight`,
+        :class:`~lightprobe.emitters.directional.DirectionalLight` or :class:`~lightprobe.emitters.sun.SunLight` (an
+        emitter without a surface)."""
         from .emitters.directional import DirectionalLight
         from .emitters.punctual import PointLight
+        from .emitters.sun import SunLight
 
-        if not isinstance(light, PointLight | DirectionalLight):
-            raise SceneError(f"add_light takes a PointLight, SpotLight or DirectionalLight, got {type(light).__name__}")
+        if not isinstance(light, PointLight | DirectionalLight | SunLight):
+            raise SceneError(
+                f"add_light takes a PointLight, SpotLight, DirectionalLight or SunLight, got {type(light).__name__}"
+            )
         self.lights.append(light)
         return light
 
@@ -235,7 +239,7 @@ class Scene:
     def light_table(self):
         """The light table (:class:`~lightprobe.emitters.kinds.LightArrays`, world space): every emissive object --
         spheres, rectangles, then each face of each emissive mesh, in the order :meth:`compile` numbers them --,
-        the point and spot lights, then the infinite lights: the directional ones, and the environment last."""
+        the point and spot lights, then the infinite lights: the directional ones and suns, and the environment last."""
         from .emitters.kinds import KINDS, LightArrays, concatenate
         from .emitters.lights import light_arrays
 
@@ -262,8 +266,8 @@ class Scene:
             _triangle_lights(o.shape, o.emission, o.two_sided) for o in emitters if isinstance(o.shape, TriangleMesh)
         ]
         # after every surface's rows, so compile()'s numbering of those holds; bounded lights before infinite ones
-        bounded = [x for x in self.lights if x.kind != "directional"]
-        infinite = [x for x in self.lights if x.kind == "directional"]
+        bounded = [x for x in self.lights if not KINDS[x.kind].infinite]
+        infinite = [x for x in self.lights if KINDS[x.kind].infinite]
         lamps = light_arrays(bounded + infinite, environment=self.environment is not None)
         return concatenate([analytic, *meshes, lamps])
 
@@ -275,7 +279,7 @@ class Scene:
         if self.emitters:
             n = sum(_light_rows(o) for o in self.emitters)
             lights.append(f"{n} area lights")
-        for kind in ("point", "spot", "directional"):
+        for kind in ("point", "spot", "directional", "sun"):
             n = sum(light.kind == kind for light in self.lights)
             if n:
                 lights.append(f"{n} {kind} light{'s' if n > 1 else ''}")

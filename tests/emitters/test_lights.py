@@ -16,6 +16,7 @@ from lightprobe.emitters.kinds import KINDS
 from lightprobe.emitters.lights import escaped_batch, light_arrays, pdf_batch, sample_batch
 from lightprobe.emitters.procedural import sky_with_sun
 from lightprobe.emitters.punctual import PointLight, SpotLight
+from lightprobe.emitters.sun import SunLight
 from lightprobe.errors import ParameterError
 from lightprobe.geometry.frame import frame_matrix
 
@@ -36,6 +37,7 @@ def _one_of_each():
         "spot": SpotLight([0.0, 3.0, 0.0], [0.0, 0.0, 0.0], 6.0, cone_angle=40.0),
         "directional": SUN,
         "delta directional": DirectionalLight([0.0, -1.0, -1.0], 2.0),
+        "sun": SunLight([0.3, 1.0, -0.2], turbidity=3.0),
     }
     return lights, env
 
@@ -49,9 +51,8 @@ def test_every_kind_of_the_table_goes_through_the_contract():
     for name, light in lights.items():
         table = light_arrays([light])
         seen.add(light.kind)
-        _check_kind(
-            table, 0, env=None, delta=name in ("point", "spot", "delta directional"), infinite="directional" in name
-        )
+        delta = name in ("point", "spot", "delta directional")
+        _check_kind(table, 0, env=None, delta=delta, infinite=KINDS[light.kind].infinite)
     table = light_arrays([], environment=True)
     _check_kind(table, 0, env=env, delta=False, infinite=True)
     seen.add("environment")

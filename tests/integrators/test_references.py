@@ -43,6 +43,8 @@ CASES = [
     ("many", {"strategy": "mis", "light_sampler": "power", "spp": 1024}),
     ("many", {"strategy": "env", "light_sampler": "uniform", "spp": 1024}),
     ("many-as-mesh", {"strategy": "mis", "light_sampler": "bvh", "spp": 1024}),
+    ("sunsky", {"strategy": "mis"}),
+    ("sunsky", {"strategy": "env", "spp": 512}),
 ]
 
 

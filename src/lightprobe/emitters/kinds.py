@@ -2,7 +2,7 @@
 
 Every light of a scene is a row of one table (:class:`LightArrays`), as pbrt-v4 keeps every ``Light`` in one array
 (its ``ImageInfiniteLight`` among them): bounded lights first (area lights, then point and spot lights), then the
-infinite ones (directional lights, then the environment map, whose data the kernels read from its own
+infinite ones (directional lights and suns, then the environment map, whose data the kernels read from its own
 :class:`~lightprobe.emitters.envmap.EnvKernel`).  :data:`KINDS` is the only place a kind's number is written; the
 contract that dispatches on it is :mod:`lightprobe.emitters.lights`, and a test runs every kind through it.
 
@@ -30,6 +30,7 @@ __all__ = [
     "LIGHT_RECT",
     "LIGHT_SPHERE",
     "LIGHT_SPOT",
+    "LIGHT_SUN",
     "LIGHT_TRIANGLE",
     "ROW_WIDTH",
     "Kind",
@@ -48,7 +49,8 @@ __all__ = [
 # columns of a geometry row: the widest kind's, a parallelogram's (geometry.intersect.rectangle_rows)
 ROW_WIDTH = RECT_WIDTH
 
-LIGHT_RECT, LIGHT_SPHERE, LIGHT_TRIANGLE, LIGHT_POINT, LIGHT_SPOT, LIGHT_DIRECTIONAL, LIGHT_ENVIRONMENT = range(7)
+(LIGHT_RECT, LIGHT_SPHERE, LIGHT_TRIANGLE, LIGHT_POINT, LIGHT_SPOT, LIGHT_DIRECTIONAL, LIGHT_ENVIRONMENT,
+ LIGHT_SUN) = range(8)  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -73,6 +75,7 @@ KINDS = {
         Kind(LIGHT_SPOT, "spot", "punctual", area=False, delta=True, infinite=False),
         Kind(LIGHT_DIRECTIONAL, "directional", "directional", area=False, delta=False, infinite=True),
         Kind(LIGHT_ENVIRONMENT, "environment", "envmap", area=False, delta=False, infinite=True),
+        Kind(LIGHT_SUN, "sun", "sun", area=False, delta=False, infinite=True),
     )
 }
 
@@ -128,9 +131,11 @@ class LightArrays(NamedTuple):
     geom: np.ndarray  # (L, ROW_WIDTH) float64: a rectangle's row of geometry/intersect.rectangle_rows (origin,
     #                   edge_u, edge_v, unit normal, dual vectors) | sphere centre, radius | triangle v0, v1, v2,
     #                   unit normal | point position | spot position, axis, cos total, cos start | directional
-    #                   direction toward the light, cos of its half-angle, its solid angle | environment: unused
+    #                   direction toward the light, cos of its half-angle, its solid angle | environment: unused |
+    #                   sun: a directional row's six, then its table's turbidity index, 1 / sin^2 alpha and its
+    #                   scale (emitters/sun.py)
     radiance: np.ndarray  # (L, 3) float64: radiance; a point or spot light's intensity; a delta directional
-    #                       light's irradiance; the environment's: unused (its map)
+    #                       light's irradiance; the environment's: unused (its map); the sun's disc's mean
     two_sided: np.ndarray  # (L,) int64
     area: np.ndarray  # (L,) float64 (0 for lights without a surface)
 

@@ -8,8 +8,9 @@ For a shading point p with normal n:
   per steradian (1 for a delta light), and whether it is a delta light;
 * ``light_pdf(lights, env, l, strategy, compensated, p, n, w)``: the density with which ``light_sample`` produces
   direction w (0 for a delta light: no given direction is ever its);
-* ``escaped_radiance(lights, env, w)``: what a ray that leaves the scene along w sees: the environment's and
-  every directional light's radiance (the table's last rows, :func:`first_infinite` on), each ``infinite_radiance``;
+* ``escaped_radiance(lights, env, w)``: what a ray that leaves the scene along w sees: the environment's, every
+  directional light's and sun's radiance (the table's last rows, :func:`first_infinite` on), each
+  ``infinite_radiance``;
 * for area lights a BSDF ray has hit at a known point, ``emitted`` and ``area_pdf_at`` (module ``area``).
 
 ``strategy`` is how area lights are sampled (:data:`~.area.STRATEGIES`); ``compensated`` whether the environment is
@@ -146,8 +147,8 @@ def _light_pdf_of(lights, env, l, strategy, compensated, px, py, pz, nx, ny, nz,
 
 
 def infinite_radiance(lights, env, l, wx, wy, wz):
-    """Radiance that infinite light l (the environment or a directional light) sends along -w, toward a ray leaving
-    the scene along unit direction w; compiled code only."""
+    """Radiance that infinite light l (the environment, a directional light or the sun) sends along -w, toward a ray
+    leaving the scene along unit direction w; compiled code only."""
     raise TypeError("infinite_radiance is compiled code's (escaped_batch calls it from Python)")
 
 
@@ -281,7 +282,8 @@ def escaped_batch(lights: LightArrays, dirs, *, env=None) -> np.ndarray:
 
 def light_arrays(lights, *, environment: bool = False) -> LightArrays:
     """The table of Python light objects (:class:`~.area.AreaLight`, :class:`~.punctual.PointLight`,
-    :class:`~.punctual.SpotLight`, :class:`~.directional.DirectionalLight`), in order, with a last row for the
+    :class:`~.punctual.SpotLight`, :class:`~.directional.DirectionalLight`, :class:`~.sun.SunLight`), in order,
+    with a last row for the
     scene's environment map when ``environment``."""
     rows = [
         LightArrays(

@@ -10,7 +10,8 @@ Example (every key shown; optional ones have their default)::
     fov_axis = "y"                      # optional: "y" vertical (default) or "x" horizontal
     resolution = [512, 512]
 
-    [environment]                       # exactly one of file / sky / constant; optional when objects emit
+    [environment]                       # exactly one of file / sky / constant, or type = "sunsky" (below);
+                                        #   optional when objects emit
     file = "sky.exr"                    # .exr, .hdr, .pfm
     mapping = "latlong"                 # or "angular" (Debevec light probe)
     scale = 1.0
@@ -21,6 +22,26 @@ Example (every key shown; optional ones have their default)::
     # sky = { sun_elevation = 35, sun_azimuth = 45, sun_diameter = 0.5, sun_radiance = [4e4, 3.8e4, 3.4e4],
     #         width = 1024, height = 512 }     # the procedural sky with a sun
     # constant = [1.0, 1.0, 1.0]              # a uniform white furnace
+
+    # [environment]                     # or: the Hosek-Wilkie sun and sky (Mitsuba 3.9.1's sunsky)
+    # type = "sunsky"                   #   radiance in W m^-2 sr^-1 nm^-1 times Mitsuba's RGB normalisation
+    # turbidity = 3.0                   #   1 (clear, arctic) to 10 (hazy)
+    # albedo = 0.3                      #   the ground's, 0-1: a number or [r, g, b]
+    # sun_elevation = 45.0              #   degrees above the horizon, 0-90 (Mitsuba's sky is black below it)
+    # sun_azimuth = 0.0                 #   degrees, as the sky's u = azimuth / 360 (0: toward -Z, 90: toward +X)
+    # sun_direction = [0.3, 1.0, -0.2]  #   or the world direction toward the sun (not with sun_elevation)
+    # year = 2010                       #   or where the sun stands at a date, time and place (Mitsuba's: noon
+    # month = 7                         #   sun toward +X in the north, morning sun +Z); any of these keys, the
+    # day = 10                          #   others Mitsuba's defaults (Tokyo, 10 July 2010, 15:00)
+    # hour = 15.0                       #   local time: hour, minute, second
+    # latitude = 35.6894                #   degrees, north positive; longitude east positive
+    # longitude = 139.6917
+    # timezone = 9.0                    #   hours from UTC
+    # sun_scale = 1.0                   #   multiplies the sun (0: no sun)
+    # sky_scale = 1.0                   #   multiplies the sky (0: no sky)
+    # sun_aperture = 0.5358             #   the sun's angular diameter in degrees (its irradiance is kept)
+    # limb_darkening = true             #   Mitsuba's complex_sun; false: its default disc of uniform radiance
+    # width = 1024                      #   the sky's lat-long map: width x (width / 2 + 1)
 
     [materials.floor]
     type = "lambert"                    # lambert: albedo
@@ -144,6 +165,7 @@ from ..emitters.directional import DirectionalLight
 from ..emitters.envmap import EnvironmentMap
 from ..emitters.procedural import constant, sky_with_sun
 from ..emitters.punctual import PointLight, SpotLight
+from ..emitters.sunsky import SunSky
 from ..errors import LightprobeError, SceneError, numeric_array
 from ..geometry.camera import Camera
 from ..geometry.mesh import TriangleMesh
@@ -242,7 +264,37 @@ def _camera(t: _Table) -> Camera:
     return cam
 
 
-def _environment(t: _Table, base: Path) -> EnvironmentMap:
+_SUNSKY_NUMBERS = ("turbidity", "sun_elevation", "sun_azimuth", "sun_scale", "sky_scale", "sun_aperture")
+_SUNSKY_WHEN = ("hour", "minute", "second", "latitude", "longitude", "timezone")
+
+
+def _sunsky(t: _Table) -> SunSky:
+    """``[environment] type = "sunsky"``: the Hosek-Wilkie sun and sky (emitters/sunsky.py)."""
+    options = {key: t.number(key) for key in _SUNSKY_NUMBERS if key in t.data}
+    if "albedo" in t.data:
+        options["albedo"] = t.rgb("albedo")
+    if "sun_direction" in t.data:
+        options["sun_direction"] = numeric_array(t.get("sun_direction"), f"{t.where}: sun_direction", SceneError)
+    if "width" in t.data:
+        options["width"] = t.integer("width", minimum=8)
+    if "limb_darkening" in t.data:
+        options["limb_darkening"] = t.boolean("limb_darkening")
+    when = {key: t.integer(key) for key in ("year", "month", "day") if key in t.data}
+    when |= {key: t.number(key) for key in _SUNSKY_WHEN if key in t.data}
+    if when:
+        options["when"] = when
+    t.done()
+    return SunSky(**options)
+
+
+def _environment(t: _Table, base: Path) -> EnvironmentMap | SunSky:
+    """The ``[environment]`` table: a map, or a :class:`~lightprobe.emitters.sunsky.SunSky` (its sky a map, its sun
+    a light) for ``type = "sunsky"``."""
+    kind = t.string("type")
+    if kind is not None:
+        if kind != "sunsky":
+            raise SceneError(f"{t.where}: type must be 'sunsky' (or leave it out for a map), got {kind!r}")
+        return _sunsky(t)
     sources = [k for k in ("file", "sky", "constant") if k in t.data]
     if len(sources) != 1:
         raise SceneError(f"{t.where}: give exactly one of file, sky or constant (got {sources or 'none'})")
@@ -492,7 +544,12 @@ def load_scene(path: str | os.PathLike, *, require_light: bool = True) -> tuple[
     env = None
     if "environment" in root.data:
         env = _within(f"{p}: [environment]", lambda w: _environment(_Table(root.get("environment"), w), base))
+    sunsky = env if isinstance(env, SunSky) else None
+    if sunsky is not None:
+        env = _within(f"{p}: [environment]", lambda w: sunsky.environment())
     scene = Scene(camera, env, name=p.stem)
+    if sunsky is not None and (sun := sunsky.sun()) is not None:
+        scene.add_light(sun)
     materials = root.get("materials", {})
     if not isinstance(materials, dict):
         raise SceneError(f"{p}: [materials] must be a table of tables")
