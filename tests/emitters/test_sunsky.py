@@ -1,4 +1,4 @@
-"""The Hosek-Wilkie sun and sky (emitters/sunsky.py, emitters/sun.py) against Mitsuba 3.9.1's ``sunsky``.
+"""The Hosek-Wilkie sun and sky (emitters/hosek_wilkie.py, sun.py, sunsky.py) against Mitsuba 3.9.1's ``sunsky``.
 
 ``tests/data/mitsuba_sunsky_radiance.npz`` (made by benchmarks/mitsuba_sunsky_radiance.py, without which these
 tests need no Mitsuba) holds Mitsuba's radiance of five settings (turbidity 1-10, albedo 0-1 and one RGB albedo,
@@ -17,10 +17,11 @@ import numpy as np
 import pytest
 
 from lightprobe.analysis import chi2
+from lightprobe.emitters.hosek_wilkie import sky_radiance, sun_position
 from lightprobe.emitters.lights import escaped_batch, light_arrays, pdf_batch, sample_batch
 from lightprobe.emitters.procedural import sun_direction
 from lightprobe.emitters.sun import SunLight
-from lightprobe.emitters.sunsky import SunSky, sky_radiance, sun_position
+from lightprobe.emitters.sunsky import SunSky
 from lightprobe.errors import ParameterError
 from lightprobe.geometry.frame import frame_matrix
 

@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 from lightprobe.cli import main
+from lightprobe.emitters.hosek_wilkie import sun_position
 from lightprobe.emitters.procedural import sun_direction
-from lightprobe.emitters.sunsky import SunSky, sun_position
+from lightprobe.emitters.sunsky import SunSky
 from lightprobe.errors import SceneError
 from lightprobe.io.scene_file import load_scene
 

@@ -5,16 +5,16 @@ angle (emitters/directional.py) it lights every point from one cone of direction
 direction toward the sun, and is sampled uniformly in that cone (pbrt-v4's ``SampleUniformCone``, as Mitsuba 3's
 ``sunsky`` samples its sun), density 1 / Omega with Omega = 2 pi (1 - cos alpha); but its radiance varies over the
 disc: the Hosek-Wilkie 2013 solar radiance function, a polynomial in the elevation of the direction looked along and
-in the limb-darkening cosine mu (emitters/sunsky.py's docstring has the model; the table is Mitsuba's RGB one, with
-the limb darkening baked in).  The sampling is not proportional to the radiance (the limb is about half as bright as
-the centre), but the disc is a quarter of a degree wide: every sample lands on the sun, and the weight L / p varies
-by that factor only.
+in the limb-darkening cosine mu (emitters/hosek_wilkie.py's docstring has the model; the table is Mitsuba's RGB one,
+with the limb darkening baked in).  The sampling is not proportional to the radiance (the limb is about half as
+bright as the centre), but the disc is a quarter of a degree wide: every sample lands on the sun, and the weight
+L / p varies by that factor only.
 
 Row of the light table (:class:`~lightprobe.emitters.kinds.LightArrays`): ``geom[0:6]`` as a directional light's
 (unit direction toward the sun, cos alpha, 1 - cos alpha, Omega), so the cone's sampling and density are
 directional.py's own functions; ``geom[6]`` the turbidity less 1 (the table's index, interpolated linearly as
 Mitsuba's); ``geom[7]`` 1 / sin^2 alpha (for mu); ``geom[8]`` the factor the polynomial is multiplied by
-(:func:`~lightprobe.emitters.sunsky.sun_scale_factor`); ``geom[9]`` 1 for the limb-darkened sun, 0 for Mitsuba's
+(:func:`~lightprobe.emitters.hosek_wilkie.sun_scale_factor`); ``geom[9]`` 1 for the limb-darkened sun, 0 for Mitsuba's
 uniform one.  ``radiance`` holds the disc's mean radiance (the uniform sun's radiance), so that the light
 selector's irradiance of a directional row, pi L sin^2 alpha, is the sun's.
 
@@ -31,8 +31,7 @@ import numpy as np
 from .._numba import jit, jit_inline
 from ..errors import ParameterError
 from .directional import _inside, directional_pdf, directional_sample
-from .kinds import ROW_WIDTH, LightSample
-from .sunsky import (
+from .hosek_wilkie import (
     SUN_APERTURE,
     SUN_SEGMENTS,
     TURBIDITY_RANGE,
@@ -42,6 +41,7 @@ from .sunsky import (
     sun_scale_factor,
     uniform_sun_radiance,
 )
+from .kinds import ROW_WIDTH, LightSample
 
 __all__ = ["SunLight", "sun_disc_radiance", "sun_pdf", "sun_sample"]
 
@@ -71,7 +71,7 @@ def _channel(i, f, segment, c, x, mu):
 @jit
 def sun_disc_radiance(g, radiance, wx, wy, wz):
     """RGB radiance of the sun with row ``g`` seen along unit direction w: zero outside its disc and below the
-    horizon; inside, the solar radiance polynomial of emitters/sunsky.py at w's elevation and limb cosine, or, for
+    horizon; inside, the solar radiance polynomial of emitters/hosek_wilkie.py at w's elevation and limb cosine, or, for
     the uniform sun (``g[9]`` 0), its row's ``radiance``."""
     if wy < 0.0 or not _inside(g, wx, wy, wz):
         return 0.0, 0.0, 0.0
@@ -124,7 +124,7 @@ class SunLight:
     ``turbidity`` 1-10, a disc of angular diameter ``aperture`` degrees (its irradiance kept that of the standard
     0.5358-degree sun, as Mitsuba's) times ``scale``; ``limb_darkening`` (Mitsuba's ``complex_sun``) its radiance
     over the disc from the solar radiance function, else Mitsuba's default uniform disc
-    (:func:`~lightprobe.emitters.sunsky.uniform_sun_radiance`)."""
+    (:func:`~lightprobe.emitters.hosek_wilkie.uniform_sun_radiance`)."""
 
     kind = "sun"
     two_sided = False
@@ -162,12 +162,13 @@ class SunLight:
 
     @property
     def half_angle(self) -> float:
-        """alpha in radians (:func:`~lightprobe.emitters.sunsky.disc_angles`: Mitsuba's float32 value)."""
+        """alpha in radians (:func:`~lightprobe.emitters.hosek_wilkie.disc_angles`: Mitsuba's float32 value)."""
         return disc_angles(self.aperture)[0]
 
     @property
     def cos_half_angle(self) -> float:
-        """cos alpha as Mitsuba's disc has it, rounded to float32 (:func:`~lightprobe.emitters.sunsky.disc_angles`)."""
+        """cos alpha as Mitsuba's disc has it, rounded to float32
+        (:func:`~lightprobe.emitters.hosek_wilkie.disc_angles`)."""
         return disc_angles(self.aperture)[1]
 
     @property

@@ -269,7 +269,8 @@ _SUNSKY_WHEN = ("hour", "minute", "second", "latitude", "longitude", "timezone")
 
 
 def _sunsky(t: _Table) -> SunSky:
-    """``[environment] type = "sunsky"``: the Hosek-Wilkie sun and sky (emitters/sunsky.py)."""
+    """``[environment] type = "sunsky"``: the Hosek-Wilkie sun and sky (emitters/sunsky.py; its model
+    emitters/hosek_wilkie.py)."""
     options = {key: t.number(key) for key in _SUNSKY_NUMBERS if key in t.data}
     if "albedo" in t.data:
         options["albedo"] = t.rgb("albedo")
