@@ -30,7 +30,7 @@ import numpy as np
 
 from .._numba import jit, jit_inline
 from ..errors import ParameterError
-from .directional import _inside, directional_pdf, directional_sample
+from .directional import _inside, _vector, directional_pdf, directional_sample
 from .hosek_wilkie import (
     SUN_APERTURE,
     SUN_SEGMENTS,
@@ -109,16 +109,6 @@ def sun_pdf(g, wx, wy, wz):
     return directional_pdf(g, wx, wy, wz)
 
 
-def _vector(value, name: str) -> np.ndarray:
-    try:
-        v = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        v = None
-    if v is None or isinstance(value, str | bool | dict) or v.shape != (3,) or not np.all(np.isfinite(v)):
-        raise ParameterError(f"sun: {name} must be 3 finite numbers, got {value!r}")
-    return v
-
-
 class SunLight:
     """The Hosek-Wilkie sun toward world direction ``sun_direction`` (y >= 0: above the horizon), at
     ``turbidity`` 1-10, a disc of angular diameter ``aperture`` degrees (its irradiance kept that of the standard
@@ -139,7 +129,7 @@ class SunLight:
         scale: float = 1.0,
         limb_darkening: bool = True,
     ):
-        d = _vector(sun_direction, "sun_direction")
+        d = _vector(sun_direction, "sun: sun_direction")
         length = float(np.linalg.norm(d))
         if not length > 0.0:
             raise ParameterError("sun: sun_direction must not be zero")
