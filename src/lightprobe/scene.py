@@ -24,7 +24,7 @@ from .bsdfs.base import BSDF, PARAM_SIZE
 from .emitters.envmap import EnvironmentMap
 from .errors import SceneError, warn_once
 from .geometry.camera import Camera
-from .geometry.intersect import RECT_WIDTH, rectangle_rows
+from .geometry.intersect import rectangle_rows_of
 from .geometry.mesh import TriangleMesh
 from .geometry.scene_arrays import SceneArrays
 from .geometry.shape_bvh import build_shape_tree
@@ -189,7 +189,7 @@ class Scene:
                 row += _light_rows(o)
 
         sphere_rows = np.array([[*o.shape.center, o.shape.radius] for o in spheres]).reshape(-1, 4)
-        rect_rows = _rect_rows([o.shape for o in rects])
+        rect_rows = rectangle_rows_of([o.shape for o in rects])
         return SceneArrays(
             np.ascontiguousarray(np.concatenate(vertices)) if vertices else np.zeros((0, 3)),
             np.ascontiguousarray(np.concatenate(normals)) if normals else np.zeros((0, 3)),
@@ -237,39 +237,11 @@ class Scene:
         return [o for o in self.objects if o.emission is not None]
 
     def light_table(self):
-        """The light table (:class:`~lightprobe.emitters.kinds.LightArrays`, world space): every emissive object --
-        spheres, rectangles, then each face of each emissive mesh, in the order :meth:`compile` numbers them --,
-        the point and spot lights, then the infinite lights: the directional ones and suns, and the environment last."""
-        from .emitters.kinds import KINDS, LightArrays, concatenate
-        from .emitters.lights import light_arrays
+        """The light table (:class:`~lightprobe.emitters.kinds.LightArrays`, world space) of the scene's emissive
+        objects and lights: :func:`lightprobe.emitters.table.light_table`."""
+        from .emitters.table import light_table
 
-        emitters = self.emitters
-        spheres = [o for o in emitters if isinstance(o.shape, Sphere)]
-        rects = [o for o in emitters if isinstance(o.shape, Rectangle)]
-        sphere_geom = np.zeros((len(spheres), RECT_WIDTH))
-        sphere_geom[:, :4] = np.array([[*o.shape.center, o.shape.radius] for o in spheres]).reshape(-1, 4)
-        rect_geom = _rect_rows([o.shape for o in rects])
-        # built as arrays, not one AreaLight each: a scene file with 100,000 rectangle lights (issue 32)
-        analytic = LightArrays(
-            np.array([KINDS["sphere"].code] * len(spheres) + [KINDS["rectangle"].code] * len(rects), np.int64),
-            np.ascontiguousarray(np.concatenate([sphere_geom, rect_geom])),
-            np.array([o.emission for o in spheres + rects], np.float64).reshape(-1, 3),
-            np.array([o.two_sided for o in spheres + rects], np.int64),
-            np.concatenate(
-                [
-                    4.0 * np.pi * sphere_geom[:, 3] ** 2,
-                    np.linalg.norm(np.cross(rect_geom[:, 3:6], rect_geom[:, 6:9]), axis=1),
-                ]
-            ),
-        )
-        meshes = [
-            _triangle_lights(o.shape, o.emission, o.two_sided) for o in emitters if isinstance(o.shape, TriangleMesh)
-        ]
-        # after every surface's rows, so compile()'s numbering of those holds; bounded lights before infinite ones
-        bounded = [x for x in self.lights if not KINDS[x.kind].infinite]
-        infinite = [x for x in self.lights if KINDS[x.kind].infinite]
-        lamps = light_arrays(bounded + infinite, environment=self.environment is not None)
-        return concatenate([analytic, *meshes, lamps])
+        return light_table(self.emitters, self.lights, environment=self.environment is not None)
 
     def summary(self) -> str:
         w, h = self.camera.resolution
@@ -289,13 +261,6 @@ class Scene:
             f"{self.name}: {len(self.objects)} objects ({self.triangle_count} triangles), "
             f"{len(self.materials)} materials{textures}, {w}x{h}, light {' + '.join(lights) or 'none'}"
         )
-
-
-def _rect_rows(rects: list[Rectangle]) -> np.ndarray:
-    """The kernels' rows of parallelograms (geometry/intersect.py's rectangle_rows)."""
-    if not rects:
-        return np.zeros((0, RECT_WIDTH))
-    return rectangle_rows(*(np.array([getattr(r, f) for r in rects]) for f in ("origin", "edge_u", "edge_v")))
 
 
 def _light_rows(obj: SceneObject) -> int:
@@ -320,25 +285,6 @@ def _emission(value, shape, label: str) -> np.ndarray | None:
     except LightprobeError as exc:
         raise SceneError(f"{label}: {exc}") from None
     return rgb if rgb.max() > 0 else None
-
-
-def _triangle_lights(mesh: TriangleMesh, emission, two_sided: bool):
-    """The light table rows of an emissive mesh, one per face."""
-    from .emitters.kinds import KINDS, LightArrays
-
-    v = mesh.vertices[mesh.faces]  # (F, 3, 3)
-    cross = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
-    length = np.linalg.norm(cross, axis=1)
-    f = v.shape[0]
-    return LightArrays(
-        np.full(f, KINDS["triangle"].code, np.int64),
-        np.ascontiguousarray(
-            np.concatenate([v.reshape(-1, 9), cross / length[:, None], np.zeros((f, RECT_WIDTH - 12))], axis=1)
-        ),
-        np.ascontiguousarray(np.broadcast_to(np.asarray(emission, dtype=np.float64), (f, 3))),
-        np.full(f, int(two_sided), np.int64),
-        0.5 * length,
-    )
 
 
 class _TextureRows:

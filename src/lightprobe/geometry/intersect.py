@@ -42,6 +42,7 @@ __all__ = [
     "ray_offset",
     "rect_hit",
     "rectangle_rows",
+    "rectangle_rows_of",
     "surface",
     "triangle_error",
 ]
@@ -68,6 +69,13 @@ def rectangle_rows(origin, edge_u, edge_v):
     area = np.linalg.norm(cross, axis=1, keepdims=True)
     n = cross / area
     return np.ascontiguousarray(np.concatenate([o, u, v, n, np.cross(v, n) / area, np.cross(n, u) / area], axis=1))
+
+
+def rectangle_rows_of(rects) -> np.ndarray:
+    """:func:`rectangle_rows` of shapes with ``origin``, ``edge_u`` and ``edge_v`` (geometry.shapes.Rectangle)."""
+    if not rects:
+        return np.zeros((0, RECT_WIDTH))
+    return rectangle_rows(*(np.array([getattr(r, f) for r in rects]) for f in ("origin", "edge_u", "edge_v")))
 
 
 @jit
