@@ -15,8 +15,8 @@ from lightprobe.emitters.selection import SELECTORS, LightSampler
 
 def _lights(n_panels: int = 300):
     """Triangles of powers over four decades, two spheres, two rectangles (one two-sided), a point and a spot."""
+    from lightprobe.emitters.table import _triangle_lights
     from lightprobe.geometry.mesh import TriangleMesh
-    from lightprobe.scene import _triangle_lights
 
     v, f, radiance = light_panels(n_panels, seed=3)
     mesh = TriangleMesh.from_arrays(v, f, smooth=False)

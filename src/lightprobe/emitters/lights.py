@@ -22,6 +22,7 @@ which: :data:`~.kinds.KINDS`, the one table; ``tests/emitters/test_lights.py`` r
 
 from __future__ import annotations
 
+import functools
 import importlib
 
 import numpy as np
@@ -118,7 +119,9 @@ def dispatch_source(function: str, name: str) -> str:
     return "\n".join(lines) + "\n"
 
 
+@functools.cache
 def _dispatcher(function: str, name: str):
+    """The dispatcher compiled from :func:`dispatch_source` (one function object each, so that Numba types it once)."""
     modules = {kind.module for kind in KINDS.values()}
     namespace = {module: importlib.import_module(f"{__package__}.{module}") for module in modules}
     exec(compile(dispatch_source(function, name), f"<lights.{name}>", "exec"), namespace)
