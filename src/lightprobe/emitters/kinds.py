@@ -132,8 +132,8 @@ class LightArrays(NamedTuple):
     #                   edge_u, edge_v, unit normal, dual vectors) | sphere centre, radius | triangle v0, v1, v2,
     #                   unit normal | point position | spot position, axis, cos total, cos start | directional
     #                   direction toward the light, cos of its half-angle, its solid angle | environment: unused |
-    #                   sun: a directional row's six, then its table's turbidity index, 1 / sin^2 alpha and its
-    #                   scale (emitters/sun.py)
+    #                   sun: a directional row's six, then its table's turbidity index, 1 / sin^2 alpha, its
+    #                   scale and 1 for a limb-darkened disc (emitters/sun.py)
     radiance: np.ndarray  # (L, 3) float64: radiance; a point or spot light's intensity; a delta directional
     #                       light's irradiance; the environment's: unused (its map); the sun's disc's mean
     two_sided: np.ndarray  # (L,) int64
