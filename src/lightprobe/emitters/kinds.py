@@ -97,7 +97,8 @@ def _flag_table(name: str) -> np.ndarray:
     return table
 
 
-_AREA, _INFINITE, _POSITIONAL = _flag_table("area"), _flag_table("infinite"), _flag_table("positional")
+_FLAG_TABLES = {name: _flag_table(name) for name in _FLAGS}
+_AREA, _INFINITE, _POSITIONAL = _FLAG_TABLES["area"], _FLAG_TABLES["infinite"], _FLAG_TABLES["positional"]
 
 
 @jit_inline
@@ -121,7 +122,7 @@ def is_positional_kind(kind):
 def flag_rows(kinds: np.ndarray, name: str) -> np.ndarray:
     """Which rows of a light table's ``kind`` column have the flag ``name`` (``area``, ``infinite``,
     ``positional``): a boolean mask, for NumPy code."""
-    return _flag_table(name)[kinds]
+    return _FLAG_TABLES[name][kinds]
 
 
 class LightArrays(NamedTuple):
