@@ -19,7 +19,9 @@ Every estimate is built from ``n`` independent *groups*; a group is one directio
 strategies and ``n_bsdf + n_env`` directions for MIS.  The result reports the mean, the sample variance of one
 group, and the variance of the mean, so estimators can be compared at equal numbers of directions (see
 :meth:`Estimate.variance_per_sample`).  ``visibility`` (a function of world directions returning 0/1) stands in
-for shadow rays; by default nothing is blocked.
+for shadow rays; by default nothing is blocked.  The estimator is the laboratory's
+(:func:`lightprobe.integrators.batch_estimator.shade`): the n groups are n copies of the point, each with its own
+directions, so a change to the estimator is made in one place.
 """
 
 from __future__ import annotations
@@ -35,13 +37,20 @@ from ..color import luminance
 from ..emitters.envmap import EnvironmentMap
 from ..errors import ParameterError
 from ..geometry.frame import frame_matrix
-from ..sampling import warps
 from ..sampling.mis import balance_heuristic, power_heuristic
+from .batch_estimator import Context, EnvironmentSampling, HemisphereSampling, MaterialSampling, shade
 
 __all__ = ["STRATEGIES", "Estimate", "estimate"]
 
 STRATEGIES = ("uniform", "cosine", "brdf", "env", "mis")
 HEURISTICS = ("balance", "power")
+#: the single-technique strategies' techniques
+TECHNIQUES = {
+    "uniform": lambda: HemisphereSampling(cosine=False),
+    "cosine": lambda: HemisphereSampling(cosine=True),
+    "brdf": MaterialSampling,
+    "env": EnvironmentSampling,
+}
 
 
 @dataclass(frozen=True)
@@ -129,7 +138,7 @@ def estimate(
     seed : int
         Seed of the random numbers (results are reproducible bit for bit).
     visibility : callable, optional
-        ``visibility(dirs) -> (N,)`` with 1 where the world direction is unblocked.
+        ``visibility(dirs) -> (N,)`` with 1 where the world direction is unblocked, 0 where it is blocked.
     """
     if strategy not in STRATEGIES:
         raise ParameterError(f"strategy must be one of {STRATEGIES}, got {strategy!r}")
@@ -147,58 +156,32 @@ def estimate(
             raise ParameterError(
                 "MIS needs the BSDF's full mixture pdf (seed eq. 19); use Phong(..., estimator='mixture')"
             )
+    if strategy == "brdf" and isinstance(bsdf, Phong) and bsdf.estimator != "mixture":
+        raise ParameterError(
+            "this estimator weighs a sample by f cos / p of the whole BSDF; Phong's chosen_lobe estimator (seed "
+            "section 2.4) is the render core's: render with strategy='brdf'"
+        )
     nrm = _unit(normal, "normal")
     frame = frame_matrix(nrm)  # rows s, t, n: local = frame @ world
-    wo_local = frame @ _unit(wo, "wo")
-    rng = np.random.default_rng(seed)
-
-    def shade_local(wi_local: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """World directions and L(w) V(w) for local directions."""
-        world = wi_local @ frame
-        radiance = env.eval(world)
-        if visibility is not None:
-            radiance = radiance * np.asarray(visibility(world), dtype=np.float64).reshape(-1, 1)
-        return world, radiance
-
-    if strategy in ("uniform", "cosine"):
-        u = rng.random((n, 2))
-        if strategy == "uniform":
-            wi = warps.square_to_uniform_hemisphere(u)
-            pdf = warps.uniform_hemisphere_pdf(wi)
-        else:
-            wi = warps.square_to_cosine_hemisphere(u)
-            pdf = warps.cosine_hemisphere_pdf(wi)
-        _, radiance = shade_local(wi)
-        f = bsdf.eval(wo_local, wi)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            values = np.where((pdf > 0)[:, None], f * wi[:, 2:3] * radiance / pdf[:, None], 0.0)
-        samples_per_group = 1
-    elif strategy == "brdf":
-        wi, pdf, weight = bsdf.sample_weight(wo_local, rng.random((n, 3)))
-        _, radiance = shade_local(wi)
-        values = weight * radiance
-        samples_per_group = 1
-    elif strategy == "env":
-        world, pdf = env.sample(rng.random((n, 2)))
-        values = _env_contributions(env, bsdf, frame, wo_local, world, pdf, visibility)
-        samples_per_group = 1
+    ctx = Context.at_point(frame @ _unit(wo, "wo"), frame, n, bsdf, env)
+    if strategy == "mis":
+        techniques, counts = (MaterialSampling(), EnvironmentSampling(compensated)), (n_bsdf, n_env)
+        techniques, counts = zip(*[(t, c) for t, c in zip(techniques, counts, strict=True) if c > 0], strict=True)
     else:
-        values = np.zeros((n, 3))
-        if n_bsdf:
-            u = rng.random((n * n_bsdf, 3))
-            wi, p_b, weight = bsdf.sample_weight(wo_local, u)
-            world, radiance = shade_local(wi)
-            p_e = env.pdf(world, compensated=compensated)
-            w = _mis_weight(heuristic, n_bsdf, p_b, n_env, p_e)
-            values += (weight * radiance * w[:, None]).reshape(n, n_bsdf, 3).sum(axis=1) / n_bsdf
-        if n_env:
-            world, p_e = env.sample(rng.random((n * n_env, 2)), compensated=compensated)
-            wi = world @ frame.T
-            p_b = bsdf.pdf(wo_local, wi)
-            w = _mis_weight(heuristic, n_env, p_e, n_bsdf, p_b)
-            contrib = _env_contributions(env, bsdf, frame, wo_local, world, p_e, visibility) * w[:, None]
-            values += contrib.reshape(n, n_env, 3).sum(axis=1) / n_env
-        samples_per_group = n_bsdf + n_env
+        techniques, counts = (TECHNIQUES[strategy](),), (1,)
+    rng = np.random.default_rng(seed)
+    numbers = [rng.random((count, n, t.dimensions)) for t, count in zip(techniques, counts, strict=True)]
+
+    def occluded(origins, dirs):
+        if visibility is None:
+            return np.zeros(dirs.shape[0], dtype=np.bool_)
+        return np.asarray(visibility(dirs)).reshape(-1) == 0
+
+    def weight(n_f, p_f, n_g, p_g):
+        return _mis_weight(heuristic, n_f, p_f, n_g, p_g)
+
+    values, _ = shade(ctx, techniques, counts, weight, numbers, np.tile(nrm, (n, 1)), np.zeros(n), occluded)
+    samples_per_group = sum(counts)
 
     if not np.all(np.isfinite(values)):
         raise RuntimeError(f"non-finite sample values in strategy {strategy!r}: this is a bug in lightprobe")
@@ -210,15 +193,3 @@ def estimate(
         samples_per_group=samples_per_group,
         strategy=strategy,
     )
-
-
-def _env_contributions(env, bsdf, frame, wo_local, world, pdf, visibility) -> np.ndarray:
-    """f(wo, wi) cos(theta_i) L(wi) V(wi) / p_env(wi) for environment-sampled world directions."""
-    wi = world @ frame.T
-    f = bsdf.eval(wo_local, wi)
-    radiance = env.eval(world)
-    if visibility is not None:
-        radiance = radiance * np.asarray(visibility(world), dtype=np.float64).reshape(-1, 1)
-    cos = np.maximum(wi[:, 2:3], 0.0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where((pdf > 0)[:, None], f * cos * radiance / pdf[:, None], 0.0)

@@ -27,12 +27,11 @@ import numpy as np
 from numba.core.dispatcher import Dispatcher
 
 from .._numba import jit, jit_parallel, prange
-from ..bsdfs.dispatch import bsdf_eval
-from ..emitters.envmap import env_eval
 from ..geometry.camera import camera_ray
 from ..geometry.intersect import MISS
 from ..geometry.raytracer import RayTracer
 from ..integrators.accumulation import Accumulator, RenderResult, result_from
+from ..integrators.batch_estimator import Context, add_samples, shade
 from ..integrators.settings import RenderSettings
 from ..integrators.techniques import store_shading_frame
 from ..sampling.mis import balance_heuristic, power_heuristic
@@ -56,7 +55,7 @@ from .jit_techniques import (
 )
 from .jit_techniques import user_serial as _user_serial
 from .technique_errors import _RenderTimeUp
-from .techniques import UNIT_TOLERANCE, Context, GuardedTechnique, Heuristic, RenderClock, TechniqueError
+from .techniques import UNIT_TOLERANCE, GuardedTechnique, Heuristic, RenderClock, TechniqueError
 
 __all__ = ["LabRenderError", "LabStrategy", "render_lab"]
 
@@ -212,50 +211,6 @@ def _first_invalid(wi, pdf, p_other, weight, has_other):
         if wrong:
             bad += 1
     return bad
-
-
-@jit_parallel
-def _shadow_rays(kind, params, count, wo, gnormal, error, position, local, world, pdf, weight, f, scale, d, origin,
-                 live):  # fmt: skip
-    """The estimator's terms before visibility, as the NumPy path computes them: f, the factor w cos / (n p), the
-    unit direction and the offset origin of each live row (pdf, cos, weight and f all > 0)."""
-    n = wo.shape[0]
-    for r in prange(pdf.shape[0]):
-        k = r % n
-        fr, fg, fb = bsdf_eval(kind, params, (wo[k, 0], wo[k, 1], wo[k, 2]), (local[r, 0], local[r, 1], local[r, 2]))
-        f[r, 0], f[r, 1], f[r, 2] = fr, fg, fb
-        cos = max(local[r, 2], 0.0)
-        live[r] = pdf[r] > 0.0 and cos > 0.0 and weight[r] > 0.0 and (fr > 0.0 or fg > 0.0 or fb > 0.0)
-        if live[r]:
-            x, y, z = world[r, 0], world[r, 1], world[r, 2]
-            norm = np.sqrt(x * x + y * y + z * z)
-            x, y, z = x / norm, y / norm, z / norm
-            d[r, 0], d[r, 1], d[r, 2] = x, y, z
-            ng0, ng1, ng2 = gnormal[k, 0], gnormal[k, 1], gnormal[k, 2]
-            side = -1.0 if x * ng0 + y * ng1 + z * ng2 < 0.0 else 1.0
-            offset = side * error[k]
-            origin[r, 0] = position[k, 0] + offset * ng0
-            origin[r, 1] = position[k, 1] + offset * ng1
-            origin[r, 2] = position[k, 2] + offset * ng2
-            scale[r] = weight[r] * cos / (count * pdf[r])
-
-
-@jit_parallel
-def _add_visible(env, count, out, f, scale, d, visible):
-    """out[k] += f L(d) w cos / (n p) of each visible row, sample by sample in order (as the NumPy path adds)."""
-    n = out.shape[0]
-    for k in prange(n):
-        for i in range(count):
-            r = i * n + k
-            if visible[r]:
-                lr, lg, lb = env_eval(env, d[r, 0], d[r, 1], d[r, 2])
-                out[k, 0] += f[r, 0] * lr * scale[r]
-                out[k, 1] += f[r, 1] * lg * scale[r]
-                out[k, 2] += f[r, 2] * lb * scale[r]
-            else:  # the NumPy path adds a row of zeros here (it turns -0.0 into 0.0): the same bits
-                out[k, 0] += 0.0
-                out[k, 1] += 0.0
-                out[k, 2] += 0.0
 
 
 @jit_parallel
@@ -429,57 +384,20 @@ class _Shader:
             # compiled code cannot be stopped from outside (and a signal must not land in Numba's compiler, which
             # the first call runs): the render's time limit, like the technique's own, is looked at after the batch
             self.clock.seconds_left()
-            f, scale, d, origin = np.empty((m, 3)), np.zeros(m), np.zeros((m, 3)), np.zeros((m, 3))
-            live = np.zeros(m, dtype=np.bool_)
-            _shadow_rays(material.kind, material.params, count, wo, gnormal, error, position, local, world, pdf,
-                         weight, f, scale, d, origin, live)  # fmt: skip
-            rows = np.nonzero(live)[0]
-            visible = np.zeros(m, dtype=np.bool_)
-            if rows.size:
-                visible[rows] = ~self.tracer.occluded(origin[rows], d[rows])
-                self.rays += rows.size
-            _add_visible(self.env.kernel, count, out, f, scale, d, visible)
+            self.rays += add_samples(out, ctx, count, local, world, pdf, weight, gnormal, error, self.tracer.occluded)
         return out
 
     def _shade(self, ctx: Context, numbers: list[np.ndarray], gnormal, error) -> np.ndarray:
-        """The estimator of the module docstring at the points of ``ctx`` (one material); ``numbers[t]`` holds
-        technique t's random numbers, (count, N, dims). Each technique is called once for all its samples of the
-        batch (count x N rows, sample-major); the samples are added in the core's order, technique by technique,
-        sample by sample, so that lightprobe's own techniques give the core's image bit for bit."""
-        techniques = self.strategy.techniques
-        n = len(ctx)
-        out = np.zeros((n, 3))
-        for j, (tech, count) in enumerate(zip(techniques, self.counts, strict=True)):
-            rows_of = np.tile(np.arange(n), count)
-            every = ctx.subset(rows_of) if count > 1 else ctx
-            uu = np.ascontiguousarray(numbers[j].reshape(count * n, -1))
-            wi, pdf = tech.sample(uu, every)
-            if tech.kind == "bsdf":
-                local, world = wi, np.einsum("nk,nkj->nj", wi, every.frame)
-            else:
-                world, local = wi, np.einsum("nkj,nj->nk", every.frame, wi)
-            weight = np.ones(count * n)
-            if len(techniques) == 2:
-                other = techniques[1 - j]
-                p_other = other.pdf(local if other.kind == "bsdf" else world, every)
-                weight = _weight(self.heuristic, count, pdf, self.counts[1 - j], p_other)
-            f = every.material.eval(every.wo, local)
-            cos = np.maximum(local[:, 2], 0.0)
-            live = (pdf > 0) & (cos > 0) & (weight > 0) & np.any(f > 0, axis=1)
-            contribution = np.zeros((count * n, 3))
-            rows = np.nonzero(live)[0]
-            if rows.size:
-                d = world[rows] / np.linalg.norm(world[rows], axis=1, keepdims=True)
-                ng = gnormal[rows_of[rows]]
-                side = np.where(np.einsum("nk,nk->n", d, ng) < 0.0, -1.0, 1.0)
-                origin = every.position[rows] + (side * error[rows_of[rows]])[:, None] * ng
-                visible = ~self.tracer.occluded(origin, d)
-                self.rays += d.shape[0]
-                rows, d = rows[visible], d[visible]
-                scale = weight[rows] * cos[rows] / (count * pdf[rows])
-                contribution[rows] = f[rows] * self.env.eval(d) * scale[:, None]
-            for i in range(count):
-                out += contribution[i * n : (i + 1) * n]
+        """The estimator of the module docstring at the points of ``ctx`` (one material), each technique called as
+        NumPy once for all its samples of the batch, its checks naming the function, the check and the sample;
+        ``numbers[t]`` holds technique t's random numbers, (count, N, dims) (``integrators.batch_estimator.shade``)."""
+
+        def weight(n_f, p_f, n_g, p_g):
+            return _weight(self.heuristic, n_f, p_f, n_g, p_g)
+
+        out, rays = shade(ctx, self.strategy.techniques, self.counts, weight, numbers, gnormal, error,
+                          self.tracer.occluded)  # fmt: skip
+        self.rays += rays
         return out
 
 

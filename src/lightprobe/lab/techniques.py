@@ -25,7 +25,8 @@ map's distributions there, not in every call).
 :func:`load_technique` reads ``FILE.py[:NAME]``; :class:`GuardedTechnique` calls a technique and turns every way it
 can go wrong (an exception, NaN or Inf, a negative pdf, the wrong shape or dtype, non-unit directions, a call that
 takes too long) into one :class:`TechniqueError` naming the function, the check and the first offending sample.
-:class:`BuiltinBSDF` and :class:`BuiltinEnvironment` are lightprobe's own techniques behind the same contract.
+lightprobe's own techniques behind the same contract, and the :class:`Context` a technique sees, are
+:mod:`lightprobe.integrators.batch_estimator`'s (:func:`builtin` guards them like a user's).
 """
 
 from __future__ import annotations
@@ -40,19 +41,17 @@ import threading
 import time
 from collections.abc import Callable
 from contextlib import contextmanager
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from ..integrators.batch_estimator import Context, EnvironmentSampling, MaterialSampling
 from . import jit_techniques as jt
 from .jit_techniques import JitTechnique, jit_functions, technique_data
 from .technique_errors import TechniqueError, _RenderTimeUp, _row, _TooLong, _user_line
 
 __all__ = [
     "KINDS",
-    "BuiltinBSDF",
-    "BuiltinEnvironment",
     "Context",
     "GuardedTechnique",
     "TechniqueError",
@@ -67,54 +66,6 @@ SUPPORTS = ("hemisphere", "sphere")
 UNIT_TOLERANCE = 1e-4
 #: seconds one call may take before it is stopped (per batch; batches hold at most a few hundred thousand samples)
 DEFAULT_TIME_LIMIT = 60.0
-
-
-@dataclass
-class Context:
-    """The shading points of one batch, as a technique sees them (N points).
-
-    Attributes
-    ----------
-    wo : (N, 3)
-        Direction toward the viewer in the local shading frame (normal +z).
-    normal : (N, 3)
-        Shading normal, world space.
-    frame : (N, 3, 3)
-        Rows s, t, n of the shading frame in world space: ``local = frame @ world``, ``world = local @ frame``.
-    position : (N, 3)
-        Hit points, world space.
-    material : lightprobe BSDF
-        The batch's material (one per batch), e.g. :class:`lightprobe.Phong` with ``rho_d``, ``rho_s`` (RGB arrays),
-        ``exponent``; its own ``eval``, ``pdf`` and ``sample`` are there too.
-    environment : lightprobe EnvironmentMap or None
-        The map: ``luminance`` (H, W) of the texels (lat-long, row 0 the zenith), ``radiance`` (H, W, 3),
-        ``to_world`` (3 x 3, the map's rotation), ``eval(dirs)``. :func:`uv_to_direction` and
-        :func:`direction_to_uv` convert between lat-long (u, v) and world directions with its rotation.
-    """
-
-    wo: np.ndarray
-    normal: np.ndarray
-    frame: np.ndarray
-    position: np.ndarray
-    material: object = None
-    environment: object = None
-
-    def __len__(self) -> int:
-        return self.wo.shape[0]
-
-    def subset(self, rows) -> Context:
-        """The context of some of the points (a boolean mask or indices)."""
-        return Context(self.wo[rows], self.normal[rows], self.frame[rows], self.position[rows], self.material,
-                       self.environment)  # fmt: skip
-
-    @classmethod
-    def local(cls, wo, n: int, material=None, environment=None) -> Context:
-        """N copies of one local ``wo`` at the origin with normal +z (world = local): what ``check`` uses."""
-        w = np.asarray(wo, dtype=np.float64).reshape(3)
-        w = w / np.linalg.norm(w)
-        frame = np.broadcast_to(np.eye(3), (n, 3, 3)).copy()
-        return cls(np.tile(w, (n, 1)), np.tile([0.0, 0.0, 1.0], (n, 1)), frame, np.zeros((n, 3)), material,
-                   environment)  # fmt: skip
 
 
 # --- lat-long coordinates (the README's convention, Mitsuba 3's) ----------------------------------------------------
@@ -451,40 +402,10 @@ class GuardedTechnique:
             )
 
 
-# --- lightprobe's own techniques behind the same contract -----------------------------------------------------------
-class BuiltinBSDF:
-    """The material's own importance sampling (its ``sample``/``pdf``, lobes chosen by u[:, 2])."""
-
-    kind = "bsdf"
-    dimensions = 3
-    support = "sphere"
-
-    def sample(self, u, ctx):
-        # the materials take their 2D pair from columns 1 and 2 (bsdfs/base.py); a technique's u has it in 0 and 1
-        return ctx.material.sample(ctx.wo, np.ascontiguousarray(u[:, [2, 0, 1]]))
-
-    def pdf(self, wi, ctx):
-        return ctx.material.pdf(ctx.wo, wi)
-
-
-class BuiltinEnvironment:
-    """The environment map's own importance sampling (its ``sample``/``pdf``)."""
-
-    kind = "light"
-    dimensions = 2
-    support = "sphere"
-
-    def sample(self, u, ctx):
-        return ctx.environment.sample(u)
-
-    def pdf(self, wi, ctx):
-        return ctx.environment.pdf(wi)
-
-
 def builtin(kind: str) -> GuardedTechnique:
     """lightprobe's technique of ``kind`` ("bsdf" or "light"), guarded like a user's: its NumPy methods for batch
     calls, its njit twins (the same kernels) for the laboratory's compiled estimator."""
-    obj = BuiltinBSDF() if kind == "bsdf" else BuiltinEnvironment()
+    obj = MaterialSampling() if kind == "bsdf" else EnvironmentSampling()
     guarded = GuardedTechnique(obj, "lightprobe:" + ("brdf" if kind == "bsdf" else "env"), time_limit=0.0)
     guarded.builtin = True
     guarded.jit = (
