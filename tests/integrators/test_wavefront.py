@@ -194,6 +194,25 @@ def test_two_lights_are_picked_per_camera_sample_unless_one_light_is_all_there_i
     assert not np.array_equal(auto, render(lit, RenderSettings(spp=4, seed=5, lights_per_sample=1)).image)
 
 
+def test_a_render_builds_its_light_table_once_and_its_plan_holds_it(monkeypatch):
+    """resolve() builds the light table and its selector once; the passes read them from the plan (the table was
+    built again by the passes, and the delta lights counted from a third copy of the lights' rows)."""
+    from lightprobe.emitters.punctual import PointLight
+
+    scene = small_scene((6, 4))
+    scene.add(Rectangle([-0.5, 3, -0.5], [1, 0, 0], [0, 0, 1]), None, emission=5.0, name="panel")
+    scene.add_light(PointLight([0, 2, 0], 3.0))
+    built = []
+    table = Scene.light_table
+    monkeypatch.setattr(Scene, "light_table", lambda self: built.append(1) or table(self))
+    plan = wavefront.resolve(scene, RenderSettings(spp=1, light_sampler="power"))
+    assert len(built) == 1 and plan.delta_lights == 1
+    assert plan.lights.kind.shape[0] == 3 and plan.selector.n_lights == 3 and plan.selector.cdf.shape[0] == 3
+    built.clear()
+    result = render(scene, RenderSettings(spp=2, seed=1, light_sampler="power"))
+    assert len(built) == 1 and np.isfinite(result.image).all()
+
+
 @pytest.fixture(scope="module")
 def reference():
     return render(small_scene(), RenderSettings(spp=4096, strategy="mis", seed=12345))

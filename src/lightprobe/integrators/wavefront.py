@@ -36,9 +36,9 @@ from ..bsdfs.lambert import LAMBERT
 from ..bsdfs.phong import PHONG
 from ..emitters.area import STRATEGIES as LIGHT_STRATEGIES
 from ..emitters.envmap import BILINEAR, placeholder_environment
-from ..emitters.kinds import KINDS, light_counts
+from ..emitters.kinds import KINDS, LightArrays, light_counts
 from ..emitters.lights import is_delta, light_arrays
-from ..emitters.selection import build_selector
+from ..emitters.selection import LightSelector, build_selector
 from ..errors import LightprobeWarning, ParameterError
 from ..geometry.embree import PACKET, packets_native
 from ..geometry.raytracer import RayTracer
@@ -99,12 +99,13 @@ def _environment_alone(scene: Scene, settings: RenderSettings) -> bool:
     return lit_by_the_map_alone(scene) and settings.lights_per_sample in (None, 1)
 
 
-def _delta_lights(scene: Scene) -> int:
+def _delta_lights(scene: Scene, table: LightArrays | None = None) -> int:
     """How many of the scene's lights are point or spot lights or delta directional lights, by the light contract's
-    own test on their rows, run as Python (no kernel to load for a count)."""
+    own test on their rows (``table``: the scene's light table, if already built; otherwise the rows of its lights
+    alone), run as Python (no kernel to load for a count)."""
     if not scene.lights:
         return 0
-    table = light_arrays(scene.lights)
+    table = table if table is not None else light_arrays(scene.lights)
     return sum(bool(is_delta.py_func(table, i)) for i in range(table.kind.shape[0]))
 
 
@@ -174,12 +175,14 @@ def plan_for(scene: Scene, settings: RenderSettings) -> pipeline.Plan:
 
 @dataclass(frozen=True)
 class RenderPlan:
-    """What a render works out from its scene and settings, once (:func:`resolve`), for the driver and its
-    statistics to read: the settings checked and with their automatic choices made, how many delta lights there
-    are, which materials sample the compensated map, and the stages (whether the environment map is the only light:
-    ``pipeline.environment_alone``)."""
+    """What a render works out from its scene and settings, once (:func:`resolve`), for the driver, its statistics
+    and the laboratory to read: the settings checked and with their automatic choices made, the light table and its
+    selector, how many delta lights there are, which materials sample the compensated map, and the stages (whether
+    the environment map is the only light: ``pipeline.environment_alone``)."""
 
     settings: RenderSettings  # resolved and checked
+    lights: LightArrays  # the scene's light table (emitters/table.py)
+    selector: LightSelector  # the resolved light sampler over it
     delta_lights: int  # point and spot lights and directional lights of angle 0
     compensated: bool | str  # compensation_for: True, False or DIFFUSE
     pipeline: pipeline.Plan  # what the scene needs, and so the stages
@@ -188,15 +191,24 @@ class RenderPlan:
 def resolve(scene: Scene, settings: RenderSettings | None = None, *, resumed: bool = False) -> RenderPlan:
     """The :class:`RenderPlan` of a render of ``scene`` with ``settings`` (``resumed``: one that continues
     another): the settings checked as given (a user's value named as typed), resolved for the scene, and checked
-    again with the automatic counts in the message."""
+    again with the automatic counts in the message; the light table built once, and its selector."""
     settings = settings or RenderSettings()
     settings.validate()
     alone = _environment_alone(scene, settings)
     _check(scene, settings, alone)
-    delta_lights = _delta_lights(scene)
+    lights = scene.light_table()
+    delta_lights = _delta_lights(scene, lights)
     resolved = _checked(settings, _settings_for(scene, settings, alone, delta_lights, resumed))
+    environment = scene.environment
     return RenderPlan(
         settings=resolved,
+        lights=lights,
+        selector=build_selector(
+            resolved.light_sampler,
+            lights,
+            env_irradiance=environment.irradiance_terms if environment is not None else None,
+            env_irradiance_compensated=environment.compensated_irradiance_terms if environment is not None else None,
+        ),
         delta_lights=delta_lights,
         compensated=compensation_for(scene, resolved),
         pipeline=plan_for(scene, resolved),  # the stages follow the resolved pick count
@@ -260,17 +272,11 @@ class _Pass:
         self.stages = tuple(pipeline.stage_id(name) for name in plan.stages())
         self.names = plan.stages()
         m = settings.shading_samples
-        lights = scene.light_table()
-        environment = scene.environment
+        lights = render_plan.lights
         self.scene = arrays
-        self.env = (environment or placeholder_environment()).kernel
+        self.env = (scene.environment or placeholder_environment()).kernel
         self.lights = lights
-        self.sel = build_selector(
-            settings.light_sampler,
-            lights,
-            env_irradiance=environment.irradiance_terms if environment is not None else None,
-            env_irradiance_compensated=environment.compensated_irradiance_terms if environment is not None else None,
-        )
+        self.sel = render_plan.selector
         self.ray_counts = np.zeros((threads_max, 8), np.int64)  # per worker (a row = a cache line)
         self.launcher = pipeline.Launcher(threads, self.stages)
         compensated = render_plan.compensated

@@ -409,12 +409,12 @@ def render_lab(
     render between passes, or stops a technique's call in flight at the limit (a compiled batch: after it) and drops
     its pass (Numba's compiling not counted); Ctrl-C keeps the passes done; ``progress(stats)`` after each pass (the
     render core's stats keys). See the module docstring."""
-    from ..integrators.wavefront import settings_for
+    from ..integrators.wavefront import resolve
 
     _check_scene(scene)
-    # the laboratory's estimator takes spp samples in every pixel: no adaptive counts
-    settings = settings_for(scene, (settings or RenderSettings()).uniform_unless_adaptive())
-    settings.validate()
+    # the render core's plan: the settings checked and resolved as a render of the scene resolves them (the
+    # laboratory's estimator takes spp samples in every pixel: no adaptive counts)
+    settings = resolve(scene, (settings or RenderSettings()).uniform_unless_adaptive()).settings
     width, height = scene.camera.resolution
     acc = resume.copy() if resume is not None else Accumulator(width * height)
     first = settings.first_sample
