@@ -48,7 +48,7 @@ from .stages.bsdf_rays import (
     non_light_blocks,
     what_bsdf_rays_see,
 )
-from .stages.camera import camera_blocks, camera_lanes, camera_samples, camera_scalar
+from .stages.camera import camera_blocks, camera_lanes, camera_lanes_tree, camera_samples, camera_scalar
 from .stages.finish import finish
 from .stages.light_samples import (
     environment_blocks,
@@ -146,6 +146,7 @@ class Stage:
 
 STAGES: tuple[Stage, ...] = (
     Stage("camera", camera_lanes, camera_blocks, twin="camera_scalar"),
+    Stage("camera_tree", camera_lanes_tree, camera_blocks, twin="camera_scalar"),
     Stage("camera_scalar", camera_scalar, camera_samples),
     Stage("setup", shading_setup, camera_samples),
     Stage("setup_textured", shading_setup_textured, camera_samples),
@@ -313,7 +314,8 @@ class Plan:
 
     def stages(self) -> tuple[str, ...]:
         """The names of this render's stages, in order."""
-        names = ["camera" if self.lanes else "camera_scalar", "setup_textured" if self.textured else "setup"]
+        camera = ("camera_tree" if self.shape_tree else "camera") if self.lanes else "camera_scalar"
+        names = [camera, "setup_textured" if self.textured else "setup"]
         if self.environment_alone:
             if self.resampled:
                 names.append("environment_samples_resampled")

@@ -16,6 +16,7 @@ from lightprobe.geometry.camera import Camera
 from lightprobe.geometry.embree import new_scratch
 from lightprobe.geometry.intersect import MESH, MISS, RECT, SPHERE
 from lightprobe.geometry.raytracer import RayTracer
+from lightprobe.geometry.shape_bvh import SHAPES_FOR_BVH
 from lightprobe.geometry.shapes import Rectangle, Sphere
 from lightprobe.integrators import wavefront
 from lightprobe.integrators.wavefront import RenderSettings, render
@@ -86,6 +87,24 @@ def test_lanes_find_every_nearest_hit_the_scalar_pass_finds(meshes, spheres, ins
     assert np.count_nonzero(kinds == RECT) > 2000 and np.count_nonzero(kinds == MISS) > 1000
     if spheres:
         assert np.count_nonzero(kinds == SPHERE) > 2000 and set(lanes["index"][kinds == SPHERE].tolist()) == {0, 1, 2}
+
+
+@pytest.mark.parametrize("sampler", ["sobol", "independent"])
+def test_the_tree_stage_finds_every_nearest_hit_the_scalar_pass_finds(sampler):
+    """A scene of more than SHAPES_FOR_BVH spheres and rectangles runs ``camera_tree`` (its rays walk the shapes'
+    hierarchy): the same directions and hits as the scalar stage, ray for ray, and the plan picks it."""
+    scene = _scene(resolution=(61, 47))
+    for i in range(SHAPES_FOR_BVH):
+        scene.add(Sphere([-2.0 + 0.25 * i, 0.15 + 0.05 * (i % 3), 1.6], 0.12), "m")
+    assert scene.compile().tree_skip.shape[0] > 0
+    cam = scene.camera.kernel_array()
+    scalar = _hits("camera_scalar", scene, cam, sampler=sampler)
+    tree = _hits("camera_tree", scene, cam, sampler=sampler)
+    for name in ("dirs", "t", "kind", "index"):
+        assert np.array_equal(tree[name], scalar[name]), name
+    assert np.count_nonzero(tree["kind"] == SPHERE) > 500 and len(set(tree["index"][tree["kind"] == SPHERE])) > 10
+    plan = wavefront.plan_for(scene, RenderSettings(spp=1))
+    assert plan.shape_tree and plan.stages()[0] == ("camera_tree" if plan.lanes else "camera_scalar")
 
 
 def test_lanes_and_the_scalar_pass_leave_the_same_mesh_hits():

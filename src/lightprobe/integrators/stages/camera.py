@@ -21,7 +21,7 @@ from ...simd import LANES
 from .ray_lanes import CROSSED, HIT_INDEX, HIT_KIND, HIT_T, put_ray, shape_tests
 from .sobol_lanes import camera_numbers_block
 
-__all__ = ["camera_blocks", "camera_lanes", "camera_samples", "camera_scalar"]
+__all__ = ["camera_blocks", "camera_lanes", "camera_lanes_tree", "camera_samples", "camera_scalar"]
 
 
 @jit
@@ -74,39 +74,56 @@ def _nearest_hit_into(s, c, cams, worker, k):
     _mesh_hit_into(s, c, cams, worker, k, may_hit_mesh(s, ox, oy, oz, dx, dy, dz, t))
 
 
+@jit_inline
+def _block_rays(c, cams, start, stop):
+    """The directions of camera samples start .. stop - 1, into dirs."""
+    dirs = cams.dirs
+    if c.sampler == SOBOL:
+        # the rays' positions in their pixels 8 at a time (sampling/sobol_lanes.py), into dirs until the directions
+        # replace them: the same bits as uniform_2d
+        camera_numbers_block(dirs, c.seed, c.pixels, c.spp_pass, c.sample_start, start)
+        for k in range(start, stop):
+            dirs[k, 0], dirs[k, 1], dirs[k, 2] = camera_ray(c.cam, c.pixels[k // c.spp_pass], dirs[k, 0], dirs[k, 1])
+    else:
+        for k in range(start, stop):
+            _ray_into(c, cams, k)
+
+
 @jit_body
 def camera_lanes(s, c, cams, worker, lo, hi):
-    """Blocks lo .. hi - 1 of 8 camera samples."""
+    """Blocks lo .. hi - 1 of 8 camera samples, the analytic shapes tested 8 rays at a time (ray_lanes.py): a scene
+    without a shape hierarchy."""
     n = cams.t.shape[0]
     dirs = cams.dirs
     for block in range(lo, hi):
         start = block * LANES
         stop = min(start + LANES, n)
-        if c.sampler == SOBOL:
-            # the rays' positions in their pixels 8 at a time (sampling/sobol_lanes.py), into dirs until the
-            # directions replace them: the same bits as uniform_2d
-            camera_numbers_block(dirs, c.seed, c.pixels, c.spp_pass, c.sample_start, start)
-            for k in range(start, stop):
-                dirs[k, 0], dirs[k, 1], dirs[k, 2] = camera_ray(
-                    c.cam, c.pixels[k // c.spp_pass], dirs[k, 0], dirs[k, 1]
-                )
-        else:
-            for k in range(start, stop):
-                _ray_into(c, cams, k)
-        if s.tree_skip.shape[0] == 0:  # the shape tests 8 rays at a time (ray_lanes.py)
-            rays = c.lane_rays[worker]
-            for k in range(start, stop):
-                put_ray(rays, k - start, c.cam[0], c.cam[1], c.cam[2], dirs[k, 0], dirs[k, 1], dirs[k, 2], np.inf)
-            shape_tests(rays, stop - start, s.spheres, s.rects, s.mesh_bounds, s.mesh_spheres)
-            for k in range(start, stop):
-                lane = k - start
-                cams.t[k] = rays[HIT_T, lane]
-                cams.kind[k] = np.int64(rays[HIT_KIND, lane])
-                cams.index[k] = np.int64(rays[HIT_INDEX, lane])
-                _mesh_hit_into(s, c, cams, worker, k, rays[CROSSED, lane] != 0.0)
-        else:  # many shapes: each ray walks their hierarchy (geometry/shape_bvh.py)
-            for k in range(start, stop):
-                _nearest_hit_into(s, c, cams, worker, k)
+        _block_rays(c, cams, start, stop)
+        rays = c.lane_rays[worker]
+        for k in range(start, stop):
+            put_ray(rays, k - start, c.cam[0], c.cam[1], c.cam[2], dirs[k, 0], dirs[k, 1], dirs[k, 2], np.inf)
+        shape_tests(rays, stop - start, s.spheres, s.rects, s.mesh_bounds, s.mesh_spheres)
+        for k in range(start, stop):
+            lane = k - start
+            cams.t[k] = rays[HIT_T, lane]
+            cams.kind[k] = np.int64(rays[HIT_KIND, lane])
+            cams.index[k] = np.int64(rays[HIT_INDEX, lane])
+            _mesh_hit_into(s, c, cams, worker, k, rays[CROSSED, lane] != 0.0)
+
+
+@jit_body
+def camera_lanes_tree(s, c, cams, worker, lo, hi):
+    """Blocks lo .. hi - 1 of 8 camera samples, their directions as :func:`camera_lanes` makes them, each ray then
+    walking the shapes' hierarchy (geometry/shape_bvh.py: a scene of many spheres and rectangles).  A stage of its
+    own so that the other scenes' camera stage carries no hierarchy walk: it was 3.6 s of the demo's 43 s of
+    compiling (decisions.md 112)."""
+    n = cams.t.shape[0]
+    for block in range(lo, hi):
+        start = block * LANES
+        stop = min(start + LANES, n)
+        _block_rays(c, cams, start, stop)
+        for k in range(start, stop):
+            _nearest_hit_into(s, c, cams, worker, k)
 
 
 @jit_body
