@@ -186,11 +186,13 @@ def _run_group(group, position, s, env, lights, sel, c, cams, slots, acc, counte
     """The claim loop of :func:`run_stage` for one stage group (the overload below)."""
 
 
-@overload(_run_group, prefer_literal=True, inline="always")
+@overload(_run_group, prefer_literal=True)
 def _run_group_overload(group, position, s, env, lights, sel, c, cams, slots, acc, counter, worker):
     """The loop for the group whose index ``group`` is a compile-time constant: its own stages only, each called with
     the records it declares (:func:`group_loop_source`), so only they are typed and compiled (indexing a global
-    table of every group made Numba lower all of it, 4.8 s)."""
+    table of every group made Numba lower all of it, 4.8 s).  Called, not inlined: Numba compiles an overload's
+    implementation whole to type it, so an inlined loop was compiled twice, the second time inside
+    :func:`run_stage` (a plan's loop 7.3 -> 5.7 s; the call is one per stage and worker, decisions.md 113)."""
     if not isinstance(group, types.IntegerLiteral):
         raise TypingError("run_stage's group must be a compile-time constant")
     return _group_loop(group.literal_value)

@@ -1,4 +1,4 @@
-"""Render a scene with user techniques: the laboratory's estimator, in NumPy, one batch of shading points at a time.
+"""Render a scene with user techniques: the laboratory's estimator, one batch of shading points at a time.
 
 A :class:`LabStrategy` is one technique alone (``n_bsdf + n_env`` directions of it per camera sample, as the
 renderer's single-technique strategies) or two under MIS, a BSDF technique and a light technique (``n_bsdf`` and
@@ -8,10 +8,12 @@ material and L the environment (Krivanek eqs. 2 and 16)::
 
     value = sum over techniques t, samples i of  w_t(wi) f(wo, wi) cos(theta_i) L(wi) V(wi) / (n_t p_t(wi))
 
-The scene must be lit by its environment map alone (the exercise's setting). Camera rays, hit points and shading
-frames come from the render core's own routines (``store_shading_frame``), shadow rays from its ray tracer
-(``RayTracer.occluded``, origins offset as the core does), random numbers from its samplers: a pure function of
-(seed, pixel, sample index, dimension). Each pass is one sample of every pixel, added in sample order to the
+What follows the techniques' directions (f, the factor w cos / (n p), the shadow rays, the sum in the core's order)
+is :mod:`lightprobe.integrators.batch_estimator`'s, the one place it is written beside the stages (the shading-point
+tables use it too). The scene must be lit by its environment map alone (the exercise's setting). Camera rays, hit
+points and shading frames come from the render core's own routines (``store_shading_frame``), shadow rays from its
+ray tracer (``RayTracer.occluded``, origins offset as the core does), random numbers from its samplers: a pure
+function of (seed, pixel, sample index, dimension). Each pass is one sample of every pixel, added in sample order to the
 core's :class:`~lightprobe.integrators.accumulation.Accumulator`, so the image is the same bit for bit whether it is
 rendered at once or continued (``resume``), and ``compare`` can treat it like any render. A technique that fails
 mid-render raises a :class:`LabRenderError` that carries what was accumulated before the failing pass.
