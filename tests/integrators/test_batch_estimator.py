@@ -147,3 +147,11 @@ def test_the_chosen_lobe_estimator_is_refused_for_brdf_sampling(point):
     env = point[0]
     with pytest.raises(ParameterError, match="chosen_lobe"):
         estimate(env, Phong(0.4, 0.5, 25, estimator="chosen_lobe"), strategy="brdf")
+
+
+def test_a_visibility_of_the_wrong_shape_is_one_clear_error(point):
+    env, bsdf = point[0], point[1]
+    with pytest.raises(ParameterError, match=r"visibility\(dirs\) must return one value per direction"):
+        estimate(env, bsdf, strategy="cosine", n=100, visibility=lambda d: np.ones((len(d), 3)))
+    half = estimate(env, bsdf, strategy="cosine", n=4000, visibility=lambda d: (d[:, 0] < 0)[:, None])
+    assert np.all(half.mean < estimate(env, bsdf, strategy="cosine", n=4000).mean)

@@ -208,6 +208,7 @@ def add_samples(out, ctx: Context, count: int, local, world, pdf, weight, gnorma
     ``weight``) to ``out`` (N, 3), the estimator of the module docstring, with visibility from ``occluded``; returns
     the shadow rays it asked about."""
     m = pdf.shape[0]
+    count = int(count)  # one compiled version of the kernels whatever type of integer the caller has
     material = ctx.material
     f, scale, d, origin = np.empty((m, 3)), np.zeros(m), np.zeros((m, 3)), np.zeros((m, 3))
     live = np.zeros(m, dtype=np.bool_)

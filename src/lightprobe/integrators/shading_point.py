@@ -175,7 +175,12 @@ def estimate(
     def occluded(origins, dirs):
         if visibility is None:
             return np.zeros(dirs.shape[0], dtype=np.bool_)
-        return np.asarray(visibility(dirs)).reshape(-1) == 0
+        seen = np.asarray(visibility(dirs))
+        if seen.shape not in ((dirs.shape[0],), (dirs.shape[0], 1)):
+            raise ParameterError(
+                f"visibility(dirs) must return one value per direction ({dirs.shape[0]},), got shape {seen.shape}"
+            )
+        return seen.reshape(-1) == 0
 
     def weight(n_f, p_f, n_g, p_g):
         return _mis_weight(heuristic, n_f, p_f, n_g, p_g)
