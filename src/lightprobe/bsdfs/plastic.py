@@ -32,7 +32,7 @@ import math
 
 import numpy as np
 
-from .._numba import jit, jit_inline, jit_parallel, prange
+from .._numba import jit, jit_alloc, jit_inline
 from ..errors import ParameterError
 from ..sampling.distributions import choose_rescaled
 from ..sampling.kernels import INV_PI, cosine_hemisphere_pdf
@@ -107,7 +107,7 @@ def plastic_sample(p, wo, u0, u1, u2):
     return wi, pdf, (f[0] * k, f[1] * k, f[2] * k)
 
 
-@jit_parallel
+@jit_alloc
 def _interface_albedo(alpha, eta, mus, nodes, weights, transmit):
     """Directional reflectance (or transmittance) of a rough GGX dielectric interface for cos(theta) = mus.
 
@@ -117,7 +117,7 @@ def _interface_albedo(alpha, eta, mus, nodes, weights, transmit):
     """
     out = np.empty(mus.shape[0])
     n = nodes.shape[0]
-    for k in prange(mus.shape[0]):
+    for k in range(mus.shape[0]):
         mu = max(mus[k], 1e-6)
         ox, oz = math.sqrt(max(0.0, 1.0 - mu * mu)), mu
         acc = 0.0
