@@ -41,6 +41,7 @@ CASES = [
     ("area", {"strategy": "mis", "light_strategy": "area", "heuristic": "balance", "spp": 1024}),
     ("many", {"strategy": "mis", "light_sampler": "bvh", "spp": 1024}),
     ("many", {"strategy": "mis", "light_sampler": "power", "spp": 1024}),
+    ("many", {"strategy": "mis", "light_sampler": "learned", "spp": 1024}),
     ("many", {"strategy": "env", "light_sampler": "uniform", "spp": 1024}),
     ("many-as-mesh", {"strategy": "mis", "light_sampler": "bvh", "spp": 1024}),
     ("sunsky", {"strategy": "mis"}),

@@ -98,7 +98,7 @@ __all__ = [
     "selector_pmf",
 ]
 
-SELECTORS = {"uniform": 0, "power": 1, "bvh": 2}
+SELECTORS = {"uniform": 0, "power": 1, "bvh": 2, "learned": 2}  # learned: a BVH, and what the render learns
 UNIFORM, POWER, BVH = 0, 1, 2
 MAX_DEPTH = 62  # the binary tree's depth: its eight-wide collapse's trails are int64 (TRAIL_BITS per level)
 TRAIL_BITS = PATH_BITS  # a light's trail holds the child (0 .. WIDTH - 1) taken at each level of the eight-wide tree
@@ -126,6 +126,16 @@ class LightSelector(NamedTuple):
     wide_bounds: np.ndarray  # (M, 12 * 8) each node's children's bounds: column f * 8 + c is field f of child c
     wide_child: np.ndarray  # (M, 8) child c: a node (>= 0), a light l (-2 - l), or none (-1)
     light_trail: np.ndarray  # (n_bounded,) each light's path from the root: bits 3d .. 3d + 2 the child at depth d
+    # learned selection (``learned``; emitters/selection_learning.py): empty arrays and ``cut_levels`` 0 until the
+    # render has learned.  Above the cut (``cut_levels`` levels of the tree) a learned cell weighs each child's
+    # importance by a learned ratio; a cell is a leaf of a k-d tree over the shading points
+    cut_levels: int
+    learn_offset: np.ndarray  # (M,) int64 a node above the cut: its children's first entry in a cell's row; else -1
+    cell_axis: np.ndarray  # (tree nodes,) int64 the k-d tree's split axis, -1 at a leaf
+    cell_split: np.ndarray  # (tree nodes,) float64 below it: child 0, else child 1
+    cell_next: np.ndarray  # (tree nodes, 2) int64 the children; at a leaf (its cell, 0), cell -1: none learned
+    cell_ratio: np.ndarray  # (cells, entries) float64 each child's learned ratio of contribution to importance
+    defensive: float  # alpha: the share of the BVH's own distribution in a learned cell's mixture
 
 
 # --- light bounds (pbrt-v4 LightBounds, DirectionCone) ----------------------------------------------------------------
@@ -640,6 +650,9 @@ def select_light(sel, px, py, pz, nx, ny, nz, u, compensated):
     # BVH: down the eight-wide tree, each child in proportion to its weight
     if _no_bounds(sel):
         return -1, 0.0, u
+    cell = cell_of(sel, px, py, pz)
+    if cell >= 0:
+        return _select_learned(sel, cell, pmf, px, py, pz, nx, ny, nz, u)
     node = 0
     while True:
         w, total = _child_weights(sel.wide_bounds, node, px, py, pz, nx, ny, nz)
@@ -660,6 +673,101 @@ def select_light(sel, px, py, pz, nx, ny, nz, u, compensated):
         if child < 0:
             return -2 - child, pmf, u
         node = child
+
+
+# --- learned selection (emitters/selection_learning.py learns the ratios) --------------------------------------------
+@jit_inline
+def cell_of(sel, px, py, pz):
+    """The learned cell of a receiver at p: the leaf of the k-d tree over the shading points it falls in; -1 where
+    nothing was learned (or the selector has not learned)."""
+    if sel.cell_axis.shape[0] == 0:
+        return -1
+    node = 0
+    axis = sel.cell_axis[0]
+    while axis >= 0:
+        x = px if axis == 0 else (py if axis == 1 else pz)
+        node = sel.cell_next[node, 0 if x < sel.cell_split[node] else 1]
+        axis = sel.cell_axis[node]
+    return sel.cell_next[node, 0]
+
+
+@jit_inline
+def _learned_scale(sel, row, node, w):
+    """(1 / sum of the children's importances x their learned ratios, the node's first entry in a cell's row);
+    0 where no child has a ratio above 0 (the node then keeps the BVH's shares)."""
+    base = sel.learn_offset[node]
+    t = 0.0
+    for c in range(WIDTH):
+        t += w[c] * row[base + c]
+    return (1.0 / t if t > 0.0 else 0.0), base
+
+
+@jit_inline
+def _learned_share(alpha, row, base, w, c, scale, scale_r):
+    """Child c's probability at a learned node: alpha x the BVH's share + (1 - alpha) x its share of importance x
+    learned ratio (the BVH's alone where no ratio is above 0)."""
+    if scale_r == 0.0:
+        return w[c] * scale
+    return alpha * (w[c] * scale) + (1.0 - alpha) * (w[c] * row[base + c] * scale_r)
+
+
+@jit_inline
+def _select_learned(sel, cell, pmf, px, py, pz, nx, ny, nz, u):
+    """select_light's descent in a learned cell (``pmf``: the probability of a bounded light so far): above the cut
+    each child by :func:`_learned_share`, below it as the BVH.  :func:`_learned_pmf` repeats the operations."""
+    row = sel.cell_ratio[cell]
+    alpha = sel.defensive
+    node = 0
+    depth = 0
+    while True:
+        w, total = _child_weights(sel.wide_bounds, node, px, py, pz, nx, ny, nz)
+        scale = 1.0 / total
+        scale_r, base = 0.0, 0
+        if depth < sel.cut_levels:
+            scale_r, base = _learned_scale(sel, row, node, w)
+        chosen, start, width, lo = -1, 0.0, 0.0, 0.0
+        for c in range(WIDTH):
+            share = _learned_share(alpha, row, base, w, c, scale, scale_r)
+            if share > 0.0:
+                chosen, start, width = c, lo, share
+                if u < lo + share:
+                    break
+            lo += share
+        if chosen < 0:
+            return -1, 0.0, u
+        pmf *= width
+        u = _rescaled(u, start, width)
+        child = sel.wide_child[node, chosen]
+        if child < 0:
+            return -2 - child, pmf, u
+        node = child
+        depth += 1
+
+
+@jit_inline
+def _learned_pmf(sel, cell, pmf, px, py, pz, nx, ny, nz, light):
+    """The probability that :func:`_select_learned` picks bounded ``light`` (``pmf``: that of a bounded pick)."""
+    row = sel.cell_ratio[cell]
+    alpha = sel.defensive
+    trail = sel.light_trail[light]
+    node = 0
+    depth = 0
+    while True:
+        slot = trail & (WIDTH - 1)
+        trail >>= TRAIL_BITS
+        w, total = _child_weights(sel.wide_bounds, node, px, py, pz, nx, ny, nz)
+        scale = 1.0 / total
+        scale_r, base = 0.0, 0
+        if depth < sel.cut_levels:
+            scale_r, base = _learned_scale(sel, row, node, w)
+        pmf *= _learned_share(alpha, row, base, w, slot, scale, scale_r)
+        child = sel.wide_child[node, slot]
+        if child == -1:
+            return 0.0
+        if child < 0:
+            return pmf if -2 - child == light else 0.0
+        node = child
+        depth += 1
 
 
 @jit_inline
@@ -684,6 +792,9 @@ def selector_pmf(sel, px, py, pz, nx, ny, nz, light, compensated):
         return pmf * (sel.cdf[light + 1] - sel.cdf[light])
     if _no_bounds(sel):
         return 0.0
+    cell = cell_of(sel, px, py, pz)
+    if cell >= 0:
+        return _learned_pmf(sel, cell, pmf, px, py, pz, nx, ny, nz, light)
     trail = sel.light_trail[light]
     node = 0
     while True:
@@ -763,7 +874,7 @@ def build_selector(
     cdf = np.zeros(0)
     if mode == "uniform":
         nodes = _no_nodes()
-    elif mode == "bvh":
+    elif mode in ("bvh", "learned"):
         nodes, m = _build_bvh(bounded)
         if m > 0:
             wide_bounds, wide_child, trail, deepest = _collapse(
@@ -791,7 +902,20 @@ def build_selector(
         wide_bounds,
         wide_child,
         trail,
+        *NOT_LEARNED,
     )
+
+
+#: the learned fields of a selector that has learned nothing (LightSelector's last seven fields)
+NOT_LEARNED = (
+    0,
+    np.zeros(0, np.int64),
+    np.zeros(0, np.int64),
+    np.zeros(0),
+    np.zeros((0, 2), np.int64),
+    np.zeros((0, 1)),
+    1.0,
+)
 
 
 def _bounds_rows(nodes: dict) -> np.ndarray:

@@ -106,6 +106,9 @@ class Slots(NamedTuple):
     hit_b1: np.ndarray
     hit_b2: np.ndarray
     hit_mesh: np.ndarray  # (nm,) bool: a mesh may be nearer than the analytic hit
+    # (nm,) or empty (a render that learns its light selection: emitters/selection_learning.py): a light slot's
+    # luminance of f L cos / its density, -1 where the slot picked no light
+    learn: np.ndarray
 
 
 class AccumulatorArrays(NamedTuple):
@@ -139,9 +142,10 @@ def camera_buffers(n: int, *, textured: bool = False) -> CameraSamples:
     )
 
 
-def slot_buffers(nm: int, *, picks: bool, bounded_shadows: bool, bsdf_hits: bool) -> Slots:
+def slot_buffers(nm: int, *, picks: bool, bounded_shadows: bool, bsdf_hits: bool, learning: bool = False) -> Slots:
     """Buffers for ``nm`` slots; ``picks``: light slots pick a light (``light``); ``bounded_shadows``: shadow rays
-    may end at a light (``seg``); ``bsdf_hits``: BSDF rays look for their nearest hit (the hit fields)."""
+    may end at a light (``seg``); ``bsdf_hits``: BSDF rays look for their nearest hit (the hit fields);
+    ``learning``: the render learns its light selection (``learn``)."""
     shadow = nm if bounded_shadows else 0
     picked = nm if picks else 0
     hits = nm if bsdf_hits else 0
@@ -168,6 +172,7 @@ def slot_buffers(nm: int, *, picks: bool, bounded_shadows: bool, bsdf_hits: bool
         fresh_array(hits),
         fresh_array(hits),
         fresh_array(hits, np.bool_),
+        fresh_array(nm if learning else 0),
     )
 
 

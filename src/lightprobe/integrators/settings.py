@@ -171,7 +171,8 @@ class RenderSettings:
     )
     light_sampler: str = option(
         "bvh",
-        "How a light is picked: uniform, power or bvh",
+        "How a light is picked: uniform, power, bvh, or learned (a BVH that learns from the pilot which lights "
+        "reach the shading points, shadows included)",
         "string",
         choices=lambda: SELECTORS,
         key="light_sampler",

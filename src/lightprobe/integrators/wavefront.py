@@ -47,7 +47,7 @@ from ..geometry.shapes import Rectangle, Sphere
 from ..sampling.rng import SAMPLERS
 from ..scene import Scene
 from ..simd import LANES
-from . import adaptive, outlines, pipeline, precompile
+from . import adaptive, light_learning, outlines, pipeline, precompile
 from .accumulation import Accumulator, RenderResult, result_from
 from .pass_state import PassConstants, camera_buffers, slot_buffers, views
 from .schedule import pass_pixels
@@ -311,6 +311,15 @@ class _Pass:
         self.largest = largest_pass
         self.cams = None
         self.slots = None
+        self.learning = None  # light_learning.Learning of a render that learns its light selection
+        if light_learning.learns(
+            self.sel, settings.strategy, settings.light_sampler, settings.first_sample, settings.spp
+        ) and (settings.adaptive or settings.time_limit is None):
+            n_pixels = int(np.prod(scene.camera.resolution))
+            self.learning = light_learning.Learning(
+                self.sel, n_pixels, adaptive.pilot_spp(settings.spp), self.constants.strategy, settings.n_bsdf, m
+            )
+            self.sel = self.learning.selector
 
     def make_buffers(self) -> None:
         """Every pass uses leading views of these: memory bounded by one pass.  (Mapped without huge pages, and
@@ -322,12 +331,15 @@ class _Pass:
             picks=not self.plan.environment_alone,
             bounded_shadows=self.plan.bounded_lights,
             bsdf_hits=self.plan.emissive_surfaces,
+            learning=self.learning is not None,
         )
 
     def records(self, acc: Accumulator, pixels: np.ndarray, spp_now: int, sample_start: int) -> tuple:
         """The stages' records for a pass over ``pixels`` x ``spp_now`` samples into ``acc``."""
         n = pixels.size * spp_now
         cams, slots = views(self.cams, n), views(self.slots, n * self.m)
+        if self.learning is not None and not self.learning.recording:
+            slots = slots._replace(learn=slots.learn[:0])  # learned: no more records
         c = self.constants._replace(pixels=pixels, spp_pass=spp_now, sample_start=sample_start)
         return self.scene, self.env, self.lights, self.sel, c, cams, slots, acc.arrays()
 
@@ -341,7 +353,14 @@ class _Pass:
             start = time.perf_counter()
             self.launcher.run(stage, records)
             PROFILE[name] = PROFILE.get(name, 0.0) + time.perf_counter() - start
+        if self.learning is not None:
+            self.learning.record(records)
         return int(np.count_nonzero(records[6].flags))  # the slots'
+
+    def learn(self) -> None:
+        """After the pilot: the light selection learned from its records, for every later pass."""
+        if self.learning is not None and self.learning.recording:
+            self.sel = self.learning.learn()
 
 
 def render(
@@ -451,12 +470,19 @@ def _render_planned(scene, render_plan, helpers, progress, tracer, resume, threa
         over the image (of the pilot, if adaptive), then the adaptive rounds (integrators/adaptive.py).  The
         generator runs as the passes are made, so it sees the time spent and the pilot's statistics."""
         if not settings.adaptive:
+            if work.learning is not None:  # learned light selection: from the first samples, for the rest
+                pilot = adaptive.pilot_spp(settings.spp)
+                yield from uniform_passes(0, pilot)
+                work.learn()
+                yield from uniform_passes(pilot, settings.spp - pilot)
+                return
             rounds = uniform_passes if settings.time_limit is None else timed_uniform_passes
             yield from rounds(settings.first_sample, settings.spp)
             return
         pilot, replan = adaptive.pilot_spp(settings.spp), None
         if settings.time_limit is None:
             yield from uniform_passes(0, pilot)
+            work.learn()
             counts = adaptive.sample_counts(acc.mean, acc.m2, acc.count, width, height, settings.spp)
         else:  # a time budget: the pilot doubles while it fits in a share of it, then the rest buys the counts
             pilot, round_start = 1, _clock()
@@ -466,6 +492,7 @@ def _render_planned(scene, render_plan, helpers, progress, tracer, resume, threa
                 for sample_start in range(pilot, 2 * pilot, spp_pass):  # samples pilot .. 2 pilot - 1
                     yield from over_image(sample_start, min(spp_pass, 2 * pilot - sample_start))
                 pilot *= 2
+            work.learn()
             # time per sample per pixel from the pilot's last round, the one in full-sized passes
             per_spp = (_clock() - round_start) / max(1, pilot // 2)
             mean_spp = adaptive.budget_mean(pilot, settings.spp, _clock() - start, settings.time_limit, per_spp)
@@ -529,6 +556,8 @@ def _render_planned(scene, render_plan, helpers, progress, tracer, resume, threa
         except KeyboardInterrupt:
             stats["interrupted"] = True
     stats["seconds"] = _clock() - start
+    if work.learning is not None:
+        stats.update(work.learning.stats())
     stats["embree_rays"] = int(work.ray_counts.sum() - counted_before)  # every Embree call of a render is in a stage
     if own_tracer:
         tracer.close()

@@ -73,6 +73,10 @@ def finish(s, lights, c, cams, slots, lo, hi):
                 else:
                     wi = (slots.wloc[r, 0], slots.wloc[r, 1], slots.wloc[r, 2])
                 f = bsdf_eval(mk, mp, wo, wi)
+                if st == SLOT_LIGHT and slots.learn.shape[0] > 0:
+                    # for the selection's learning: lum(f L cos) / the light's density, its pick's taken out
+                    lum = 0.212671 * f[0] * lr + 0.715160 * f[1] * lg + 0.072169 * f[2] * lb
+                    slots.learn[r] = max(0.0, lum) * max(0.0, wi[2]) / slots.tpdf[r] * slots.learn[r]
                 if f[0] == 0.0 and f[1] == 0.0 and f[2] == 0.0:
                     continue
                 if st == SLOT_LIGHT:

@@ -59,7 +59,10 @@ def light_samples(env, lights, sel, c, cams, slots, lo, hi):
     m = c.m
     if slots.light.shape[0] == 0:  # never without its record of the picks (pass_state.py)
         return
+    learning = slots.learn.shape[0] > 0
     for r in range(lo, hi):
+        if learning:
+            slots.learn[r] = -1.0  # not a light sample, unless a light is picked below
         if slots.state[r] != SLOT_LIGHT:
             continue
         k = r // m
@@ -76,6 +79,9 @@ def light_samples(env, lights, sel, c, cams, slots, lo, hi):
         if light < 0 or pmf <= 0.0:
             slots.state[r] = SLOT_NONE
             continue
+        if learning:  # a sample of this light, whatever it gives (finish.py: its value)
+            slots.learn[r] = pmf
+            slots.light[r] = light
         if c.n_per_light == 1:
             u0 = u_rest
         ls = light_sample_of(lights, env, light, c.light_strategy, compensated, px, py, pz, nx, ny, nz, u0, u1)

@@ -1,0 +1,288 @@
+"""Light selection that learns what reaches the receivers, shadows included (issue 59; decision 114).
+
+Every selector picks a light by what it would give if nothing were in the way (``selection.py``: the light BVH's
+importance of a node is pi x a bound on its lights' unoccluded irradiance).  In a building whose lights are mostly
+in other rooms most of those picks end in a blocked shadow ray.  Vevoda, Kondapaneni and Krivanek 2018 ("Bayesian
+online regression for adaptive direct illumination sampling") learn, per region of shading points, what each group
+of lights actually gives, visibility included, from the render's own shadow rays.  This is a simple form of it that
+keeps what the BVH knows about each point (distance, orientation) and learns only what it cannot know:
+
+* **Cells.** A k-d tree over the shading points of the pilot's light samples (median splits, leaves of at most
+  ``LEAF_RECORDS`` samples): cells follow where the visible points are.
+* **Ratios.** For every child of the light tree's nodes in the top ``cut_levels`` levels (at most ``MAX_ENTRIES``
+  children), each cell learns rho = (what the child's lights gave) / (the child's importance): sum over the samples
+  that went through the child of v = lum(f L cos V) / (p_light(x) P(light | child)), an unbiased estimate of the
+  child's contribution at that point (0 where the shadow ray was blocked), over the sum of the child's importance
+  at the same points.  Where the BVH's bound is what arrives, rho is about the BSDF's albedo / pi; behind a wall,
+  0.  A child with few samples is pulled toward its parent's ratio (rho = (n rho_hat + TAU rho_parent) / (n + TAU)),
+  one never sampled takes it.
+* **The descent.** In a learned cell each child above the cut is chosen with probability
+  ``alpha w_c / sum w + (1 - alpha) w_c rho_c / sum w rho`` (``selection._learned_share``), w the BVH's importances
+  at the receiver; below the cut, as the BVH.  The probability of every light is the product along its path
+  (``selection._learned_pmf``), exact for MIS.  Every child the BVH can pick keeps at least alpha (``DEFENSIVE``) of
+  its BVH share, so the render stays unbiased whatever was learned, and a level's variance is at most 1 / alpha
+  times the BVH's.
+
+Determinism: the pilot's records sit at positions given by (pixel, sample index, light slot), whatever pass wrote
+them (``integrators/light_learning.py``), the tree and the sums read them in that order, and the learned selector
+is used from the first sample after the pilot: the image is a pure function of (seed, settings), for any pass size
+or thread count.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .._numba import jit_alloc, jit_parallel, prange
+from .selection import TRAIL_BITS, WIDTH, LightSelector, _child_weights
+
+__all__ = ["DEFENSIVE", "LEAF_RECORDS", "MAX_ENTRIES", "MAX_RECORDS", "TAU", "Records", "learned", "with_cut"]
+
+MAX_ENTRIES = 1024  # learned children per cell at most: the cut is the deepest level that keeps within it
+LEAF_RECORDS = 2048  # light samples per cell at most
+MAX_RECORDS = 1 << 19  # the pilot's light samples kept for learning (32 bytes each)
+TREE_POINTS = 1 << 18  # the cells' tree is built from at most about this many of them
+DEFENSIVE = 0.2  # alpha, the BVH's share at a learned node
+TAU = 4.0  # samples' worth of the parent's ratio in a child's
+
+
+def with_cut(sel: LightSelector, max_entries: int = MAX_ENTRIES) -> LightSelector:
+    """``sel`` (a light BVH) with its cut: the deepest number of levels whose nodes have at most ``max_entries``
+    children in all, and each such node's first entry in a cell's row.  Picks and pmfs are unchanged (no cell is
+    learned yet)."""
+    child = sel.wide_child
+    if child.shape[0] == 0:
+        raise ValueError("learned selection needs a light BVH")
+    depth = np.full(child.shape[0], -1, np.int64)
+    depth[0] = 0
+    for node in range(child.shape[0]):  # children have larger indices than their parent (geometry/wide_tree.py)
+        kids = child[node][child[node] >= 0]
+        depth[kids] = depth[node] + 1
+    cut = 1
+    while np.count_nonzero(depth < cut + 1) * WIDTH <= max_entries and np.any(depth == cut):
+        cut += 1
+    above = np.flatnonzero(depth < cut)
+    offset = np.full(child.shape[0], -1, np.int64)
+    offset[above] = np.arange(above.size) * WIDTH
+    return sel._replace(cut_levels=cut, learn_offset=offset)
+
+
+class Records:
+    """The pilot's light samples kept for learning, each at a position set by (pixel, sample index, light slot):
+    ``samples`` first samples of every ``stride``-th pixel, ``slots`` light slots each.  ``light`` -1: no sample
+    there (a camera ray that met no surface, a slot that picked no bounded light, a sample not rendered)."""
+
+    def __init__(self, pixels: int, pilot: int, slots: int, limit: int = MAX_RECORDS):
+        self.slots = max(1, slots)
+        self.samples = max(1, min(pilot, limit // max(1, pixels * self.slots)))
+        self.stride = max(1, -(-pixels * self.slots * self.samples // limit))
+        n = -(-pixels // self.stride) * self.slots * self.samples
+        self.point = np.zeros((n, 3), np.float32)
+        self.normal = np.zeros((n, 3), np.float32)
+        self.light = np.full(n, -1, np.int32)
+        self.value = np.zeros(n, np.float32)  # lum(f L cos V) / the density of the point on the light
+
+
+def learned(
+    sel: LightSelector, records: Records, leaf: int = LEAF_RECORDS, alpha: float = DEFENSIVE, tau: float = TAU
+) -> LightSelector:
+    """``sel`` (:func:`with_cut`) with cells and their ratios learned from ``records``."""
+    kept = np.flatnonzero(records.light >= 0)
+    if kept.size == 0:
+        return sel
+    points = records.point[kept]
+    step = max(1, kept.size // TREE_POINTS)  # the tree's splits from every step-th record: as many cells
+    axis, split, nxt = _kd_tree(np.ascontiguousarray(points[::step]), max(1, leaf // step))
+    cells = int(nxt[axis < 0, 0].max()) + 1
+    entries = int(np.count_nonzero(sel.learn_offset >= 0)) * WIDTH
+    sums, importance, counts = _ratio_sums(
+        sel, axis, split, nxt, points, records.normal[kept], records.light[kept], records.value[kept], cells, entries
+    )
+    ratio = _shrunk(sel, sums, importance, counts, tau)
+    leaves = np.flatnonzero(axis < 0)
+    seen = ratio[nxt[leaves, 0]].max(axis=1) > 0.0
+    nxt[leaves[~seen], 0] = -1  # nothing arrived there: the BVH alone
+    return sel._replace(cell_axis=axis, cell_split=split, cell_next=nxt, cell_ratio=ratio, defensive=float(alpha))
+
+
+def _shrunk(sel: LightSelector, sums, importance, counts, tau: float) -> np.ndarray:
+    """Each cell's ratios, each child's pulled toward its parent's by ``tau`` samples' worth (the root's children
+    toward the cell's ratio over all of them)."""
+    cells = sums.shape[0]
+    ratio = np.zeros_like(sums)
+    child = sel.wide_child
+    parent_entry = {}  # a learned node's own entry in its parent's children
+    for node in np.flatnonzero(sel.learn_offset >= 0):  # parents before children
+        first = sel.learn_offset[node]
+        columns = slice(first, first + WIDTH)
+        if node == 0:
+            total = importance[:, columns].sum(axis=1)
+            parent = np.divide(sums[:, columns].sum(axis=1), total, out=np.zeros(cells), where=total > 0.0)
+        else:
+            parent = ratio[:, parent_entry[node]]
+        n, seen = counts[:, columns], importance[:, columns]
+        own = np.divide(sums[:, columns], seen, out=np.zeros((cells, WIDTH)), where=seen > 0.0)
+        own = np.where(seen > 0.0, own, parent[:, None])
+        ratio[:, columns] = (n * own + tau * parent[:, None]) / (n + tau)
+        for c in range(WIDTH):
+            k = child[node, c]
+            if k >= 0 and sel.learn_offset[k] >= 0:
+                parent_entry[k] = first + c
+    return ratio
+
+
+def _kd_tree(points: np.ndarray, leaf: int):
+    """A k-d tree over ``points`` (leaves of at most ``leaf`` points): (axis, split, next) as
+    ``LightSelector.cell_*``, each leaf's cell numbered in the order leaves are made."""
+    n = points.shape[0]
+    most = 2 * (n // max(1, leaf) + 1) * 2 + 1  # nodes: fewer than 2 n / (leaf / 2) + 1
+    axis, split, nxt, count = _kd_build(points, max(1, leaf), most)
+    return axis[:count].copy(), split[:count].copy(), nxt[:count].copy()
+
+
+@jit_alloc
+def _kd_build(points, leaf, most):
+    """:func:`_kd_tree`'s tree, splitting a node's points at the median of its widest axis; where more than half
+    share the median's coordinate (a floor at y = 0 and the walls meeting it), at the next coordinate above it, or
+    along the next axis; a node no axis splits in two non-empty halves is a leaf."""
+    n = points.shape[0]
+    order = np.arange(n)
+    axis = np.full(most, -1, np.int64)
+    split = np.zeros(most)
+    nxt = np.zeros((most, 2), np.int64)
+    stack_node = np.zeros(most, np.int64)
+    stack_lo = np.zeros(most, np.int64)
+    stack_hi = np.zeros(most, np.int64)
+    scratch = np.empty(n, np.float64)
+    top = 1
+    stack_node[0], stack_lo[0], stack_hi[0] = 0, 0, n
+    count = 1
+    cells = 0
+    while top > 0:
+        top -= 1
+        node, lo, hi = stack_node[top], stack_lo[top], stack_hi[top]
+        size = hi - lo
+        chosen, value = -1, 0.0
+        if size > leaf and count + 2 <= most:
+            low = np.full(3, np.inf)
+            high = np.full(3, -np.inf)
+            for i in range(lo, hi):
+                for a in range(3):
+                    x = np.float64(points[order[i], a])
+                    low[a] = min(low[a], x)
+                    high[a] = max(high[a], x)
+            extent = high - low
+            for _ in range(3):  # the axes, widest first
+                a = int(np.argmax(extent))
+                if not extent[a] > 0.0:
+                    break
+                extent[a] = -1.0
+                for i in range(lo, hi):
+                    scratch[i - lo] = points[order[i], a]
+                values = scratch[:size]
+                median = np.partition(values, size // 2)[size // 2]
+                below = 0
+                above_min = np.inf
+                for i in range(size):
+                    if values[i] < median:
+                        below += 1
+                    elif values[i] > median:
+                        above_min = min(above_min, values[i])
+                if below == 0:
+                    if above_min == np.inf:
+                        continue
+                    median = above_min
+                    below = 0
+                    for i in range(size):
+                        if values[i] < median:
+                            below += 1
+                if 0 < below < size:
+                    chosen, value = a, median
+                    break
+        if chosen < 0:
+            nxt[node, 0] = cells
+            cells += 1
+            continue
+        i, j = lo, hi - 1  # the points below the split first
+        while i <= j:
+            if points[order[i], chosen] < value:
+                i += 1
+            else:
+                order[i], order[j] = order[j], order[i]
+                j -= 1
+        first = count
+        count += 2
+        axis[node], split[node] = chosen, value
+        nxt[node, 0], nxt[node, 1] = first, first + 1
+        stack_node[top], stack_lo[top], stack_hi[top] = first + 1, i, hi
+        stack_node[top + 1], stack_lo[top + 1], stack_hi[top + 1] = first, lo, i
+        top += 2
+    return axis, split, nxt, count
+
+
+def _ratio_sums(sel, axis, split, nxt, points, normals, light, value, cells, entries):
+    """Per cell and learned child: the sum of v (the record's value over the probability of its light below the
+    child), of the child's importance, and the number of records.  Each record's terms are worked out in parallel,
+    then added serially in record order (the same sums for any thread count)."""
+    cell, entry, v, weight = _record_terms(sel, axis, split, nxt, points, normals, light, value)
+    return _add_terms(cell, entry, v, weight, cells, entries)
+
+
+@jit_parallel
+def _record_terms(sel, axis, split, nxt, points, normals, light, value):
+    """Each record's cell, and at each level above the cut the entry of the child its light's path takes, v there
+    and the child's importance (entry -1: no level)."""
+    n = points.shape[0]
+    levels = max(1, sel.cut_levels)
+    cell = np.empty(n, np.int64)
+    entry = np.full((n, levels), -1, np.int64)
+    v_out = np.zeros((n, levels))
+    weight_out = np.zeros((n, levels))
+    for i in prange(n):
+        px, py, pz = np.float64(points[i, 0]), np.float64(points[i, 1]), np.float64(points[i, 2])
+        nx, ny, nz = np.float64(normals[i, 0]), np.float64(normals[i, 1]), np.float64(normals[i, 2])
+        node = 0
+        while axis[node] >= 0:
+            x = px if axis[node] == 0 else (py if axis[node] == 1 else pz)
+            node = nxt[node, 0 if x < split[node] else 1]
+        cell[i] = nxt[node, 0]
+        trail = sel.light_trail[light[i]]
+        node = 0
+        depth = 0
+        below = 1.0  # the probability of the light below the child taken at each level above the cut
+        while True:  # the light's path: each level's share and the importance of the child taken
+            slot = trail & (WIDTH - 1)
+            trail >>= TRAIL_BITS
+            w, total = _child_weights(sel.wide_bounds, node, px, py, pz, nx, ny, nz)
+            if depth < sel.cut_levels:
+                entry[i, depth] = sel.learn_offset[node] + slot
+                weight_out[i, depth] = w[slot]
+                v_out[i, depth] = w[slot] / total  # the share, until v takes its place below
+            else:
+                below *= w[slot] / total
+            depth += 1
+            child = sel.wide_child[node, slot]
+            if child < 0:
+                break
+            node = child
+        v = np.float64(value[i])
+        for d in range(min(depth, sel.cut_levels) - 1, -1, -1):
+            share = v_out[i, d]
+            v_out[i, d] = v / below if v > 0.0 and below > 0.0 else 0.0
+            below *= share
+    return cell, entry, v_out, weight_out
+
+
+@jit_alloc
+def _add_terms(cell, entry, v, weight, cells, entries):
+    sums = np.zeros((cells, entries))
+    importance = np.zeros((cells, entries))
+    counts = np.zeros((cells, entries))
+    for i in range(cell.shape[0]):
+        for d in range(entry.shape[1]):
+            e = entry[i, d]
+            if e >= 0:
+                sums[cell[i], e] += v[i, d]
+                importance[cell[i], e] += weight[i, d]
+                counts[cell[i], e] += 1.0
+    return sums, importance, counts

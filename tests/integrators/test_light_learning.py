@@ -1,0 +1,61 @@
+"""Renders that learn their light selection (``light_sampler = "learned"``, integrators/light_learning.py): they learn
+from their pilot and use it after; the image is the same bits for any thread count and pass size; a render that
+starts past sample 0 has no pilot and uses the BVH; learning leaves the mean where it was."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lightprobe.integrators.wavefront import RenderSettings, render
+from lightprobe.reference_scenes import build
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return build("many", resolution=(20, 12), lights=200)
+
+
+@pytest.mark.parametrize("adaptive", [None, False])
+def test_a_learning_render_is_the_same_bits_on_any_threads_and_pass_size(scene, adaptive):
+    options = {"spp": 16, "light_sampler": "learned", "adaptive": adaptive}
+    base = render(scene, RenderSettings(threads=2, **options))
+    assert base.stats["learned_cells"] > 0 and base.stats["learned_levels"] >= 1
+    for settings in (
+        RenderSettings(threads=1, **options),
+        RenderSettings(pass_samples=100, **options),
+        RenderSettings(pass_samples=7, threads=1, **options),
+    ):
+        other = render(scene, settings)
+        np.testing.assert_array_equal(other.counts, base.counts)
+        np.testing.assert_array_equal(other.image, base.image)
+        np.testing.assert_array_equal(other.variance, base.variance)
+    bvh = render(scene, RenderSettings(threads=2, **{**options, "light_sampler": "bvh"}))
+    assert bvh.image.tobytes() != base.image.tobytes()  # what it learned changed the samples after the pilot
+    assert "learned_cells" not in bvh.stats
+
+
+def test_a_render_past_sample_0_has_no_pilot_and_picks_with_the_bvh(scene):
+    learned = render(scene, RenderSettings(spp=6, first_sample=4, light_sampler="learned"))
+    bvh = render(scene, RenderSettings(spp=6, first_sample=4, light_sampler="bvh"))
+    assert "learned_cells" not in learned.stats
+    np.testing.assert_array_equal(learned.image, bvh.image)
+
+
+def test_learning_leaves_the_mean_where_it_was():
+    # the occluded many-light scene at 256 spp, four seeds each: the images' pooled difference within noise, the
+    # noise under 1 % of the image
+    scene = build("many", resolution=(32, 24), lights=400)
+    sums, variances = {}, {}
+    for sampler in ("bvh", "learned"):
+        images = [
+            render(scene, RenderSettings(spp=256, seed=seed, light_sampler=sampler, adaptive=False))
+            for seed in range(4)
+        ]
+        sums[sampler] = sum(r.image.astype(np.float64) for r in images) / 4
+        variances[sampler] = sum(r.variance.astype(np.float64) for r in images) / 16
+    for c in range(3):
+        difference = sums["learned"][..., c].sum() - sums["bvh"][..., c].sum()
+        sigma = np.sqrt(variances["learned"][..., c].sum() + variances["bvh"][..., c].sum())
+        assert abs(difference) < 4 * sigma, (c, difference / sigma)
+        assert sigma < 0.01 * sums["bvh"][..., c].sum()
