@@ -34,7 +34,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._numba import jit_alloc, jit_parallel, prange
-from .selection import TRAIL_BITS, WIDTH, LightSelector, _child_weights
+from .selection import TRAIL_BITS, WIDTH, LightSelector, _child_weights, _learned_pmf
 
 __all__ = ["DEFENSIVE", "LEAF_RECORDS", "MAX_ENTRIES", "MAX_RECORDS", "TAU", "Records", "learned", "with_cut"]
 
@@ -44,6 +44,7 @@ MAX_RECORDS = 1 << 19  # the pilot's light samples kept for learning (32 bytes e
 TREE_POINTS = 1 << 18  # the cells' tree is built from at most about this many of them
 DEFENSIVE = 0.2  # alpha, the BVH's share at a learned node
 TAU = 4.0  # samples' worth of the parent's ratio in a child's
+MARGIN = 0.5  # a cell keeps what it learned where that halves its records' second moment (decision 114)
 
 
 def with_cut(sel: LightSelector, max_entries: int = MAX_ENTRIES) -> LightSelector:
@@ -84,9 +85,15 @@ class Records:
 
 
 def learned(
-    sel: LightSelector, records: Records, leaf: int = LEAF_RECORDS, alpha: float = DEFENSIVE, tau: float = TAU
+    sel: LightSelector,
+    records: Records,
+    leaf: int = LEAF_RECORDS,
+    alpha: float = DEFENSIVE,
+    tau: float = TAU,
+    margin: float = MARGIN,
 ) -> LightSelector:
-    """``sel`` (:func:`with_cut`) with cells and their ratios learned from ``records``."""
+    """``sel`` (:func:`with_cut`) with cells and their ratios learned from ``records``, kept in the cells where
+    they lower the records' second moment to ``margin`` of the BVH's (all cells: ``margin`` 0)."""
     kept = np.flatnonzero(records.light >= 0)
     if kept.size == 0:
         return sel
@@ -95,14 +102,52 @@ def learned(
     axis, split, nxt = _kd_tree(np.ascontiguousarray(points[::step]), max(1, leaf // step))
     cells = int(nxt[axis < 0, 0].max()) + 1
     entries = int(np.count_nonzero(sel.learn_offset >= 0)) * WIDTH
-    sums, importance, counts = _ratio_sums(
-        sel, axis, split, nxt, points, records.normal[kept], records.light[kept], records.value[kept], cells, entries
-    )
-    ratio = _shrunk(sel, sums, importance, counts, tau)
+    normals, light, value = records.normal[kept], records.light[kept], records.value[kept]
+    cell, entry, v, weight, p_bvh = _record_terms(sel, axis, split, nxt, points, normals, light, value)
+    squares, importance, counts = _add_terms(cell, entry, v, weight, cells, entries)
+    ratio = _shrunk(sel, np.sqrt(squares * counts), importance, counts, tau)
     leaves = np.flatnonzero(axis < 0)
     seen = ratio[nxt[leaves, 0]].max(axis=1) > 0.0
     nxt[leaves[~seen], 0] = -1  # nothing arrived there: the BVH alone
-    return sel._replace(cell_axis=axis, cell_split=split, cell_next=nxt, cell_ratio=ratio, defensive=float(alpha))
+    out = sel._replace(cell_axis=axis, cell_split=split, cell_next=nxt, cell_ratio=ratio, defensive=float(alpha))
+    if margin > 0.0:
+        # keep a cell's learning only where the records say it lowers the second moment of the estimate by
+        # ``margin`` (the records were drawn from the BVH, so E_q[(c / q)^2] = E_bvh[c^2 / (q p)])
+        q = _learned_probabilities(out, cell, points, normals, light)
+        m_bvh, m_learned = _second_moments(cell, value, p_bvh, q, cells)
+        worse = ~(m_learned < margin * m_bvh)
+        nxt[leaves[worse[nxt[leaves, 0].clip(0)] & (nxt[leaves, 0] >= 0)], 0] = -1
+        out = out._replace(cell_next=nxt)
+    return out
+
+
+@jit_parallel
+def _learned_probabilities(sel, cell, points, normals, light):
+    """Each record's light's probability under the learned selector (a bounded pick) in the record's cell."""
+    n = points.shape[0]
+    q = np.zeros(n)
+    for i in prange(n):
+        if cell[i] >= 0:
+            q[i] = _learned_pmf(
+                sel, cell[i], 1.0, np.float64(points[i, 0]), np.float64(points[i, 1]), np.float64(points[i, 2]),
+                np.float64(normals[i, 0]), np.float64(normals[i, 1]), np.float64(normals[i, 2]), light[i],
+            )  # fmt: skip
+    return q
+
+
+@jit_alloc
+def _second_moments(cell, value, p_bvh, q, cells):
+    """Per cell, the mean of (c / p)^2 and of c^2 / (q p) over its records (c the record's value, p its light's
+    probability under the BVH, q under the learned selector): the second moments of the two selections' estimates,
+    both from samples of the BVH."""
+    m_bvh = np.zeros(cells)
+    m_learned = np.zeros(cells)
+    for i in range(cell.shape[0]):
+        c = np.float64(value[i])
+        if c > 0.0 and p_bvh[i] > 0.0:
+            m_bvh[cell[i]] += c * c / (p_bvh[i] * p_bvh[i])
+            m_learned[cell[i]] += c * c / (q[i] * p_bvh[i]) if q[i] > 0.0 else np.inf
+    return m_bvh, m_learned
 
 
 def _shrunk(sel: LightSelector, sums, importance, counts, tau: float) -> np.ndarray:
@@ -220,14 +265,6 @@ def _kd_build(points, leaf, most):
     return axis, split, nxt, count
 
 
-def _ratio_sums(sel, axis, split, nxt, points, normals, light, value, cells, entries):
-    """Per cell and learned child: the sum of v (the record's value over the probability of its light below the
-    child), of the child's importance, and the number of records.  Each record's terms are worked out in parallel,
-    then added serially in record order (the same sums for any thread count)."""
-    cell, entry, v, weight = _record_terms(sel, axis, split, nxt, points, normals, light, value)
-    return _add_terms(cell, entry, v, weight, cells, entries)
-
-
 @jit_parallel
 def _record_terms(sel, axis, split, nxt, points, normals, light, value):
     """Each record's cell, and at each level above the cut the entry of the child its light's path takes, v there
@@ -238,6 +275,7 @@ def _record_terms(sel, axis, split, nxt, points, normals, light, value):
     entry = np.full((n, levels), -1, np.int64)
     v_out = np.zeros((n, levels))
     weight_out = np.zeros((n, levels))
+    p_out = np.zeros(n)
     for i in prange(n):
         px, py, pz = np.float64(points[i, 0]), np.float64(points[i, 1]), np.float64(points[i, 2])
         nx, ny, nz = np.float64(normals[i, 0]), np.float64(normals[i, 1]), np.float64(normals[i, 2])
@@ -270,19 +308,20 @@ def _record_terms(sel, axis, split, nxt, points, normals, light, value):
             share = v_out[i, d]
             v_out[i, d] = v / below if v > 0.0 and below > 0.0 else 0.0
             below *= share
-    return cell, entry, v_out, weight_out
+        p_out[i] = below  # the whole path's: the light's probability under the BVH
+    return cell, entry, v_out, weight_out, p_out
 
 
 @jit_alloc
 def _add_terms(cell, entry, v, weight, cells, entries):
-    sums = np.zeros((cells, entries))
+    squares = np.zeros((cells, entries))
     importance = np.zeros((cells, entries))
     counts = np.zeros((cells, entries))
     for i in range(cell.shape[0]):
         for d in range(entry.shape[1]):
             e = entry[i, d]
             if e >= 0:
-                sums[cell[i], e] += v[i, d]
+                squares[cell[i], e] += v[i, d] * v[i, d]
                 importance[cell[i], e] += weight[i, d]
                 counts[cell[i], e] += 1.0
-    return sums, importance, counts
+    return squares, importance, counts
