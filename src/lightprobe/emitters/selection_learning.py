@@ -40,8 +40,8 @@ __all__ = ["DEFENSIVE", "LEAF_RECORDS", "MAX_ENTRIES", "MAX_RECORDS", "TAU", "Re
 
 MAX_ENTRIES = 1024  # learned children per cell at most: the cut is the deepest level that keeps within it
 LEAF_RECORDS = 2048  # light samples per cell at most
-MAX_RECORDS = 1 << 19  # the pilot's light samples kept for learning (32 bytes each)
-TREE_POINTS = 1 << 18  # the cells' tree is built from at most about this many of them
+MAX_RECORDS = 1 << 18  # the pilot's light samples kept for learning (32 bytes each)
+TREE_POINTS = 1 << 16  # the cells' tree is built from at most about this many of them
 DEFENSIVE = 0.2  # alpha, the BVH's share at a learned node
 TAU = 4.0  # samples' worth of the parent's ratio in a child's
 MARGIN = 0.5  # a cell keeps what it learned where that halves its records' second moment (decision 114)
@@ -118,6 +118,8 @@ def learned(
         worse = ~(m_learned < margin * m_bvh)
         nxt[leaves[worse[nxt[leaves, 0].clip(0)] & (nxt[leaves, 0] >= 0)], 0] = -1
         out = out._replace(cell_next=nxt)
+    if not np.any(nxt[leaves, 0] >= 0):
+        return sel  # no cell learned anything worth its cost: no tree to walk at every pick
     return out
 
 
