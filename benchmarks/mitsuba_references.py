@@ -28,6 +28,9 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
+# suite scenes with a test reference too, at the test references' 64 x 48 (the building: learned light selection's
+# z-test, tests/integrators/test_light_learning.py)
+TEST_SUITE_SCENES = ("building",)
 
 
 def _prefer_llvm19() -> None:
@@ -268,7 +271,8 @@ def render(name: str, spp: int, passes: int, out: Path, *, lights: int | None = 
         if image is not None:
             env_file = str(Path(tmp) / "env.exr")
             write_image(env_file, image)
-        scene = mi.load_dict(scene_dict(mi, desc, env_file, spp, tmp))
+        power = name in TEST_SUITE_SCENES  # the occluded building: emitters sampled by power, as the suite's
+        scene = mi.load_dict(scene_dict(mi, desc, env_file, spp, tmp, power_weights=power))
         start = time.perf_counter()
         total = total2 = 0.0
         for k in range(passes):
@@ -280,7 +284,7 @@ def render(name: str, spp: int, passes: int, out: Path, *, lights: int | None = 
     variance = np.maximum(total2 / passes - mean**2, 0.0) * passes / (passes - 1) / passes
     floor = float(np.mean(variance / (mean**2 + 0.01)))
     settings = {"scene": name, "lights": lights, "spp": spp * passes, "passes": passes}
-    settings |= {"sampler": "multijitter", "integrator": "direct"}
+    settings |= {"sampler": "multijitter", "integrator": "direct", "power_weights": power}
     out.parent.mkdir(parents=True, exist_ok=True)
     np.savez_compressed(
         out, mean=mean.astype(np.float32), variance=variance.astype(np.float32), settings=json.dumps(settings)
@@ -293,7 +297,7 @@ def main() -> int:
     from lightprobe.reference_scenes import NAMES
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--scenes", nargs="*", default=list(NAMES), choices=NAMES)
+    parser.add_argument("--scenes", nargs="*", default=list(NAMES), choices=[*NAMES, *TEST_SUITE_SCENES])
     parser.add_argument("--spp", type=int, default=1024, help="samples per pixel per pass")
     parser.add_argument("--passes", type=int, default=64, help="independent passes (the variance comes from them)")
     parser.add_argument("--out", default=str(ROOT / "tests" / "data"), help="folder for mitsuba_<name>.npz")
