@@ -36,6 +36,25 @@ def test_a_learning_render_is_the_same_bits_on_any_threads_and_pass_size(scene, 
     assert "learned_cells" not in bvh.stats
 
 
+def test_a_render_continued_from_its_statistics_learns_what_the_whole_render_learned(scene):
+    # a uniform render learns after its first 4 samples whatever its spp, and its statistics carry what it learned
+    # (through the arrays a reference's checkpoint files hold): stopped at 7 and continued, the same bits as 16
+    from lightprobe.errors import ParameterError
+    from lightprobe.integrators.accumulation import Accumulator
+
+    options = {"light_sampler": "learned", "adaptive": False}
+    whole = render(scene, RenderSettings(spp=16, **options))
+    first = render(scene, RenderSettings(spp=7, **options))
+    assert first.accumulator.learned is not None and first.stats["learned_cells"] == whole.stats["learned_cells"] > 0
+    carried = Accumulator.from_arrays(first.accumulator.to_arrays())
+    resumed = render(scene, RenderSettings(spp=9, first_sample=7, pass_samples=50, **options), resume=carried)
+    np.testing.assert_array_equal(resumed.image, whole.image)
+    np.testing.assert_array_equal(resumed.variance, whole.variance)
+    other = build("many", resolution=scene.camera.resolution, lights=200)
+    with pytest.raises(ParameterError, match="learned light selection made for another scene"):
+        render(other, RenderSettings(spp=9, first_sample=7, **options), resume=carried)
+
+
 def test_a_render_past_sample_0_has_no_pilot_and_picks_with_the_bvh(scene):
     learned = render(scene, RenderSettings(spp=6, first_sample=4, light_sampler="learned"))
     bvh = render(scene, RenderSettings(spp=6, first_sample=4, light_sampler="bvh"))

@@ -72,6 +72,9 @@ class Accumulator:
         self.nonfinite = np.zeros(n_pixels, dtype=np.int64)
         #: written by an adaptive render (per-pixel counts from its pilot): it cannot be merged with a sample range
         self.adaptive = False
+        #: what a render's light selection learned (integrators/light_learning.table_of), for a render that
+        #: continues these statistics to pick as the render that did not stop would have; None: nothing learned
+        self.learned: dict | None = None
 
     def arrays(self) -> AccumulatorArrays:
         """The record the accumulation stage writes."""
@@ -106,6 +109,7 @@ class Accumulator:
         other.mean, other.m2 = self.mean.copy(), self.m2.copy()
         other.count, other.nonfinite = self.count.copy(), self.nonfinite.copy()
         other.adaptive = self.adaptive
+        other.learned = None if self.learned is None else {k: np.copy(v) for k, v in self.learned.items()}
         return other
 
     def merged(self, other: Accumulator) -> Accumulator:
@@ -129,6 +133,7 @@ class Accumulator:
             out.m2 = self.m2 + other.m2 + np.where(n > 0, delta**2 * na * nb / n, 0.0)
         out.count = self.count + other.count
         out.nonfinite = self.nonfinite + other.nonfinite
+        out.learned = self.learned if self.learned is not None else other.learned
         return out
 
     def to_arrays(self) -> dict[str, np.ndarray]:
@@ -138,6 +143,7 @@ class Accumulator:
             "count": self.count,
             "nonfinite": self.nonfinite,
             "adaptive": np.array(self.adaptive),
+            **{f"learned_{k}": np.asarray(v) for k, v in (self.learned or {}).items()},
         }
 
     @classmethod
@@ -148,6 +154,8 @@ class Accumulator:
         acc.count = np.array(arrays["count"], np.int64)
         acc.nonfinite = np.array(arrays["nonfinite"], np.int64)
         acc.adaptive = bool(arrays["adaptive"]) if "adaptive" in arrays else False  # older files: uniform renders
+        learned = {k.removeprefix("learned_"): np.array(arrays[k]) for k in arrays if k.startswith("learned_")}
+        acc.learned = learned or None
         return acc
 
 

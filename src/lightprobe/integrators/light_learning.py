@@ -1,34 +1,69 @@
 """The render's side of learned light selection (``light_sampler = "learned"``; emitters/selection_learning.py):
 which renders learn, the pilot's light samples kept as records, and the selector learned from them.
 
-A render learns from its pilot: the adaptive pilot, or, in a uniform render from sample 0, its first
-``adaptive.pilot_spp(spp)`` samples per pixel (the rounds split there).  Every sample after the pilot uses what was
-learned; the pilot's own samples use the BVH, so the image is a pure function of (seed, settings).  A render that
-starts past sample 0 (a sample range, a resumed render) has no pilot to learn from and uses the BVH throughout.
+A render learns from its pilot: the adaptive pilot (``adaptive.pilot_spp``), or, in a uniform render from sample 0,
+its first ``UNIFORM_PILOT`` samples per pixel (the rounds split there), whatever its spp, so that a render continued
+from its statistics (``render(..., resume=acc)``, which carry the learned cells: ``Accumulator.learned``) learns
+what the render that did not stop learned.  Every sample after the pilot uses what was learned; the pilot's own
+samples use the BVH, so the image is a pure function of (seed, settings).  A render that starts past sample 0
+without a learned accumulator to continue (a sample range of a distributed render, a render resumed inside the
+pilot) has nothing to learn from and picks with the BVH.
 """
 
 from __future__ import annotations
 
+import numpy as np
+
 from .._numba import jit_parallel, prange
 from ..emitters.selection import LightSelector
 from ..emitters.selection_learning import Records, learned, with_cut
+from ..errors import ParameterError
 from .techniques import ENV, MIS, VISIBLE
 
-__all__ = ["Learning", "learns"]
+__all__ = ["TABLE_FIELDS", "UNIFORM_PILOT", "Learning", "cells_learned", "learns", "restored", "table_of"]
+
+UNIFORM_PILOT = 4  # a uniform render learns from its first 4 samples per pixel
+#: the fields of a learned selector a render's statistics carry (``Accumulator.learned``)
+TABLE_FIELDS = ("cut_levels", "learn_offset", "cell_axis", "cell_split", "cell_next", "cell_ratio", "defensive")
 
 
-def learns(selector: LightSelector, strategy: str, light_sampler: str, first_sample: int, spp: int) -> bool:
-    """Whether a render learns its light selection: ``learned`` asked for, light samples taken (``mis`` or
-    ``env``), at least two bounded lights in a BVH, a pilot of at least one sample, and the render starting at
-    sample 0."""
+def learns(selector: LightSelector, strategy: str, light_sampler: str) -> bool:
+    """Whether a render's light selection can learn: ``learned`` asked for, light samples taken (``mis`` or
+    ``env``), and at least two bounded lights in a BVH."""
     return (
         light_sampler == "learned"
         and strategy in ("mis", "env")
         and selector.n_bounded >= 2
         and selector.wide_child.shape[0] > 0
-        and first_sample == 0
-        and spp >= 4
     )
+
+
+def cells_learned(table: dict) -> int:
+    """How many cells of a learned table (:func:`table_of`) learned anything (the others pick with the BVH)."""
+    axis, nxt = np.asarray(table["cell_axis"]), np.asarray(table["cell_next"])
+    return int((nxt[axis < 0, 0] >= 0).sum()) if axis.size else 0
+
+
+def table_of(selector: LightSelector) -> dict:
+    """What a learned selector learned, as arrays (``Accumulator.learned``), with the tree it was learned on
+    (its node count and bounded lights) to check it against when a render continues."""
+    table = {name: np.asarray(getattr(selector, name)) for name in TABLE_FIELDS}
+    table["tree"] = np.array([selector.wide_child.shape[0], selector.n_bounded], np.int64)
+    return table
+
+
+def restored(selector: LightSelector, table: dict) -> LightSelector:
+    """``selector`` with the learned ``table`` (:func:`table_of`) of the render it continues."""
+    tree = np.asarray(table["tree"])
+    if tree.tolist() != [selector.wide_child.shape[0], selector.n_bounded]:
+        raise ParameterError(
+            "resume: the statistics carry a learned light selection made for another scene's lights "
+            f"({int(tree[1])} bounded lights, {int(tree[0])} tree nodes; this scene: {selector.n_bounded}, "
+            f"{selector.wide_child.shape[0]})"
+        )
+    dtypes = {"learn_offset": np.int64, "cell_axis": np.int64, "cell_next": np.int64}
+    values = {name: np.ascontiguousarray(table[name], dtypes.get(name, np.float64)) for name in TABLE_FIELDS[1:-1]}
+    return selector._replace(cut_levels=int(table["cut_levels"]), defensive=float(table["defensive"]), **values)
 
 
 class Learning:
@@ -56,13 +91,6 @@ class Learning:
         self.recording = False
         self.records = None
         return self.selector
-
-    def stats(self) -> dict:
-        sel = self.selector
-        return {
-            "learned_levels": int(sel.cut_levels),
-            "learned_cells": int((sel.cell_next[sel.cell_axis < 0, 0] >= 0).sum()) if sel.cell_axis.size else 0,
-        }
 
 
 @jit_parallel

@@ -265,7 +265,7 @@ def _compensated_materials(kinds: np.ndarray, compensated) -> np.ndarray:
 class _Pass:
     """One render's stages and buffers: :meth:`run` renders one pass into an accumulator."""
 
-    def __init__(self, scene, render_plan: RenderPlan, arrays, tracer, largest_pass, threads):
+    def __init__(self, scene, render_plan: RenderPlan, arrays, tracer, largest_pass, threads, resumed=None):
         threads_max = max(threads, numba.config.NUMBA_NUM_THREADS)
         settings, plan = render_plan.settings, render_plan.pipeline
         self.plan = plan
@@ -311,15 +311,19 @@ class _Pass:
         self.largest = largest_pass
         self.cams = None
         self.slots = None
-        self.learning = None  # light_learning.Learning of a render that learns its light selection
-        if light_learning.learns(
-            self.sel, settings.strategy, settings.light_sampler, settings.first_sample, settings.spp
-        ) and (settings.adaptive or settings.time_limit is None):
-            n_pixels = int(np.prod(scene.camera.resolution))
-            self.learning = light_learning.Learning(
-                self.sel, n_pixels, adaptive.pilot_spp(settings.spp), self.constants.strategy, settings.n_bsdf, m
-            )
-            self.sel = self.learning.selector
+        self.learning = None  # light_learning.Learning of a render that learns its light selection ...
+        self.learned = None  # ... and what a render's light selection learned (or continues), for its statistics
+        if light_learning.learns(self.sel, settings.strategy, settings.light_sampler):
+            pilot = adaptive.pilot_spp(settings.spp) if settings.adaptive else light_learning.UNIFORM_PILOT
+            if resumed is not None and resumed.learned is not None:
+                self.sel = light_learning.restored(self.sel, resumed.learned)
+                self.learned = resumed.learned
+            elif settings.first_sample == 0 and pilot < settings.spp and (settings.adaptive or not settings.time_limit):
+                n_pixels = int(np.prod(scene.camera.resolution))
+                self.learning = light_learning.Learning(
+                    self.sel, n_pixels, pilot, self.constants.strategy, settings.n_bsdf, m
+                )
+                self.sel = self.learning.selector
 
     def make_buffers(self) -> None:
         """Every pass uses leading views of these: memory bounded by one pass.  (Mapped without huge pages, and
@@ -361,6 +365,7 @@ class _Pass:
         """After the pilot: the light selection learned from its records, for every later pass."""
         if self.learning is not None and self.learning.recording:
             self.sel = self.learning.learn()
+            self.learned = light_learning.table_of(self.sel)
 
 
 def render(
@@ -411,7 +416,7 @@ def _render_planned(scene, render_plan, helpers, progress, tracer, resume, threa
     acc.adaptive = settings.adaptive  # resolved: a continued render is uniform (or refused above)
     plan = render_plan.pipeline
     largest_pass = max(1, band * spp_pass)
-    work = _Pass(scene, render_plan, arrays, tracer, largest_pass, threads)
+    work = _Pass(scene, render_plan, arrays, tracer, largest_pass, threads, resume)
     kinds = work.lights.kind
     stats = {
         "width": width,
@@ -471,7 +476,7 @@ def _render_planned(scene, render_plan, helpers, progress, tracer, resume, threa
         generator runs as the passes are made, so it sees the time spent and the pilot's statistics."""
         if not settings.adaptive:
             if work.learning is not None:  # learned light selection: from the first samples, for the rest
-                pilot = adaptive.pilot_spp(settings.spp)
+                pilot = light_learning.UNIFORM_PILOT
                 yield from uniform_passes(0, pilot)
                 work.learn()
                 yield from uniform_passes(pilot, settings.spp - pilot)
@@ -556,8 +561,10 @@ def _render_planned(scene, render_plan, helpers, progress, tracer, resume, threa
         except KeyboardInterrupt:
             stats["interrupted"] = True
     stats["seconds"] = _clock() - start
-    if work.learning is not None:
-        stats.update(work.learning.stats())
+    if work.learned is not None:  # a continued render learns what the render that did not stop learned
+        acc.learned = work.learned
+        stats["learned_levels"] = int(work.learned["cut_levels"])
+        stats["learned_cells"] = light_learning.cells_learned(work.learned)
     stats["embree_rays"] = int(work.ray_counts.sum() - counted_before)  # every Embree call of a render is in a stage
     if own_tracer:
         tracer.close()
