@@ -41,7 +41,7 @@ def _learned_sampler(env=None, n: int = 16_000, seed: int = 1, blocked: bool = T
     records.normal[:] = (0.0, 1.0, 0.0)
     light, pmf = bvh.select(records.point.astype(np.float64), records.normal.astype(np.float64), rng.random(n))
     records.light[:] = light
-    records.value[:] = np.where(_blocked(light, records.point) & blocked, 0.0, pmf)
+    records.value[:] = np.where(_blocked(light, records.point) & blocked, -pmf, pmf)  # < 0: blocked
     sampler.arrays = learned(sel, records, leaf=2048, margin=margin)
     return sampler
 
@@ -56,6 +56,23 @@ def test_a_cell_keeps_what_it_learned_only_where_it_lowers_the_second_moment():
     assert cell_of(sel, -1.5, 0.0, 0.5) < 0 and cell_of(sel, -2.5, 2.0, -1.0) < 0
     plain = _learned_sampler(blocked=False, margin=0.5).arrays
     assert plain.cell_axis.size == 0 and plain.cut_levels == sel.cut_levels
+    # and the cells that learned nothing are pruned into as few leaves as the tree allows
+    kept = sel.cell_axis >= 0
+    assert np.count_nonzero(kept) < np.count_nonzero(_learned_sampler(margin=0.0).arrays.cell_axis >= 0)
+
+
+def test_a_scene_that_blocks_little_learns_nothing():
+    # the records carry what blocked samples would have given, negated: under MIN_BLOCKED of it lost, no cells
+    sel = with_cut(build_selector("learned", LIGHTS))
+    records = Records(4000, 1, 1)
+    rng = np.random.default_rng(5)
+    records.point[:] = rng.uniform(-3.0, 3.0, (4000, 3))
+    records.normal[:] = (0.0, 1.0, 0.0)
+    records.light[:] = rng.integers(0, sel.n_bounded, 4000)
+    records.value[:] = np.where(np.arange(4000) % 20 == 0, -1.0, 1.0)  # 5 % lost
+    assert learned(sel, records, leaf=500, margin=0.0) is sel
+    records.value[:] = np.where(np.arange(4000) % 4 == 0, -1.0, 1.0)  # 25 % lost
+    assert learned(sel, records, leaf=500, margin=0.0).cell_axis.size > 1
 
 
 @pytest.mark.parametrize("env", [None, ENV])

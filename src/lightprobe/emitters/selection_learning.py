@@ -9,7 +9,7 @@ keeps what the BVH knows about each point (distance, orientation) and learns onl
 
 * **Records.** Each light sample of the pilot (the adaptive pilot, or the first 4 samples of a uniform render from
   sample 0: ``integrators/light_learning.py``) is kept (``Records``: its shading point and normal, its light, and
-  lum(f L cos V) / the density of the point on the light, 0 where the shadow ray was blocked): a quarter of the
+  lum(f L cos) / the density of the point on the light, negated where the shadow ray was blocked): a quarter of the
   pilot's, but no fewer than ``MIN_RECORDS`` and no more than ``MAX_RECORDS``.
 * **Cells.** A k-d tree over the records' points (median splits, leaves of at most ``LEAF_RECORDS`` records):
   cells follow where the visible points are.
@@ -25,10 +25,12 @@ keeps what the BVH knows about each point (distance, orientation) and learns onl
   at the receiver; below the cut, as the BVH.  The probability of every light is the product along its path
   (``selection._learned_pmf``), exact for MIS.  Every child the BVH can pick keeps at least alpha (``DEFENSIVE``) of
   its BVH share, so the render stays unbiased whatever was learned.
-* **Only where it pays.** A cell keeps its ratios only if its own records say they lower the second moment of the
-  estimate to ``MARGIN`` of the BVH's (the records were drawn from the BVH, so E_q[(c / q)^2] = E_bvh[c^2 / (q p)]);
-  a scene where no cell does keeps no cells at all.  Where nothing is hidden the learned ratios only add noise to
-  the BVH's right answer (decision 114: the dome's error 0.00026 -> 0.00029 without this check, the same with it).
+* **Only where it pays.** A scene whose pilot lost less than ``MIN_BLOCKED`` of what its light samples would have
+  given to blocked shadow rays learns nothing (the records hold that loss as negative values).  A cell keeps its
+  ratios only if its own records say they lower the second moment of the estimate to ``MARGIN`` of the BVH's (the
+  records were drawn from the BVH, so E_q[(c / q)^2] = E_bvh[c^2 / (q p)]); a scene where no cell does keeps no
+  cells at all.  Where nothing is hidden the learned ratios only add noise to the BVH's right answer (decision
+  114: the dome's error 0.00026 -> 0.00029 without this check, the same with it).
 
 Determinism: the pilot's records sit at positions given by (pixel, sample index, light slot), whatever pass wrote
 them (``integrators/light_learning.py``), the tree and the sums read them in that order, and the learned selector
@@ -49,6 +51,7 @@ __all__ = [
     "MARGIN",
     "MAX_ENTRIES",
     "MAX_RECORDS",
+    "MIN_BLOCKED",
     "MIN_RECORDS",
     "TAU",
     "Records",
@@ -64,6 +67,7 @@ TREE_POINTS = 1 << 16  # the cells' tree is built from at most about this many o
 DEFENSIVE = 0.2  # alpha, the BVH's share at a learned node
 TAU = 4.0  # samples' worth of the parent's ratio in a child's
 MARGIN = 0.5  # a cell keeps what it learned where that halves its records' second moment (decision 114)
+MIN_BLOCKED = 0.1  # learn nothing if shadow rays blocked less than this share of what the pilot's samples would give
 
 
 def with_cut(sel: LightSelector, max_entries: int = MAX_ENTRIES) -> LightSelector:
@@ -102,7 +106,7 @@ class Records:
         self.point = np.zeros((n, 3), np.float32)
         self.normal = np.zeros((n, 3), np.float32)
         self.light = np.full(n, -1, np.int32)
-        self.value = np.zeros(n, np.float32)  # lum(f L cos V) / the density of the point on the light
+        self.value = np.zeros(n, np.float32)  # lum(f L cos) / the density of the point on the light; < 0: blocked
 
 
 def learned(
@@ -116,8 +120,9 @@ def learned(
     """``sel`` (:func:`with_cut`) with cells and their ratios learned from ``records``, kept in the cells where
     they lower the records' second moment to ``margin`` of the BVH's (all cells: ``margin`` 0)."""
     kept = np.flatnonzero(records.light >= 0)
-    if kept.size == 0:
-        return sel
+    lost = -records.value[kept][records.value[kept] < 0.0].astype(np.float64).sum()
+    if kept.size == 0 or not lost > MIN_BLOCKED * np.abs(records.value[kept]).astype(np.float64).sum():
+        return sel  # (almost) nothing was blocked: nothing to learn that the BVH does not know
     points = records.point[kept]
     step = max(1, kept.size // TREE_POINTS)  # the tree's splits from every step-th record: as many cells
     axis, split, nxt = _kd_tree(np.ascontiguousarray(points[::step]), max(1, leaf // step))
@@ -141,7 +146,20 @@ def learned(
         out = out._replace(cell_next=nxt)
     if not np.any(nxt[leaves, 0] >= 0):
         return sel  # no cell learned anything worth its cost: no tree to walk at every pick
-    return out
+    return out._replace(cell_axis=_pruned(axis, nxt))
+
+
+def _pruned(axis: np.ndarray, nxt: np.ndarray) -> np.ndarray:
+    """The tree's split axes with every subtree whose cells all learned nothing made one such leaf (a pick there
+    stops its walk sooner); ``nxt`` is changed to match.  Children follow their parent in the arrays."""
+    axis = axis.copy()
+    for node in range(axis.shape[0] - 1, -1, -1):
+        if axis[node] >= 0:
+            a, b = nxt[node]
+            if axis[a] < 0 and axis[b] < 0 and nxt[a, 0] < 0 and nxt[b, 0] < 0:
+                axis[node] = -1
+                nxt[node] = (-1, 0)
+    return axis
 
 
 @jit_parallel

@@ -96,7 +96,8 @@ class Learning:
 @jit_parallel
 def _record(sel, c, cams, slots, first, n_light, samples, stride, point, normal, light, value):
     """Each light slot of the pass's first ``samples`` samples of every ``stride``-th pixel: its shading point and
-    normal, its light, and lum(f L cos V) / the density of the light's point (0 if the shadow ray was blocked)."""
+    normal, its light, and lum(f L cos V) / the density of the light's point (minus what it would have given if the
+    shadow ray was blocked)."""
     m = c.m
     for k in prange(cams.t.shape[0]):
         sample = c.sample_start + k % c.spp_pass
@@ -115,4 +116,5 @@ def _record(sel, c, cams, slots, first, n_light, samples, stride, point, normal,
                 point[rec, a] = cams.point[k, a]
                 normal[rec, a] = cams.gnormal[k, a]
             light[rec] = slots.light[r]
-            value[rec] = slots.learn[r] if slots.flags[r] == VISIBLE else 0.0
+            # blocked: what it would have given, negated (the learning counts it as 0, and weighs how much was lost)
+            value[rec] = slots.learn[r] if slots.flags[r] == VISIBLE else -slots.learn[r]
