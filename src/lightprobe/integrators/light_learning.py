@@ -67,8 +67,8 @@ def restored(selector: LightSelector, table: dict) -> LightSelector:
 
 
 class Learning:
-    """One render's learning: the selector with its clusters (as the BVH until :meth:`learn`), the records of the
-    pilot's light samples, and the learned selector."""
+    """One render's learning: the selector with its cut (picking as the BVH until :meth:`learn`), the records of
+    the pilot's light samples, and the learned selector."""
 
     def __init__(self, selector: LightSelector, pixels: int, pilot: int, strategy: int, n_bsdf: int, m: int):
         self.selector = with_cut(selector)
