@@ -18,6 +18,7 @@ from .._numba import jit_parallel, prange
 from ..emitters.selection import LightSelector
 from ..emitters.selection_learning import Records, learned, with_cut
 from ..errors import ParameterError
+from . import adaptive
 from .techniques import ENV, MIS, VISIBLE
 
 __all__ = ["TABLE_FIELDS", "UNIFORM_PILOT", "Learning", "cells_learned", "learns", "restored", "table_of"]
@@ -25,6 +26,12 @@ __all__ = ["TABLE_FIELDS", "UNIFORM_PILOT", "Learning", "cells_learned", "learns
 UNIFORM_PILOT = 4  # a uniform render learns from its first 4 samples per pixel
 #: the fields of a learned selector a render's statistics carry (``Accumulator.learned``)
 TABLE_FIELDS = ("cut_levels", "learn_offset", "cell_axis", "cell_split", "cell_next", "cell_ratio", "defensive")
+
+
+def pilot_for(spp: int, adaptive_counts: bool) -> int:
+    """The samples per pixel a render learns from: the first half of an adaptive render's pilot (its second half
+    and the rounds after it use what was learned), or a uniform render's first ``UNIFORM_PILOT``."""
+    return max(1, adaptive.pilot_spp(spp) // 2) if adaptive_counts else UNIFORM_PILOT
 
 
 def learns(selector: LightSelector, strategy: str, light_sampler: str) -> bool:

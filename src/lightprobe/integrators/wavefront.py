@@ -314,7 +314,7 @@ class _Pass:
         self.learning = None  # light_learning.Learning of a render that learns its light selection ...
         self.learned = None  # ... and what a render's light selection learned (or continues), for its statistics
         if light_learning.learns(self.sel, settings.strategy, settings.light_sampler):
-            pilot = adaptive.pilot_spp(settings.spp) if settings.adaptive else light_learning.UNIFORM_PILOT
+            pilot = light_learning.pilot_for(settings.spp, settings.adaptive)
             if resumed is not None and resumed.learned is not None:
                 self.sel = light_learning.restored(self.sel, resumed.learned)
                 self.learned = resumed.learned
@@ -486,8 +486,13 @@ def _render_planned(scene, render_plan, helpers, progress, tracer, resume, threa
             return
         pilot, replan = adaptive.pilot_spp(settings.spp), None
         if settings.time_limit is None:
-            yield from uniform_passes(0, pilot)
-            work.learn()
+            if work.learning is not None:  # the pilot's first half learns the light selection for the rest
+                learned_at = light_learning.pilot_for(settings.spp, True)
+                yield from uniform_passes(0, learned_at)
+                work.learn()
+                yield from uniform_passes(learned_at, pilot - learned_at)
+            else:
+                yield from uniform_passes(0, pilot)
             counts = adaptive.sample_counts(acc.mean, acc.m2, acc.count, width, height, settings.spp)
         else:  # a time budget: the pilot doubles while it fits in a share of it, then the rest buys the counts
             pilot, round_start = 1, _clock()
