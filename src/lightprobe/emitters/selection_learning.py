@@ -7,10 +7,10 @@ online regression for adaptive direct illumination sampling") learn, per region 
 of lights actually gives, visibility included, from the render's own shadow rays.  This is a simple form of it that
 keeps what the BVH knows about each point (distance, orientation) and learns only what it cannot know:
 
-* **Records.** Each light sample of the pilot (the adaptive pilot, or the first 4 samples of a uniform render from
-  sample 0: ``integrators/light_learning.py``) is kept (``Records``: its shading point and normal, its light, and
-  lum(f L cos) / the density of the point on the light, negated where the shadow ray was blocked): a quarter of the
-  pilot's, but no fewer than ``MIN_RECORDS`` and no more than ``MAX_RECORDS``.
+* **Records.** Each light sample of the pilot (the first half of the adaptive pilot, or the first 4 samples of a
+  uniform render from sample 0: ``integrators/light_learning.py``) is kept (``Records``: its shading point and
+  normal, its light, and lum(f L cos) / the density of the point on the light, negated where the shadow ray was
+  blocked): a quarter of the pilot's, but no fewer than ``MIN_RECORDS`` and no more than ``MAX_RECORDS``.
 * **Cells.** A k-d tree over the records' points (median splits, leaves of at most ``LEAF_RECORDS`` records):
   cells follow where the visible points are.
 * **Ratios.** For every child of the light tree's nodes in the top ``cut_levels`` levels (at most ``MAX_ENTRIES``

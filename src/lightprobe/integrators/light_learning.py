@@ -1,8 +1,9 @@
 """The render's side of learned light selection (``light_sampler = "learned"``; emitters/selection_learning.py):
 which renders learn, the pilot's light samples kept as records, and the selector learned from them.
 
-A render learns from its pilot: the adaptive pilot (``adaptive.pilot_spp``), or, in a uniform render from sample 0,
-its first ``UNIFORM_PILOT`` samples per pixel (the rounds split there), whatever its spp, so that a render continued
+A render learns from its pilot (``pilot_for``): the first half of the adaptive pilot (``adaptive.pilot_spp``; its
+second half already picks with what was learned), or, in a uniform render from sample 0, its first
+``UNIFORM_PILOT`` samples per pixel (the rounds split there), whatever its spp, so that a render continued
 from its statistics (``render(..., resume=acc)``, which carry the learned cells: ``Accumulator.learned``) learns
 what the render that did not stop learned.  Every sample after the pilot uses what was learned; the pilot's own
 samples use the BVH, so the image is a pure function of (seed, settings).  A render that starts past sample 0
