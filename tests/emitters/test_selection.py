@@ -43,6 +43,31 @@ RECEIVERS = [
 ]
 
 
+def assert_picks_follow_the_pmf(sampler, p, nrm, seed: int, tests: int, compensated: bool = False) -> None:
+    """At one receiver: the pmf sums to one, select() reports pmf() for what it picks, and 400,000 picks' counts
+    pass a chi-square test against the pmf at 0.01 / ``tests``; no pick where the pmf is 0."""
+    n = sampler.arrays.n_lights
+    pmf = sampler.pmf(p, nrm, compensated=compensated)
+    assert pmf.shape == (n,) and np.all(pmf >= 0)
+    assert pmf.sum() == pytest.approx(1.0, abs=1e-12), pmf.sum()
+    samples = 400_000
+    u = np.random.default_rng(seed).random(samples)
+    light, reported = sampler.select(p, nrm, u, compensated=compensated)
+    assert np.all(light >= 0)
+    np.testing.assert_allclose(reported, pmf[light], rtol=1e-12)
+    counts = np.bincount(light, minlength=n)
+    # chi-square of the pick counts against the pmf, cells with fewer than 20 expected pooled (with 5, forty
+    # cells of a few picks each gave p < 0.01 for 3 % of 200 seeds: the statistic's tail is heavier there)
+    expected = samples * pmf
+    big = expected >= 20
+    observed = np.append(counts[big], counts[~big].sum())
+    wanted = np.append(expected[big], expected[~big].sum())
+    keep = wanted > 0
+    _, p_value = stats.chisquare(observed[keep], wanted[keep] * observed[keep].sum() / wanted[keep].sum())
+    assert p_value > 0.01 / tests, p_value
+    assert counts[pmf == 0].sum() == 0
+
+
 @pytest.mark.parametrize(
     "env, compensated", [(None, False), ((40.0, 0.0, 20.0, 5.0), False), ((40.0, 0.0, 20.0, 5.0), True)]
 )
@@ -50,27 +75,9 @@ RECEIVERS = [
 def test_pmf_sums_to_one_and_matches_the_picks(mode, env, compensated):
     # compensated receivers weigh the environment by the second terms (emitters/selection.py)
     sampler = LightSampler(mode, LIGHTS, env_irradiance=env, env_irradiance_compensated=(8.0, 0.0, 6.0, 1.0))
-    n = LIGHTS.kind.shape[0] + (env is not None)
+    assert sampler.arrays.n_lights == LIGHTS.kind.shape[0] + (env is not None)
     for i, (p, nrm) in enumerate(RECEIVERS):
-        pmf = sampler.pmf(p, nrm, compensated=compensated)
-        assert pmf.shape == (n,) and np.all(pmf >= 0)
-        assert pmf.sum() == pytest.approx(1.0, abs=1e-12), (mode, i, pmf.sum())
-        samples = 400_000
-        u = np.random.default_rng(100 + i).random(samples)
-        light, reported = sampler.select(p, nrm, u, compensated=compensated)
-        assert np.all(light >= 0)
-        np.testing.assert_allclose(reported, pmf[light], rtol=1e-12)
-        counts = np.bincount(light, minlength=n)
-        # chi-square of the pick counts against the pmf, cells with fewer than 20 expected pooled (with 5, forty
-        # cells of a few picks each gave p < 0.01 for 3 % of 200 seeds: the statistic's tail is heavier there)
-        expected = samples * pmf
-        big = expected >= 20
-        observed = np.append(counts[big], counts[~big].sum())
-        wanted = np.append(expected[big], expected[~big].sum())
-        keep = wanted > 0
-        _, p_value = stats.chisquare(observed[keep], wanted[keep] * observed[keep].sum() / wanted[keep].sum())
-        assert p_value > 0.01 / (3 * 3 * len(RECEIVERS)), (mode, i, p_value)
-        assert counts[pmf == 0].sum() == 0
+        assert_picks_follow_the_pmf(sampler, p, nrm, 100 + i, 3 * 3 * len(RECEIVERS), compensated)
 
 
 def test_power_selection_is_proportional_to_power_and_uniform_is_uniform():

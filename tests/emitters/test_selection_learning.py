@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy import stats
 
 from lightprobe.emitters.selection import LightSampler, _child_weights, build_selector, cell_of
 from lightprobe.emitters.selection_learning import (
@@ -18,7 +17,7 @@ from lightprobe.emitters.selection_learning import (
     with_cut,
 )
 
-from .test_selection import LIGHTS, RECEIVERS
+from .test_selection import LIGHTS, RECEIVERS, assert_picks_follow_the_pmf
 
 ENV = (40.0, 0.0, 20.0, 5.0)
 
@@ -78,26 +77,9 @@ def test_a_scene_that_blocks_little_learns_nothing():
 @pytest.mark.parametrize("env", [None, ENV])
 def test_a_learned_pmf_sums_to_one_and_matches_the_picks(env):
     sampler = _learned_sampler(env)
-    n = LIGHTS.kind.shape[0] + (env is not None)
     for i, (p, nrm) in enumerate(RECEIVERS):
         assert cell_of(sampler.arrays, *np.asarray(p, float)) >= 0 or i == 3  # the far receiver may lie anywhere
-        pmf = sampler.pmf(p, nrm)
-        assert pmf.shape == (n,) and np.all(pmf >= 0)
-        assert pmf.sum() == pytest.approx(1.0, abs=1e-12), (i, pmf.sum())
-        samples = 400_000
-        u = np.random.default_rng(200 + i).random(samples)
-        light, reported = sampler.select(p, nrm, u)
-        assert np.all(light >= 0)
-        np.testing.assert_allclose(reported, pmf[light], rtol=1e-12)
-        counts = np.bincount(light, minlength=n)
-        expected = samples * pmf
-        big = expected >= 20
-        observed = np.append(counts[big], counts[~big].sum())
-        wanted = np.append(expected[big], expected[~big].sum())
-        keep = wanted > 0
-        _, p_value = stats.chisquare(observed[keep], wanted[keep] * observed[keep].sum() / wanted[keep].sum())
-        assert p_value > 0.01 / (2 * len(RECEIVERS)), (i, p_value)
-        assert counts[pmf == 0].sum() == 0
+        assert_picks_follow_the_pmf(sampler, p, nrm, 200 + i, 2 * len(RECEIVERS))
 
 
 def test_the_rescaled_number_stays_stratified_within_each_light():

@@ -650,29 +650,7 @@ def select_light(sel, px, py, pz, nx, ny, nz, u, compensated):
     # BVH: down the eight-wide tree, each child in proportion to its weight
     if _no_bounds(sel):
         return -1, 0.0, u
-    cell = cell_of(sel, px, py, pz)
-    if cell >= 0:
-        return _select_learned(sel, cell, pmf, px, py, pz, nx, ny, nz, u)
-    node = 0
-    while True:
-        w, total = _child_weights(sel.wide_bounds, node, px, py, pz, nx, ny, nz)
-        scale = 1.0 / total
-        chosen, start, width, lo = -1, 0.0, 0.0, 0.0
-        for c in range(WIDTH):
-            share = w[c] * scale  # the very expression selector_pmf uses, so both report the same bits
-            if share > 0.0:
-                chosen, start, width = c, lo, share  # the last child with a share, where rounding leaves u past all
-                if u < lo + share:
-                    break
-            lo += share
-        if chosen < 0:
-            return -1, 0.0, u
-        pmf *= width
-        u = _rescaled(u, start, width)
-        child = sel.wide_child[node, chosen]
-        if child < 0:
-            return -2 - child, pmf, u
-        node = child
+    return _descend(sel, cell_of(sel, px, py, pz), pmf, px, py, pz, nx, ny, nz, u)
 
 
 # --- learned selection (emitters/selection_learning.py learns the ratios) --------------------------------------------
@@ -692,44 +670,44 @@ def cell_of(sel, px, py, pz):
 
 
 @jit_inline
-def _learned_scale(sel, row, node, w):
-    """(1 / sum of the children's importances x their learned ratios, the node's first entry in a cell's row);
-    0 where no child has a ratio above 0 (the node then keeps the BVH's shares)."""
+def _learned_scale(sel, cell, node, w):
+    """(1 / sum of the children's importances x their learned ratios in ``cell``, the node's first entry in the
+    cell's row); 0 where no child has a ratio above 0 (the node then keeps the BVH's shares)."""
     base = sel.learn_offset[node]
     t = 0.0
     for c in range(WIDTH):
-        t += w[c] * row[base + c]
+        t += w[c] * sel.cell_ratio[cell, base + c]
     return (1.0 / t if t > 0.0 else 0.0), base
 
 
 @jit_inline
-def _learned_share(alpha, row, base, w, c, scale, scale_r):
-    """Child c's probability at a learned node: alpha x the BVH's share + (1 - alpha) x its share of importance x
-    learned ratio (the BVH's alone where no ratio is above 0)."""
+def _share(sel, cell, base, w, c, scale, scale_r):
+    """Child c's probability: the BVH's, w_c / sum w (``scale`` = 1 / sum w), or at a learned node (``scale_r`` >
+    0) alpha x that + (1 - alpha) x its share of importance x learned ratio."""
     if scale_r == 0.0:
-        return w[c] * scale
-    return alpha * (w[c] * scale) + (1.0 - alpha) * (w[c] * row[base + c] * scale_r)
+        return w[c] * scale  # the very expression _descend and _path_pmf both use, so both report the same bits
+    alpha = sel.defensive
+    return alpha * (w[c] * scale) + (1.0 - alpha) * (w[c] * sel.cell_ratio[cell, base + c] * scale_r)
 
 
 @jit_inline
-def _select_learned(sel, cell, pmf, px, py, pz, nx, ny, nz, u):
-    """select_light's descent in a learned cell (``pmf``: the probability of a bounded light so far): above the cut
-    each child by :func:`_learned_share`, below it as the BVH.  :func:`_learned_pmf` repeats the operations."""
-    row = sel.cell_ratio[cell]
-    alpha = sel.defensive
+def _descend(sel, cell, pmf, px, py, pz, nx, ny, nz, u):
+    """select_light's bounded pick (``pmf``: the probability of a bounded light so far): down the eight-wide tree,
+    each child by :func:`_share` -- the BVH's share, or, above the cut in a learned ``cell`` (>= 0), the learned
+    mixture.  :func:`_path_pmf` repeats the operations along a light's trail."""
     node = 0
     depth = 0
     while True:
         w, total = _child_weights(sel.wide_bounds, node, px, py, pz, nx, ny, nz)
         scale = 1.0 / total
         scale_r, base = 0.0, 0
-        if depth < sel.cut_levels:
-            scale_r, base = _learned_scale(sel, row, node, w)
+        if cell >= 0 and depth < sel.cut_levels:
+            scale_r, base = _learned_scale(sel, cell, node, w)
         chosen, start, width, lo = -1, 0.0, 0.0, 0.0
         for c in range(WIDTH):
-            share = _learned_share(alpha, row, base, w, c, scale, scale_r)
+            share = _share(sel, cell, base, w, c, scale, scale_r)
             if share > 0.0:
-                chosen, start, width = c, lo, share
+                chosen, start, width = c, lo, share  # the last child with a share, where rounding leaves u past all
                 if u < lo + share:
                     break
             lo += share
@@ -745,10 +723,8 @@ def _select_learned(sel, cell, pmf, px, py, pz, nx, ny, nz, u):
 
 
 @jit_inline
-def _learned_pmf(sel, cell, pmf, px, py, pz, nx, ny, nz, light):
-    """The probability that :func:`_select_learned` picks bounded ``light`` (``pmf``: that of a bounded pick)."""
-    row = sel.cell_ratio[cell]
-    alpha = sel.defensive
+def _path_pmf(sel, cell, pmf, px, py, pz, nx, ny, nz, light):
+    """The probability that :func:`_descend` picks bounded ``light`` (``pmf``: that of a bounded pick)."""
     trail = sel.light_trail[light]
     node = 0
     depth = 0
@@ -758,14 +734,14 @@ def _learned_pmf(sel, cell, pmf, px, py, pz, nx, ny, nz, light):
         w, total = _child_weights(sel.wide_bounds, node, px, py, pz, nx, ny, nz)
         scale = 1.0 / total
         scale_r, base = 0.0, 0
-        if depth < sel.cut_levels:
-            scale_r, base = _learned_scale(sel, row, node, w)
-        pmf *= _learned_share(alpha, row, base, w, slot, scale, scale_r)
+        if cell >= 0 and depth < sel.cut_levels:
+            scale_r, base = _learned_scale(sel, cell, node, w)
+        pmf *= _share(sel, cell, base, w, slot, scale, scale_r)
         child = sel.wide_child[node, slot]
         if child == -1:
             return 0.0
         if child < 0:
-            return pmf if -2 - child == light else 0.0
+            return pmf if -2 - child == light else 0.0  # a light without power (never picked) ends elsewhere
         node = child
         depth += 1
 
@@ -792,22 +768,7 @@ def selector_pmf(sel, px, py, pz, nx, ny, nz, light, compensated):
         return pmf * (sel.cdf[light + 1] - sel.cdf[light])
     if _no_bounds(sel):
         return 0.0
-    cell = cell_of(sel, px, py, pz)
-    if cell >= 0:
-        return _learned_pmf(sel, cell, pmf, px, py, pz, nx, ny, nz, light)
-    trail = sel.light_trail[light]
-    node = 0
-    while True:
-        slot = trail & (WIDTH - 1)
-        trail >>= TRAIL_BITS
-        w, total = _child_weights(sel.wide_bounds, node, px, py, pz, nx, ny, nz)
-        pmf *= w[slot] * (1.0 / total)
-        child = sel.wide_child[node, slot]
-        if child == -1:
-            return 0.0
-        if child < 0:
-            return pmf if -2 - child == light else 0.0  # a light without power (never picked) ends elsewhere
-        node = child
+    return _path_pmf(sel, cell_of(sel, px, py, pz), pmf, px, py, pz, nx, ny, nz, light)
 
 
 @jit_parallel

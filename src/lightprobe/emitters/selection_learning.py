@@ -21,9 +21,9 @@ keeps what the BVH knows about each point (distance, orientation) and learns onl
   each choice's second moment (a light seen from half a cell is not to be halved).  A child with few records is
   pulled toward its parent's ratio (rho = (n rho_hat + TAU rho_parent) / (n + TAU)), one never sampled takes it.
 * **The descent.** In a learned cell each child above the cut is chosen with probability
-  ``alpha w_c / sum w + (1 - alpha) w_c rho_c / sum w rho`` (``selection._learned_share``), w the BVH's importances
+  ``alpha w_c / sum w + (1 - alpha) w_c rho_c / sum w rho`` (``selection._share``), w the BVH's importances
   at the receiver; below the cut, as the BVH.  The probability of every light is the product along its path
-  (``selection._learned_pmf``), exact for MIS.  Every child the BVH can pick keeps at least alpha (``DEFENSIVE``) of
+  (``selection._path_pmf``), exact for MIS.  Every child the BVH can pick keeps at least alpha (``DEFENSIVE``) of
   its BVH share, so the render stays unbiased whatever was learned.
 * **Only where it pays.** A scene whose pilot lost less than ``MIN_BLOCKED`` of what its light samples would have
   given to blocked shadow rays learns nothing (the records hold that loss as negative values).  A cell keeps its
@@ -43,7 +43,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._numba import jit_alloc, jit_parallel, prange
-from .selection import TRAIL_BITS, WIDTH, LightSelector, _child_weights, _learned_pmf
+from .selection import TRAIL_BITS, WIDTH, LightSelector, _child_weights, _path_pmf
 
 __all__ = [
     "DEFENSIVE",
@@ -169,7 +169,7 @@ def _learned_probabilities(sel, cell, points, normals, light):
     q = np.zeros(n)
     for i in prange(n):
         if cell[i] >= 0:
-            q[i] = _learned_pmf(
+            q[i] = _path_pmf(
                 sel, cell[i], 1.0, np.float64(points[i, 0]), np.float64(points[i, 1]), np.float64(points[i, 2]),
                 np.float64(normals[i, 0]), np.float64(normals[i, 1]), np.float64(normals[i, 2]), light[i],
             )  # fmt: skip
