@@ -1,4 +1,4 @@
-"""Choosing which light to sample: uniform, in proportion to power, or with a light BVH.
+"""Choosing which light to sample: uniform, in proportion to power, with a light BVH, or with one that learns.
 
 The lecture's many-light estimator picks light l with probability p_l and divides by it (1/(KN) sum f / (p_l p)),
 so every selector offers ``select(p, n, u) -> (light, pmf, u')`` and ``pmf(p, n, light)`` for MIS (pbrt-v4's
@@ -28,17 +28,23 @@ then the environment map, the last row).
     to eight children a node (:func:`_collapse`), whose importances the descent computes at once in vector lanes
     (``light_tree_lanes.py``): a third of the levels, each child weighed among seven siblings rather than one
     (decisions.md 90).
+``learned``
+    the BVH, weighed where the render's pilot found that shadows hide what the BVH expects: per cell of shading
+    points, each child of the tree's top levels by a learned ratio of what its lights gave to its importance, a
+    fifth of each level's choice left to the BVH's shares (``emitters/selection_learning.py`` learns the ratios,
+    ``integrators/light_learning.py`` keeps the pilot's samples; decision 114).  Until a render has learned, and in
+    cells that learned nothing, the same picks as ``bvh``; :func:`_descend` and :func:`_path_pmf` are both.
 
-The infinite lights (``power`` and ``bvh``) are kept apart from the bounded ones, as pbrt-v4's ``BVHLightSampler``
-keeps them, and chosen *per shading point*: together with probability I_inf / (I_inf + I_area), each in proportion
-to its own I, where I_area is the importance of the root of the bounded lights' bounds for the receiver (the
-BVH's own estimate of pi x their irradiance, pbrt-v4's ``LightBounds::Importance``) and an infinite light's
-I = pi max(a + b . n, floor) is pi x its irradiance on the receiver: for the environment E_env(n) = a + b . n to
-first order (its radiance's constant and linear terms: a = pi c0, b = 2 pi / 3 c1), floored at a / 4; for a
-directional light E n . w_l, floored at E / 4 (emitters/directional.py).  A global share by power (pi R^2 of the
+The infinite lights (``power``, ``bvh`` and ``learned``) are kept apart from the bounded ones, as pbrt-v4's
+``BVHLightSampler`` keeps them, and chosen *per shading point*: together with probability I_inf / (I_inf + I_area),
+each in proportion to its own I, where I_area is the importance of the root of the bounded lights' bounds for the
+receiver (the BVH's own estimate of pi x their irradiance, pbrt-v4's ``LightBounds::Importance``) and an infinite
+light's I = pi max(a + b . n, floor) is pi x its irradiance on the receiver: for the environment E_env(n) = a + b .
+n to first order (its radiance's constant and linear terms: a = pi c0, b = 2 pi / 3 c1), floored at a / 4; for a
+directional light E n . w_l, floored at E / 4 (emitters/directional.py). A global share by power (pi R^2 of the
 scene's bounding sphere x the map's integral, pbrt-v4's ``ImageInfiniteLight::Phi``) gave a dim sky 89 % of the
-picks in a scene with a 16 m ground, where uniform selection was more efficient (issue 32; decisions.md 71).  The
-bounded lights' ``power`` CDF and the BVH are then over the bounded lights alone.  ``uniform`` keeps the infinite
+picks in a scene with a 16 m ground, where uniform selection was more efficient (issue 32; decisions.md 71). The
+bounded lights' ``power`` CDF and the BVH are then over the bounded lights alone. ``uniform`` keeps the infinite
 lights among its L equally likely lights.
 
 A receiver whose material samples the MIS-compensated environment (Karlik et al. 2019: the density of max(L - mean,
