@@ -666,13 +666,18 @@ def cell_of(sel, px, py, pz):
     nothing was learned (or the selector has not learned)."""
     if sel.cell_axis.shape[0] == 0:
         return -1
+    return leaf_of(sel.cell_axis, sel.cell_split, sel.cell_next, px, py, pz)
+
+
+@jit_inline
+def leaf_of(axis, split, nxt, px, py, pz):
+    """What the leaf of a k-d tree (``LightSelector.cell_*``'s layout) that p falls in holds: below a node's split
+    along its axis, child 0, else child 1."""
     node = 0
-    axis = sel.cell_axis[0]
-    while axis >= 0:
-        x = px if axis == 0 else (py if axis == 1 else pz)
-        node = sel.cell_next[node, 0 if x < sel.cell_split[node] else 1]
-        axis = sel.cell_axis[node]
-    return sel.cell_next[node, 0]
+    while axis[node] >= 0:
+        x = px if axis[node] == 0 else (py if axis[node] == 1 else pz)
+        node = nxt[node, 0 if x < split[node] else 1]
+    return nxt[node, 0]
 
 
 @jit_inline

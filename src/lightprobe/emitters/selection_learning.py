@@ -43,7 +43,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._numba import jit_alloc, jit_parallel, prange
-from .selection import TRAIL_BITS, WIDTH, LightSelector, _child_weights, _path_pmf
+from .selection import TRAIL_BITS, WIDTH, LightSelector, _child_weights, _path_pmf, leaf_of
 
 __all__ = [
     "DEFENSIVE",
@@ -67,7 +67,7 @@ TREE_POINTS = 1 << 16  # the cells' tree is built from at most about this many o
 DEFENSIVE = 0.2  # alpha, the BVH's share at a learned node
 TAU = 4.0  # samples' worth of the parent's ratio in a child's
 MARGIN = 0.5  # a cell keeps what it learned where that halves its records' second moment (decision 114)
-MIN_BLOCKED = 0.1  # learn nothing if shadow rays blocked less than this share of what the pilot's samples would give
+MIN_BLOCKED = 0.05  # learn nothing where shadows took less than this share of what the pilot's samples would give
 
 
 def with_cut(sel: LightSelector, max_entries: int = MAX_ENTRIES) -> LightSelector:
@@ -120,9 +120,9 @@ def learned(
     """``sel`` (:func:`with_cut`) with cells and their ratios learned from ``records``, kept in the cells where
     they lower the records' second moment to ``margin`` of the BVH's (all cells: ``margin`` 0)."""
     kept = np.flatnonzero(records.light >= 0)
-    lost = -records.value[kept][records.value[kept] < 0.0].astype(np.float64).sum()
-    if kept.size == 0 or not lost > MIN_BLOCKED * np.abs(records.value[kept]).astype(np.float64).sum():
-        return sel  # (almost) nothing was blocked: nothing to learn that the BVH does not know
+    would_give = records.value[kept].astype(np.float64)
+    if not -would_give[would_give < 0.0].sum() > MIN_BLOCKED * np.abs(would_give).sum():
+        return sel  # (almost) nothing was blocked (or no record at all): nothing the BVH does not know
     points = records.point[kept]
     step = max(1, kept.size // TREE_POINTS)  # the tree's splits from every step-th record: as many cells
     axis, split, nxt = _kd_tree(np.ascontiguousarray(points[::step]), max(1, leaf // step))
@@ -320,11 +320,7 @@ def _record_terms(sel, axis, split, nxt, points, normals, light, value):
     for i in prange(n):
         px, py, pz = np.float64(points[i, 0]), np.float64(points[i, 1]), np.float64(points[i, 2])
         nx, ny, nz = np.float64(normals[i, 0]), np.float64(normals[i, 1]), np.float64(normals[i, 2])
-        node = 0
-        while axis[node] >= 0:
-            x = px if axis[node] == 0 else (py if axis[node] == 1 else pz)
-            node = nxt[node, 0 if x < split[node] else 1]
-        cell[i] = nxt[node, 0]
+        cell[i] = leaf_of(axis, split, nxt, px, py, pz)
         trail = sel.light_trail[light[i]]
         node = 0
         depth = 0

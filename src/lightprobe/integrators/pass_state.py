@@ -106,8 +106,9 @@ class Slots(NamedTuple):
     hit_b1: np.ndarray
     hit_b2: np.ndarray
     hit_mesh: np.ndarray  # (nm,) bool: a mesh may be nearer than the analytic hit
-    # (nm,) or empty (a render that learns its light selection: emitters/selection_learning.py): a light slot's
-    # luminance of f L cos / its density, -1 where the slot picked no light
+    # (nm,) or empty (a render that learns its light selection: emitters/selection_learning.py): -1 where the slot
+    # picked no light; after the light samples, the pick's probability; after the finish stage, the luminance of
+    # f L cos / the density of the point on the light (0 for a sample that gives nothing)
     learn: np.ndarray
 
 

@@ -87,6 +87,8 @@ def light_samples(env, lights, sel, c, cams, slots, lo, hi):
         ls = light_sample_of(lights, env, light, c.light_strategy, compensated, px, py, pz, nx, ny, nz, u0, u1)
         if ls.pdf <= 0.0 or (ls.r == 0.0 and ls.g == 0.0 and ls.b == 0.0):
             slots.state[r] = SLOT_NONE
+            if learning:  # a sample that gives nothing (a light facing away), not one a shadow blocked
+                slots.learn[r] = 0.0
             continue
         slots.wdir[r, 0], slots.wdir[r, 1], slots.wdir[r, 2] = ls.wx, ls.wy, ls.wz
         slots.radiance[r, 0], slots.radiance[r, 1], slots.radiance[r, 2] = ls.r, ls.g, ls.b
