@@ -488,9 +488,25 @@ def compare_command(
     seed: Annotated[int, typer.Option(help="Random seed of the strategies.")] = 0,
     as_json: Annotated[bool, typer.Option("--json", help="Also print one JSON line per strategy.")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar.")] = False,
+    selector: Annotated[
+        list[str] | None,
+        typer.Option(
+            help="Your light selector, FILE.py[:NAME] (select(ctx, u) -> (light, pmf), pmf(ctx, light)), measured "
+            "in the light-choice section against lightprobe's and the oracle; repeat for several."
+        ),
+    ] = None,
+    light_choice_points: Annotated[
+        int,
+        typer.Option(
+            help="Shading points of the light-choice section (the oracle and the split of the variance; scenes "
+            "with two or more lights); 0: no section."
+        ),
+    ] = 512,
 ) -> None:
     """Render each strategy at equal samples or equal time, measure it against a reference, and write a
-    self-contained HTML report (images with synchronised zoom and crops, error maps, convergence, efficiency)."""
+    self-contained HTML report (images with synchronised zoom and crops, error maps, convergence, efficiency; on a
+    scene with several lights, each light selector against the oracle and where each strategy's variance comes
+    from)."""
     import shlex
 
     from .analysis.report import write_report
@@ -528,6 +544,15 @@ def compare_command(
     tokens = [t for t in strategies.split(",") if t.strip()]
     for token in tokens:  # a bad token is an error before the reference is rendered, not after
         parse_strategy(token, base, equal, spp)
+    if light_choice_points < 0:
+        raise LightprobeError(f"--light-choice-points must be >= 0, got {light_choice_points}")
+    from .experiments.light_choice import check_selectors
+    from .lab.selectors import load_selector
+
+    user_selectors = [load_selector(spec) for spec in selector or []]
+    if user_selectors and light_choice_points == 0:
+        raise LightprobeError("--selector is measured in the light-choice section: give --light-choice-points > 0")
+    check_selectors(scene, user_selectors)  # a selector that breaks its contract fails before anything renders
     w, h = scene.camera.resolution
     if reference is not None:
         ref = read_image(reference)
@@ -574,6 +599,16 @@ def compare_command(
         "strategies": {r.label: _strategy_settings(r.settings) for r in runs},
     }
     budget = f"{spp} spp each" if equal == "spp" else f"{seconds:g} s each"
+    choice, choice_error = None, None
+    if light_choice_points:
+        from .experiments.compare import light_choice
+        from .experiments.light_choice import LightChoice
+
+        try:
+            choice = light_choice(scene, runs, ref_image, user_selectors=user_selectors, points=light_choice_points)
+        except LightprobeError as exc:  # a user selector failed at a point the first check did not see: keep the rest
+            choice_error = exc
+            choice = LightChoice(points=0, lights=0, per_light=0, bsdf_samples=0, skipped=str(exc))
     write_report(
         output,
         title=f"lightprobe compare: {name}, {budget}",
@@ -583,6 +618,7 @@ def compare_command(
         settings=settings,
         notes=f"{w}x{h}, equal {equal}: {budget}. Reference: {settings['reference']}."
         + "".join(f" Strategy {r.label} stopped early at {r.spp:g} spp: {r.error}" for r in runs if r.error),
+        light_choice=choice,
     )
     for r in runs:
         m = r.metrics
@@ -603,6 +639,8 @@ def compare_command(
     failed = [r for r in runs if r.error]
     if failed:  # the report keeps what every strategy rendered; the failure is still an error
         raise LightprobeError(f"strategy {failed[0].label!r} stopped at {failed[0].spp:g} spp: {failed[0].error}")
+    if choice_error is not None:
+        raise choice_error
 
 
 @app.command("check")

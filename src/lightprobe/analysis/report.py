@@ -132,6 +132,7 @@ table { border-collapse: collapse; } td, th { border: 1px solid #ccc; padding: 3
 th { background: #eee; } td:first-child, th:first-child { text-align: left; }
 pre { background: #eee; padding: 8px; overflow-x: auto; }
 .best { font-weight: bold; }
+.bound { font-style: italic; }
 """
 
 _SCRIPT = """
@@ -220,8 +221,11 @@ def write_report(
     settings: dict,
     notes: str = "",
     exposure: float = 0.0,
+    light_choice=None,
 ) -> Path:
-    """Write the report of ``runs`` (:class:`~lightprobe.experiments.compare.StrategyRun`) to ``path``."""
+    """Write the report of ``runs`` (:class:`~lightprobe.experiments.compare.StrategyRun`) to ``path``;
+    ``light_choice``: a :class:`~lightprobe.experiments.light_choice.LightChoice` for its section (the oracle and
+    the split of the variance), or None."""
     p = Path(path)
     width = reference.shape[1]
     shown = max(160, min(360, width))
@@ -295,8 +299,10 @@ def write_report(
                 for o in objects
             )
             parts.append(f"<tr><td>{html.escape(r.label)}</td>{cells}</tr>")
+    parts.append("</table>")
+    if light_choice is not None:
+        parts += _light_choice_section(light_choice)
     parts += [
-        "</table>",
         "<h2>Reproduce</h2>",
         f"<pre>{html.escape(command)}</pre>",
         f"<pre>{html.escape(json.dumps(settings, indent=2, default=str))}</pre>",
@@ -311,6 +317,73 @@ def write_report(
     finally:
         tmp.unlink(missing_ok=True)
     return p
+
+
+def _share(x: float, total: float) -> str:
+    if not (np.isfinite(x) and np.isfinite(total)) or total <= 0.0:
+        return _fmt(x, ".3g")
+    return f"{_fmt(x, '.3g')} ({100.0 * x / total:.0f} %)"
+
+
+def _light_choice_section(choice) -> list[str]:
+    """The report's "Light choice" section: the selectors against the oracle, and each strategy's variance split."""
+    parts = ['<h2 id="light-choice">Light choice</h2>']
+    if choice.skipped:
+        return [*parts, f"<p>Not measured: {html.escape(choice.skipped)}.</p>"]
+    left_out = f" ({choice.textured} pixels with textured materials left out)" if choice.textured else ""
+    parts += [
+        f"<p>At {choice.points} shading points of the camera's first hits{left_out}, each of the {choice.lights} "
+        f"lights estimated by brute force ({choice.per_light} samples each with its shadow ray, "
+        f"{choice.bsdf_samples} BSDF "
+        f"samples a point; {choice.seconds:.1f} s). {100.0 * choice.arriving:.1f} % of the light the lights would "
+        "give the points without shadows reaches them. Figures are shares of a one-sample relMSE (variance / "
+        "(mean<sup>2</sup> + 0.01), averaged over the image; independent samples).</p>",
+        "<h3>Selectors against the oracle (light sampling alone)</h3>",
+        "<p>The <b>oracle</b> picks each light in proportion to what it gives the point, shadows included: "
+        "the choice of light adds nothing. The <b>unoccluded oracle</b> does the same ignoring shadows: the best a "
+        "selector blind to visibility can do. The <b>variance-optimal</b> choice (in proportion to the RMS of what a "
+        "light gives) has the least light-sample variance of all. The best selector a render can use is in bold; "
+        "the three bounds in italics.</p>",
+        '<table class="light-choice-selectors"><tr><th>selector</th><th>variance the choice of light adds</th>'
+        "<th>light-sample variance</th><th>&times; the oracle's</th></tr>",
+    ]
+    bounds = ("unoccluded oracle", "oracle", "variance-optimal")  # not selectors a render can use: references
+    best = min((r.vs_oracle for r in choice.selectors if r.name not in bounds), default=None)
+    for r in choice.selectors:
+        mark = ' class="best"' if r.vs_oracle == best else ' class="bound"' if r.name in bounds else ""
+        parts.append(
+            f"<tr{mark}><td>{html.escape(r.name)}</td><td>{_fmt(r.choice, '.3g')}</td><td>{_fmt(r.total, '.3g')}</td>"
+            f"<td>{_fmt(r.vs_oracle, '.2f')}</td></tr>"
+        )
+    parts += [
+        "</table><h3>Where each strategy's variance comes from</h3>",
+        "<p>One camera sample's variance, split by the law of total variance: which light is picked, which point of "
+        "it, visibility (what the shadows' unevenness over a light adds), the BSDF sample, and where in the pixel the "
+        "sample lands (edges and emitters seen directly, without the outline control variate). <i>Measured</i> is "
+        "the same quantity from the strategy's own samples, for comparison (it also counts the rare bright samples "
+        "the points may miss).</p>",
+        '<table class="light-choice-split"><tr><th>strategy</th><th>selector</th><th>choice of light</th>'
+        "<th>point on the light</th><th>visibility</th><th>BSDF sample</th><th>pixel</th><th>total</th>"
+        "<th>measured</th></tr>",
+    ]
+    for sp in choice.splits:
+        total = sp.total
+        cells = "".join(f"<td>{_share(x, total)}</td>" for x in (sp.choice, sp.point, sp.visibility, sp.bsdf, sp.pixel))
+        measured = choice.measured.get(sp.label, float("nan"))
+        pilot = "*" if sp.selector == "learned" and sp.label in choice.measured else ""
+        parts.append(
+            f"<tr><td>{html.escape(sp.label)}</td><td>{html.escape(sp.selector)}</td>{cells}"
+            f"<td>{_fmt(total, '.3g')}</td><td>{_fmt(measured, '.3g')}{pilot}</td></tr>"
+        )
+    parts.append("</table>")
+    if any(sp.selector == "learned" for sp in choice.splits):
+        parts.append(
+            "<p>* A learned selection's render picks as the BVH for its first 4 samples, which it learns from: its "
+            "measured spread pools those with the learned ones; the split is the learned selection's alone.</p>"
+        )
+    for label, why in choice.unsplit.items():
+        parts.append(f"<p>{html.escape(label)}: not split ({html.escape(why)}).</p>")
+    return parts
 
 
 def write_gallery(

@@ -6,7 +6,8 @@ material; the defaults take it on Lambertian ones), ``uniform``, ``cosine``, the
 ``[render]`` key of a scene file,
 e.g. ``mis-power/sampler=independent`` or ``env/light_sampler=bvh/lights_per_sample=4``.
 
-Each strategy renders in doubling rounds (1, 2, 4, ... samples per pixel), each round continuing the previous one
+Each strategy renders in doubling rounds (1, 2, 4, ... samples per pixel; 8, 16, ... under a learned light selection,
+which learns from its first 4 in a first round without a time limit), each round continuing the previous one
 (``render(..., resume=...)``), so the convergence curve costs no more than the final image.  In ``time`` mode the
 last round stops at the time budget (at the end of a short pass), so every strategy gets the same seconds of
 rendering; in ``spp`` mode every strategy gets the same samples.  Metrics (``lightprobe.analysis.metrics``) are
@@ -35,10 +36,11 @@ import numpy as np
 
 from ..analysis import metrics
 from ..errors import LightprobeError
+from ..integrators.light_learning import UNIFORM_PILOT
 from ..integrators.wavefront import RenderSettings, render, result_from, settings_for
 from ..scene import Scene
 
-__all__ = ["PRESETS", "StrategyRun", "compare", "parse_strategy"]
+__all__ = ["PRESETS", "StrategyRun", "compare", "light_choice", "parse_strategy"]
 
 # An adaptive strategy's mean count at equal time is what its time limit buys; this only keeps it finite.
 _TIME_MODE_SPP = 1 << 20
@@ -126,6 +128,10 @@ class StrategyRun:
     metrics: dict = field(default_factory=dict)
     #: why the strategy stopped early (a user technique that failed mid-render), or None; its rounds so far count
     error: str | None = None
+    #: what its light selection learned (``light_sampler = "learned"``: integrators/light_learning.py), or None
+    learned: dict | None = None
+    #: each pixel's camera samples (the variance is of their mean)
+    counts: np.ndarray | None = field(default=None, repr=False)
 
 
 def _measure(image, variance, reference, reference_variance, mask=None) -> dict:
@@ -173,7 +179,11 @@ def run_strategy(
     acc = None
     done = 0
     spent = 0.0
-    target = 1
+    # a learned light selection learns in a render of more than its first UNIFORM_PILOT samples without a time limit
+    # (integrators/wavefront.py), and the rounds after it continue with what it learned: its first round takes twice
+    # the pilot, whole (in time mode it may overrun the budget: its seconds say so); a shorter one would learn nothing
+    learning = settings.light_sampler == "learned" and lab is None
+    target = 2 * UNIFORM_PILOT if learning else 1
     # the report states the allocation and heuristic actually used; a strategy's rounds continue each other, so its
     # counts are uniform unless it asks for adaptive ones (adaptive=true: separate renders, _adaptive_rounds)
     settings = settings_for(scene, settings.uniform_unless_adaptive())
@@ -197,6 +207,8 @@ def run_strategy(
             if limit <= 0.0:
                 break
             n = max(target - done, 1)
+        if learning and done == 0:
+            limit = None
         part = dataclasses.replace(settings, spp=n, first_sample=done, time_limit=limit, pass_samples=pass_samples)
         try:
             result = renderer(scene, part, acc)
@@ -228,6 +240,7 @@ def run_strategy(
         target *= 2
     if acc is None:
         raise LightprobeError(f"strategy {label!r} rendered nothing")
+    run.learned, run.counts = acc.learned, acc.count.reshape(height, width).copy()
     run.seconds = spent
     run.spp = float(acc.count.mean())
     return _final_metrics(run, reference, reference_variance, masks)
@@ -248,6 +261,7 @@ def _adaptive_rounds(
     for i, (n, budget) in enumerate(zip(targets, budgets, strict=True)):
         result = render(scene, dataclasses.replace(settings, spp=n, first_sample=0, time_limit=budget))
         run.image, run.variance = result.image, result.variance
+        run.learned, run.counts = result.accumulator.learned, result.counts
         run.seconds, run.spp = result.stats["seconds"], float(result.counts.mean())
         run.rounds.append(
             {"spp": run.spp, "seconds": run.seconds, **_measure(result.image, result.variance, reference, None)}
@@ -324,3 +338,28 @@ def compare(
     for r in runs:
         r.metrics["relative_efficiency"] = r.metrics["efficiency"] / best
     return runs
+
+
+def per_sample_relmse(run: StrategyRun, reference: np.ndarray) -> float:
+    """The variance of one camera sample as a relMSE, from the run's own samples: the mean over the pixels of
+    lum(variance of the mean) x count / (lum(reference)^2 + 0.01) (the spread of the samples, not the error of the
+    image: a Sobol' render's image does better)."""
+    from ..color import luminance
+
+    ref = luminance(np.asarray(reference[..., :3], dtype=np.float64))
+    spread = luminance(np.asarray(run.variance, dtype=np.float64)) * run.counts
+    return float(np.mean(spread / (ref * ref + 0.01)))
+
+
+def light_choice(scene: Scene, runs: list[StrategyRun], reference: np.ndarray, *, user_selectors=(), points: int = 512):
+    """How far each light selector is from the oracle and where each run's variance comes from
+    (:func:`lightprobe.experiments.light_choice.measure`), each split beside the run's own per-sample relMSE
+    (``measured``); None for a scene with fewer than two lights."""
+    from .light_choice import measure
+
+    found = measure(
+        scene, [(r.label, r.settings, r.learned) for r in runs], points=points, user_selectors=user_selectors
+    )
+    if found is not None:
+        found.measured = {r.label: per_sample_relmse(r, reference) for r in runs if r.counts is not None}
+    return found

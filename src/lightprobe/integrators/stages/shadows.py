@@ -39,6 +39,7 @@ __all__ = [
     "analytic_shadows_lanes",
     "mesh_shadows",
     "mesh_shadows_single",
+    "ray_to_light",
     "shadow_ray",
 ]
 
@@ -50,7 +51,7 @@ SHADOW_EPSILON = 1e-5
 
 
 @jit_inline
-def _ray_to_light(lights, light, px, py, pz, qx, qy, qz, wx, wy, wz, dist):
+def ray_to_light(lights, light, px, py, pz, qx, qy, qz, wx, wy, wz, dist):
     """The shadow ray from origin q (p offset by its error bound) to the point x = p + dist w sampled on ``light``,
     x moved toward p by its own error bound along the light's normal: (origin, unit direction, length less
     SHADOW_EPSILON of it).  A point or spot light is its own position, with no surface to offset from."""
@@ -81,7 +82,7 @@ def shadow_ray(lights, c, cams, slots, r):
         # a point x on a bounded light: the shadow ray leaves the offset origin aimed at x moved toward p by x's own
         # error bound, and ends there (pbrt-v4's SpawnRayTo offsets both ends; from the offset origin along the
         # original direction, a grazing ray would meet the light's plane before the segment ends and shadow itself)
-        return _ray_to_light(lights, slots.light[r], px, py, pz, qx, qy, qz, wx, wy, wz, slots.seg[r])
+        return ray_to_light(lights, slots.light[r], px, py, pz, qx, qy, qz, wx, wy, wz, slots.seg[r])
     return qx, qy, qz, wx, wy, wz, math.inf
 
 

@@ -1,0 +1,678 @@
+"""The choice of light at the camera's shading points: how far each light selector is from the best possible one
+(the oracle), and where a render's variance comes from (the choice of light, the point on it, visibility, the BSDF
+sample).
+
+At ``points`` shading points the camera sees (random pixels, jittered, as a render's first hits), every light's
+contribution is estimated by brute force: ``per_light`` stratified samples on each light (the renderer's own light
+sampling, ``emitters.lights.light_sample_of``), each with its shadow ray, and ``bsdf_samples`` BSDF directions with
+the rays they trace.  For light l with selection probability P_l, the light-sample estimator of one sample is
+X = w g V / P_l, with g = f L cos / p (luminance; p the density of the point on the light), V the shadow ray's
+verdict and w the strategy's MIS weight.  Its variance splits exactly by the law of total variance::
+
+    Var X = [sum_l m_l^2 / P_l - (sum_l m_l)^2]                   the choice of light      (m_l = E[w g V | l])
+          + sum_l c_l^2 Var(w g | l) / P_l                         the point on the light   (c_l = m_l / E[w g | l])
+          + sum_l (Var(w g V | l) - c_l^2 Var(w g | l)) / P_l      visibility
+
+the point term being what the variance would be if each light's shadows were spread evenly over it (a light that
+is half hidden counts as a light of half the brightness); visibility is what the shadows' unevenness adds (it can
+be slightly negative where a shadow happens to hide the part of a light the sampling over-weights).  The BSDF
+sample's variance is the fourth term.  A camera sample of ``n_light`` light samples and ``n_bsdf`` BSDF samples has
+variance Var X / n_light + Var B / n_bsdf (independent samples: the renderer's Sobol' points do better), and each term
+is reported as its share of a 1-spp relMSE: the mean over the points of variance / (mean^2 + 0.01).
+
+For the selectors (light sampling alone, no MIS weight), the table gives the variance the choice adds and the whole
+light-sample variance relative to the **oracle**, P_l proportional to m_l: the best any selector can do at that point,
+visibility included: its choice adds nothing.  The **unoccluded oracle** (P_l proportional to E[g | l], shadows
+ignored) is the best a selector blind to visibility can do.  The **variance-optimal** selector, P_l proportional to
+sqrt(E[(g V)^2 | l]), minimises the whole sum_l E[(g V)^2 | l] / P_l (Cauchy-Schwarz): below the oracle where lights
+differ in how unevenly they light the point.  A user's selector (:mod:`lightprobe.lab.selectors`) joins the table.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+
+import numpy as np
+from numba.core.errors import NumbaIRAssumptionWarning
+
+from .._numba import jit_parallel, prange
+from ..bsdfs.dispatch import bsdf_eval, bsdf_pdf
+from ..bsdfs.dispatch import sample_batch as bsdf_sample_batch
+from ..emitters.area import STRATEGIES as LIGHT_STRATEGIES
+from ..emitters.kinds import flag_rows
+from ..emitters.lights import (
+    emitted,
+    first_infinite,
+    infinite_radiance,
+    is_delta,
+    light_pdf_of,
+    light_sample_of,
+)
+from ..emitters.selection import _pmf_all, build_selector
+from ..errors import ParameterError
+from ..geometry.frame import to_local
+from ..geometry.intersect import MISS, ray_offset, surface
+from ..geometry.raytracer import RayTracer
+from ..integrators.light_learning import restored
+from ..integrators.settings import RenderSettings
+from ..integrators.stages.setup import emitter_of
+from ..integrators.stages.shadows import ray_to_light
+from ..integrators.wavefront import _compensated_materials, compensation_for, resolve
+from ..lab.render import _camera_batch, _shading_batch
+from ..sampling.mis import balance_heuristic, power_heuristic
+from ..scene import Scene
+
+__all__ = ["RAY_BUDGET", "LightChoice", "SelectorRow", "Split", "check_selectors", "measure"]
+
+#: light samples (each with its shadow ray) the brute force may take: points x lights x per_light
+RAY_BUDGET = 1 << 22
+#: fewer points than this say too little: a scene with more lights is not measured
+MIN_POINTS = 16
+#: camera samples per measured pixel (where in the pixel a sample lands is the split's fifth term)
+PER_PIXEL = 4
+#: rays through each pixel (a regular grid) that find the edges: pixels where they meet more than one surface
+EDGE_TRIALS = 16
+#: the relMSE's guard against dark pixels (analysis/metrics.py)
+DARK = 0.01
+#: the selectors of the renderer that every table lists (the strategies' own are added)
+BUILTIN_SELECTORS = ("uniform", "power", "bvh")
+#: the strategies whose variance is split: light samples, BSDF samples, or both under MIS
+SPLIT_STRATEGIES = ("mis", "env", "brdf")
+_LUMINANCE = (0.212671, 0.715160, 0.072169)
+
+
+@dataclass
+class SelectorRow:
+    """One selector's light-sample variance at the points, as a 1-spp relMSE (light sampling alone)."""
+
+    name: str
+    #: what the choice of light adds
+    choice: float
+    #: choice, point on the light and visibility: the light-sample estimator's whole variance
+    total: float
+    #: ``total`` over the oracle's: how many times the oracle's samples this selector needs for its error
+    vs_oracle: float
+
+
+@dataclass
+class Split:
+    """Where one strategy's variance comes from, each term its share of a 1-spp relMSE (independent samples)."""
+
+    label: str
+    selector: str
+    choice: float
+    point: float
+    visibility: float
+    bsdf: float
+    #: where in the pixel the camera sample lands (edges, emitters and the background seen directly), measured
+    #: without the outline control variate, which takes part of it away where an emitter's outline crosses a pixel
+    pixel: float = 0.0
+
+    @property
+    def total(self) -> float:
+        return self.choice + self.point + self.visibility + self.bsdf + self.pixel
+
+
+@dataclass
+class LightChoice:
+    """What :func:`measure` found; ``skipped`` says why nothing was measured (``selectors`` and ``splits`` empty)."""
+
+    points: int
+    lights: int
+    per_light: int
+    bsdf_samples: int
+    #: the share of the lights' unoccluded contribution that reaches the points (visibility's toll)
+    arriving: float = math.nan
+    selectors: list[SelectorRow] = field(default_factory=list)
+    splits: list[Split] = field(default_factory=list)
+    #: strategies whose variance is not split (hemisphere sampling, a laboratory technique), with the reason
+    unsplit: dict[str, str] = field(default_factory=dict)
+    #: shading points left out because their material is textured (their BSDF here would be the untextured one)
+    textured: int = 0
+    seconds: float = 0.0
+    skipped: str | None = None
+    #: per strategy label, the variance of one camera sample that its render measured (relMSE; compare fills it)
+    measured: dict[str, float] = field(default_factory=dict)
+
+
+# --- shading points -------------------------------------------------------------------------------------------------
+@dataclass
+class _Points:
+    point: np.ndarray
+    gnormal: np.ndarray
+    error: np.ndarray
+    frame: np.ndarray  # (N, 9): s, t, n
+    wo: np.ndarray  # local
+    material: np.ndarray
+
+
+@dataclass
+class _CameraSamples:
+    pixel: np.ndarray  # (S,) which of the measured pixels each camera sample is in
+    weight: np.ndarray  # (pixels,) each measured pixel's weight in a mean over the image (they sum to 1)
+    seen: np.ndarray  # (S,) luminance of what it sees directly
+    shaded: np.ndarray  # (S,) its row in the points, or -1 (nothing to shade)
+    points: _Points
+    textured: int  # pixels left out: a camera sample there met a textured material
+
+    def point_weights(self) -> np.ndarray:
+        """Each point's weight in a mean over the image's shaded camera samples."""
+        rows = self.shaded >= 0
+        w = self.weight[self.pixel[rows]]
+        return w / w.sum()
+
+
+def _first_hits(scene, arrays, lights, env, tracer, pixels, jitter):
+    """Camera rays through ``pixels`` (``jitter`` in [0, 1)^2), their first hits and the luminance of what each sees
+    itself: an emitter's radiance, or the infinite lights' where it leaves the scene (integrators/stages/setup.py)."""
+    dirs = _camera_batch(scene.camera.kernel_array(), pixels, jitter)
+    origin = np.asarray(scene.camera.origin, dtype=np.float64)
+    origins = np.ascontiguousarray(np.broadcast_to(origin, dirs.shape))
+    hits = tracer.intersect(origins, dirs)
+    at_camera = (origin[None, :], origin[None, :], np.zeros(1, np.bool_), np.zeros(dirs.shape[0], np.int64))
+    seen = _what_rays_see(arrays, lights, env, 0, *at_camera, origins, dirs, np.ones_like(dirs), hits)[1].sum(axis=1)
+    return hits, origin, dirs, seen
+
+
+def _camera_samples(scene: Scene, arrays, lights, env, tracer: RayTracer, n_pixels: int, seed: int) -> _CameraSamples:
+    """``PER_PIXEL`` camera samples (jittered) in each of ``n_pixels`` pixels, and their first hits' shading points.
+    The pixels are drawn in two strata (a stratified sample of the image, weighted to stay unbiased): pixels whose
+    ``PER_PIXEL`` trial rays meet more than one surface, or see different emitted light (edges: few, where the spread
+    within a pixel is), get half of them; the rest, the other half.  Pixels where a sample meets a textured material
+    are left out (its BSDF here would be the untextured one)."""
+    width, height = scene.camera.resolution
+    rng = np.random.default_rng(seed)
+    every = np.repeat(np.arange(width * height, dtype=np.int64), EDGE_TRIALS)
+    side = int(math.sqrt(EDGE_TRIALS))
+    cells = (np.stack(np.meshgrid(np.arange(side), np.arange(side), indexing="ij"), -1).reshape(-1, 2) + 0.5) / side
+    hits, _, _, seen = _first_hits(scene, arrays, lights, env, tracer, every, np.tile(cells, (width * height, 1)))
+    surface_id = (hits[1].astype(np.int64) * (1 << 40) + hits[2].astype(np.int64)).reshape(-1, EDGE_TRIALS)
+    seen = seen.reshape(-1, EDGE_TRIALS)
+    edge = (surface_id != surface_id[:, :1]).any(axis=1) | (
+        np.abs(seen - seen[:, :1]) > 1e-3 * (np.abs(seen[:, :1]) + 1e-3)
+    ).any(axis=1)
+    strata = [np.flatnonzero(edge), np.flatnonzero(~edge)]
+    wanted = min(strata[0].size, n_pixels // 2)
+    wanted = [wanted, min(strata[1].size, n_pixels - wanted)]
+    chosen, weight = [], []
+    for members, count in zip(strata, wanted, strict=True):
+        if count:
+            chosen.append(rng.choice(members, count, replace=False))
+            weight.append(np.full(count, members.size / count / (width * height)))
+    chosen, weight = np.concatenate(chosen), np.concatenate(weight)
+    pixels = np.repeat(chosen, PER_PIXEL)
+    hits, origin, dirs, seen = _first_hits(scene, arrays, lights, env, tracer, pixels, rng.random((pixels.size, 2)))
+    t, kind, index, prim, b1, b2 = hits
+    point, gnormal, error, frame, wo, material = _shading_batch(arrays, kind, index, prim, b1, b2, t, origin, dirs)
+    shaded = (material >= 0) & (wo[:, 2] > 0.0)
+    textured = (shaded & (arrays.material_textured[np.maximum(material, 0)] != 0)).reshape(-1, PER_PIXEL).any(axis=1)
+    keep = np.flatnonzero(~textured)
+    rows = (keep[:, None] * PER_PIXEL + np.arange(PER_PIXEL)).reshape(-1)
+    rows_shaded = rows[shaded[rows]]
+    index_of = np.full(rows.size, -1, np.int64)
+    index_of[shaded[rows]] = np.arange(rows_shaded.size)
+    points = _Points(
+        point[rows_shaded], gnormal[rows_shaded], error[rows_shaded], frame[rows_shaded], wo[rows_shaded],
+        material[rows_shaded],
+    )  # fmt: skip
+    kept = weight[keep]
+    return _CameraSamples(
+        np.repeat(np.arange(keep.size), PER_PIXEL), kept / max(kept.sum(), 1e-300), seen[rows], index_of, points,
+        int(textured.sum()),
+    )  # fmt: skip
+
+
+# --- light samples --------------------------------------------------------------------------------------------------
+@jit_parallel
+def _light_rows(lights, env, strategy, point, gnormal, error, frame, wo, kinds, params, material, compensated,
+                per_light, u, out, ray):  # fmt: skip
+    """Row r = (point i, light l, sample j), i-major: out[r] = (g = lum(f L cos) / p, p, the BSDF's pdf at the
+    direction (0 for a delta light), delta), ray[r] = its shadow ray (origin, direction, length; length 0: none)."""
+    n_lights = lights.kind.shape[0]
+    for r in prange(u.shape[0]):
+        i = r // (n_lights * per_light)
+        light = (r // per_light) % n_lights
+        px, py, pz = point[i, 0], point[i, 1], point[i, 2]
+        nx, ny, nz = gnormal[i, 0], gnormal[i, 1], gnormal[i, 2]
+        for c in range(4):
+            out[r, c] = 0.0
+        ray[r, 6] = 0.0
+        ls = light_sample_of(lights, env, light, strategy, compensated[i], px, py, pz, nx, ny, nz, u[r, 0], u[r, 1])
+        if ls.pdf <= 0.0 or (ls.r == 0.0 and ls.g == 0.0 and ls.b == 0.0):
+            continue
+        ts, tt, ns = frame[i, 0:3], frame[i, 3:6], frame[i, 6:9]
+        wi = to_local(ts, tt, ns, ls.wx, ls.wy, ls.wz)
+        w_o = (wo[i, 0], wo[i, 1], wo[i, 2])
+        m = material[i]
+        f = bsdf_eval(kinds[m], params[m], w_o, wi)
+        lum = (0.212671 * f[0] * ls.r + 0.715160 * f[1] * ls.g + 0.072169 * f[2] * ls.b) * wi[2]
+        if not lum > 0.0:
+            continue
+        delta = is_delta(lights, light)
+        out[r, 0] = lum / ls.pdf
+        out[r, 1] = ls.pdf
+        out[r, 2] = 0.0 if delta else bsdf_pdf(kinds[m], params[m], w_o, wi)
+        out[r, 3] = 1.0 if delta else 0.0
+        qx, qy, qz = ray_offset(px, py, pz, nx, ny, nz, error[i], ls.wx, ls.wy, ls.wz)
+        if ls.distance < math.inf:
+            o = ray_to_light(lights, light, px, py, pz, qx, qy, qz, ls.wx, ls.wy, ls.wz, ls.distance)
+        else:
+            o = (qx, qy, qz, ls.wx, ls.wy, ls.wz, math.inf)
+        for c in range(7):
+            ray[r, c] = o[c]
+
+
+@dataclass
+class _LightTerms:
+    g: np.ndarray  # (P, L, K) lum(f L cos) / p, unshadowed
+    pdf: np.ndarray  # (P, L, K) the point's density on the light
+    pb: np.ndarray  # (P, L, K) the BSDF's density at the direction
+    seen: np.ndarray  # (P, L, K) bool: the shadow ray arrives
+
+
+def _light_terms(arrays, lights, env, tracer, pts: _Points, compensated, strategy: str, per_light, rng) -> _LightTerms:
+    """Every light's ``per_light`` samples (a jittered grid) at every point, with their shadow rays, a chunk of points
+    at a time (the rays' records stay under ~40 MB)."""
+    n_points, n_lights = pts.point.shape[0], lights.kind.shape[0]
+    side = round(math.sqrt(per_light))
+    grid = (np.stack(np.meshgrid(np.arange(side), np.arange(side), indexing="ij"), -1).reshape(-1, 2) + 0.5) / side
+    shape = (n_points, n_lights, per_light)
+    g, pdf, pb = np.zeros(shape), np.zeros(shape), np.zeros(shape)
+    seen = np.zeros(shape, np.bool_)
+    chunk = max(1, (1 << 19) // (n_lights * per_light))
+    for lo in range(0, n_points, chunk):
+        hi = min(n_points, lo + chunk)
+        rows = (hi - lo) * n_lights * per_light
+        u = (np.tile(grid, ((hi - lo) * n_lights, 1)) + (rng.random((rows, 2)) - 0.5) / side) % 1.0
+        out = np.empty((rows, 4))
+        ray = np.empty((rows, 7))
+        _light_rows(
+            lights, env, LIGHT_STRATEGIES[strategy], pts.point[lo:hi], pts.gnormal[lo:hi], pts.error[lo:hi],
+            pts.frame[lo:hi], pts.wo[lo:hi], arrays.material_kind, arrays.material_params, pts.material[lo:hi],
+            compensated[lo:hi], per_light, u, out, ray,
+        )  # fmt: skip
+        arrives = out[:, 0] > 0.0
+        live = np.flatnonzero(arrives)
+        if live.size:
+            arrives[live] = ~tracer.occluded(ray[live, 0:3], ray[live, 3:6], ray[live, 6])
+        part = (hi - lo, n_lights, per_light)
+        g[lo:hi], pdf[lo:hi], pb[lo:hi] = out[:, 0].reshape(part), out[:, 1].reshape(part), out[:, 2].reshape(part)
+        seen[lo:hi] = arrives.reshape(part)
+    return _LightTerms(g, pdf, pb, seen)
+
+
+# --- BSDF samples ---------------------------------------------------------------------------------------------------
+@jit_parallel
+def _rays_see(s, lights, env, strategy, point, gnormal, compensated, owner, origins, dirs, weight, hits, light_of,
+              value, light_pdf):  # fmt: skip
+    kind, index, prim, b1, b2, t = hits[1], hits[2], hits[3], hits[4], hits[5], hits[0]
+    first = first_infinite(lights)
+    for r in prange(dirs.shape[0]):
+        i = owner[r]
+        px, py, pz = point[i, 0], point[i, 1], point[i, 2]
+        nx, ny, nz = gnormal[i, 0], gnormal[i, 1], gnormal[i, 2]
+        wx, wy, wz = dirs[r, 0], dirs[r, 1], dirs[r, 2]
+        e = 0
+        if kind[r] == MISS:
+            for light in range(first, lights.kind.shape[0]):
+                lr, lg, lb = infinite_radiance(lights, env, light, wx, wy, wz)
+                lum = 0.212671 * weight[r, 0] * lr + 0.715160 * weight[r, 1] * lg + 0.072169 * weight[r, 2] * lb
+                if lum > 0.0:
+                    light_of[r, e] = light
+                    value[r, e] = lum
+                    light_pdf[r, e] = light_pdf_of(lights, env, light, strategy, compensated[i], px, py, pz, nx, ny,
+                                                   nz, wx, wy, wz)  # fmt: skip
+                    e += 1
+            continue
+        light = emitter_of(s, kind[r], index[r], prim[r])
+        if light < 0:
+            continue
+        x = surface(s, kind[r], index[r], prim[r], b1[r], b2[r], origins[r, 0], origins[r, 1], origins[r, 2], wx, wy,
+                    wz, t[r])[0]  # fmt: skip
+        lr, lg, lb = emitted(lights, light, x[0], x[1], x[2], wx, wy, wz)
+        lum = 0.212671 * weight[r, 0] * lr + 0.715160 * weight[r, 1] * lg + 0.072169 * weight[r, 2] * lb
+        if lum > 0.0:
+            light_of[r, 0] = light
+            value[r, 0] = lum
+            light_pdf[r, 0] = light_pdf_of(lights, env, light, strategy, compensated[i], px, py, pz, nx, ny, nz, wx,
+                                           wy, wz)  # fmt: skip
+
+
+def _what_rays_see(s, lights, env, strategy, point, gnormal, compensated, owner, origins, dirs, weight, hits):
+    """For ray r (from point owner[r], ``weight`` its f cos / p): the lights it reaches (the emitter it hits, or
+    every infinite light where it leaves the scene), each with lum(weight L) and the light's density at the
+    direction (for the MIS weight): arrays (R, E) of light (-1: none), value and density, E = the number of infinite
+    lights (at least 1)."""
+    n_entries = max(1, int(flag_rows(lights.kind, "infinite").sum()))
+    out = (np.full((dirs.shape[0], n_entries), -1, np.int64), np.zeros((dirs.shape[0], n_entries)),
+           np.zeros((dirs.shape[0], n_entries)))  # fmt: skip
+    _rays_see(s, lights, env, strategy, point, gnormal, compensated, owner, origins, dirs, weight, hits, *out)
+    return out
+
+
+@dataclass
+class _BsdfTerms:
+    owner: np.ndarray  # (R,) the point of each entry
+    pb: np.ndarray  # (R,) the BSDF's density of the direction
+    light: np.ndarray  # (R, E) the light reached (-1: none)
+    value: np.ndarray  # (R, E) lum(f cos / pb L)
+    light_pdf: np.ndarray  # (R, E)
+
+
+def _bsdf_terms(arrays, lights, env, tracer, pts: _Points, compensated, strategy: str, count: int, rng) -> _BsdfTerms:
+    n_points = pts.point.shape[0]
+    owner = np.repeat(np.arange(n_points), count)
+    wi = np.zeros((owner.size, 3))
+    pb = np.zeros(owner.size)
+    weight = np.zeros((owner.size, 3))
+    u = rng.random((owner.size, 3))
+    for m in np.unique(pts.material):
+        rows = np.flatnonzero(pts.material[owner] == m)
+        wi[rows], pb[rows], weight[rows] = bsdf_sample_batch(
+            arrays.material_kind[m], arrays.material_params[m], np.ascontiguousarray(pts.wo[owner[rows]]), u[rows]
+        )
+    live = (pb > 0.0) & np.any(weight != 0.0, axis=1)
+    frame = pts.frame[owner].reshape(-1, 3, 3)  # rows s, t, n: world = local @ frame
+    dirs = np.einsum("ri,rij->rj", wi, frame)
+    dirs /= np.maximum(np.linalg.norm(dirs, axis=1, keepdims=True), 1e-300)
+    ng = pts.gnormal[owner]
+    side = np.where(np.einsum("ij,ij->i", dirs, ng) < 0.0, -1.0, 1.0)
+    origins = pts.point[owner] + (side * pts.error[owner])[:, None] * ng  # intersect.ray_offset
+    n_entries = max(1, int(flag_rows(lights.kind, "infinite").sum()))
+    light_of = np.full((owner.size, n_entries), -1, np.int64)
+    value = np.zeros((owner.size, n_entries))
+    light_pdf = np.zeros((owner.size, n_entries))
+    keep = np.flatnonzero(live)
+    if keep.size:
+        o, d = np.ascontiguousarray(origins[keep]), np.ascontiguousarray(dirs[keep])
+        light_of[keep], value[keep], light_pdf[keep] = _what_rays_see(
+            arrays, lights, env, LIGHT_STRATEGIES[strategy], pts.point, pts.gnormal, compensated, owner[keep], o, d,
+            np.ascontiguousarray(weight[keep]), tracer.intersect(o, d),
+        )  # fmt: skip
+    return _BsdfTerms(owner, pb, light_of, value, light_pdf)
+
+
+# --- the split ------------------------------------------------------------------------------------------------------
+def _light_moments(terms: _LightTerms, weight: np.ndarray | None):
+    """Per point and light: m = E[a V], u = E[a], s2 = E[(a V)^2], q2 = E[a^2], a = w g (the sample's value times
+    its selection probability)."""
+    a = terms.g if weight is None else terms.g * weight
+    av = np.where(terms.seen, a, 0.0)
+    return av.mean(axis=2), a.mean(axis=2), (av * av).mean(axis=2), (a * a).mean(axis=2)
+
+
+def _light_variance(moments, pmf: np.ndarray):
+    """Per point: (mean, choice, point, visibility) of the one-sample light estimator with selection ``pmf``."""
+    m, u, s2, q2 = moments
+    picked = pmf > 0.0
+    inv = np.where(picked, 1.0 / np.where(picked, pmf, 1.0), 0.0)
+    mean = np.where(picked, m, 0.0).sum(axis=1)  # a light never picked gives nothing (its MIS weight is 0)
+    choice = (m * m * inv).sum(axis=1) - mean * mean
+    c = np.where(u > 0.0, m / np.where(u > 0.0, u, 1.0), 0.0)
+    point = (c * c * np.maximum(q2 - u * u, 0.0) * inv).sum(axis=1)
+    within = ((s2 - m * m) * inv).sum(axis=1)
+    return mean, np.maximum(choice, 0.0), point, within - point
+
+
+def _bsdf_values(terms: _BsdfTerms, n_points: int, pmf, n_light, n_bsdf, beta):
+    """Per BSDF sample, its MIS-weighted value (``pmf`` None: BSDF sampling alone, weight 1)."""
+    value = terms.value.copy()
+    if pmf is not None:
+        for e in range(value.shape[1]):
+            rows = np.flatnonzero(terms.light[:, e] >= 0)
+            p_light = pmf[terms.owner[rows], terms.light[rows, e]] * terms.light_pdf[rows, e]
+            value[rows, e] *= _mis(n_bsdf, terms.pb[rows], n_light, p_light, beta)
+    return value.sum(axis=1).reshape(n_points, -1)
+
+
+def _mis(n_f, p_f, n_g, p_g, beta) -> np.ndarray:
+    """The renderer's MIS weight (sampling/mis.py) of samples of technique f against g."""
+    if beta == 1.0:
+        return balance_heuristic(p_f, p_g, n_f=n_f, n_g=n_g)
+    return power_heuristic(p_f, p_g, n_f=n_f, n_g=n_g, beta=beta)
+
+
+def _light_weights(terms: _LightTerms, pmf: np.ndarray, n_light, n_bsdf, beta) -> np.ndarray:
+    return _mis(n_light, pmf[:, :, None] * terms.pdf, n_bsdf, terms.pb, beta)
+
+
+def _relative(variance: np.ndarray, mean: np.ndarray, weight: np.ndarray) -> float:
+    """The weighted mean of variance / (mean^2 + DARK): a relMSE's terms."""
+    return float(np.sum(weight * variance / (mean * mean + DARK)))
+
+
+def _selector_pmf(selector, pts: _Points, compensated) -> np.ndarray:
+    return np.stack(
+        [_pmf_all(selector, pts.point[i], pts.gnormal[i], bool(compensated[i])) for i in range(pts.point.shape[0])]
+    )
+
+
+def measure(
+    scene: Scene,
+    strategies: list[tuple[str, RenderSettings, dict | None]],
+    *,
+    points: int = 512,
+    per_light: int | None = None,
+    bsdf_samples: int = 64,
+    seed: int = 11,
+    user_selectors=(),
+) -> LightChoice | None:
+    """The oracle table and each strategy's split (``strategies``: (label, settings, the learned table of its
+    render or None)), at ``points`` camera samples (``PER_PIXEL`` in each pixel measured); None for a scene with
+    fewer than two lights (an environment map's own sampling is the laboratory's ``check`` and shading-point
+    experiment).  ``user_selectors``: :class:`lightprobe.lab.selectors.GuardedSelector` s.  ``per_light``, a square
+    number: samples of each light at each point (default: the most of 16 .. 256 that ``RAY_BUDGET`` allows; a light's
+    variance over its points is heavy-tailed where a glossy lobe meets a broad light, and few samples underestimate
+    it)."""
+    with _quiet_compiling():
+        return _measure(scene, strategies, points, per_light, bsdf_samples, seed, user_selectors)
+
+
+def _measure(scene, strategies, points, per_light, bsdf_samples, seed, user_selectors) -> LightChoice | None:
+    start = time.perf_counter()
+    lights = scene.light_table()
+    n_lights = lights.kind.shape[0]
+    if n_lights < 2:
+        return None
+    if per_light is None:
+        side = int(math.sqrt(RAY_BUDGET / max(points, 1) / n_lights))
+        per_light = min(max(side, 4), 16) ** 2
+    side = round(math.sqrt(per_light))
+    if per_light < 1 or side * side != per_light:
+        raise ValueError(f"per_light must be a square number, got {per_light}")
+    n_pixels = min(points, RAY_BUDGET // (n_lights * per_light)) // PER_PIXEL
+    result = LightChoice(points=0, lights=n_lights, per_light=per_light, bsdf_samples=bsdf_samples)
+    if n_pixels * PER_PIXEL < MIN_POINTS:
+        result.skipped = (
+            f"{n_lights} lights are too many for the brute-force oracle ({MIN_POINTS} points x {n_lights} lights x "
+            f"{per_light} samples would exceed {RAY_BUDGET} shadow rays)"
+        )
+        return result
+    arrays = scene.compile()
+    tracer = RayTracer(arrays)
+    env = (scene.environment if scene.environment is not None else _placeholder()).kernel
+    rng = np.random.default_rng(seed)
+    try:
+        cams = _camera_samples(scene, arrays, lights, env, tracer, n_pixels, seed)
+        pts = cams.points
+        result.points, result.textured = pts.point.shape[0], cams.textured
+        if result.points == 0:
+            result.skipped = "the camera sees no surface to shade"
+            return result
+        cache: dict = {}
+
+        def terms_for(light_strategy: str, compensated: np.ndarray):
+            key = (light_strategy, compensated.tobytes())
+            if key not in cache:
+                cache[key] = (
+                    _light_terms(arrays, lights, env, tracer, pts, compensated, light_strategy, per_light, rng),
+                    _bsdf_terms(arrays, lights, env, tracer, pts, compensated, light_strategy, bsdf_samples, rng),
+                )
+            return cache[key]
+
+        _selectors(result, scene, strategies, user_selectors, lights, arrays, cams, terms_for, seed)
+        for label, settings, table in strategies:
+            _split(result, scene, label, settings, table, cams, arrays, terms_for)
+    finally:
+        tracer.close()
+    result.seconds = time.perf_counter() - start
+    return result
+
+
+def check_selectors(scene: Scene, user_selectors, *, points: int = 64, seed: int = 11) -> None:
+    """Run the guards' checks of ``user_selectors`` at ``points`` camera samples' shading points (cheap: no light is
+    sampled), so that a selector that breaks its contract fails before anything is rendered; a scene with fewer than
+    two lights is an error (there is no choice to make)."""
+    if not user_selectors:
+        return
+    lights = scene.light_table()
+    if lights.kind.shape[0] < 2:
+        raise ParameterError(
+            f"scene {scene.name!r} has {lights.kind.shape[0]} light(s): a light selector needs two or more to choose "
+            "from"
+        )
+    arrays = scene.compile()
+    tracer = RayTracer(arrays)
+    env = (scene.environment if scene.environment is not None else _placeholder()).kernel
+    try:
+        with _quiet_compiling():
+            pts = _camera_samples(scene, arrays, lights, env, tracer, max(1, points // PER_PIXEL), seed).points
+    finally:
+        tracer.close()
+    if pts.point.shape[0] == 0:
+        return
+    for guarded in user_selectors:
+        guarded.pmf_matrix(pts.point, pts.gnormal, lights, seed=seed)
+
+
+def _selectors(result, scene, strategies, user_selectors, lights, arrays, cams, terms_for, seed) -> None:
+    """The table of selectors, light sampling alone (no MIS weight), with the first strategy's light sampling."""
+    pts = cams.points
+    plan = resolve(scene, strategies[0][1] if strategies else RenderSettings())
+    compensated = _compensated_materials(arrays.material_kind, plan.compensated)[pts.material]
+    light_terms, _ = terms_for(plan.settings.light_strategy, compensated)
+    moments = _light_moments(light_terms, None)
+    m, u = moments[0], moments[1]
+    result.arriving = float(m.sum() / max(u.sum(), 1e-300))
+    pmfs = {name: _selector_pmf(_built(name, lights, scene), pts, compensated) for name in BUILTIN_SELECTORS}
+    for label, settings, table in strategies:
+        if settings.light_sampler == "learned":  # what its render learned; one that learned nothing picks as the BVH
+            learned = resolve(scene, settings).selector
+            if table is not None:
+                pmfs[f"learned ({label})"] = _selector_pmf(restored(learned, table), pts, compensated)
+            else:
+                pmfs[f"learned ({label}): learned nothing, the bvh"] = _selector_pmf(learned, pts, compensated)
+    for guarded in user_selectors:
+        pmfs[guarded.label] = guarded.pmf_matrix(pts.point, pts.gnormal, lights, seed=seed)
+    pmfs["unoccluded oracle"] = u / np.maximum(u.sum(axis=1, keepdims=True), 1e-300)
+    pmfs["oracle"] = m / np.maximum(m.sum(axis=1, keepdims=True), 1e-300)
+    rms = np.sqrt(moments[2])
+    pmfs["variance-optimal"] = rms / np.maximum(rms.sum(axis=1, keepdims=True), 1e-300)
+    oracle_mean, *oracle_parts = _light_variance(moments, pmfs["oracle"])
+    weight = cams.point_weights()
+    oracle_total = _relative(sum(oracle_parts), oracle_mean, weight)
+    for name, pmf in pmfs.items():
+        mean, choice, point, visibility = _light_variance(moments, pmf)
+        if name == "oracle":
+            choice = np.zeros_like(choice)  # by construction: what is left is rounding
+        total = _relative(choice + point + visibility, mean, weight)
+        result.selectors.append(
+            SelectorRow(name, _relative(choice, mean, weight), total, total / oracle_total if oracle_total > 0 else 1.0)
+        )
+
+
+def _split(result: LightChoice, scene, label, settings, table, cams: _CameraSamples, arrays, terms_for) -> None:
+    """Strategy ``label``'s variance of one camera sample, split, each term a share of the pixels' 1-spp relMSE."""
+    if settings.strategy not in SPLIT_STRATEGIES:
+        result.unsplit[label] = f"strategy {settings.strategy!r} samples neither the lights nor the BSDF"
+        return
+    pts = cams.points
+    plan = resolve(scene, settings)
+    resolved = plan.settings
+    selector = plan.selector
+    if resolved.light_sampler == "learned" and table is not None:
+        selector = restored(selector, table)
+    compensated = _compensated_materials(arrays.material_kind, compensation_for(scene, resolved))[pts.material]
+    light_terms, bsdf_terms = terms_for(resolved.light_strategy, compensated)
+    pmf = _selector_pmf(selector, pts, compensated)
+    slots = resolved.n_bsdf + resolved.light_samples
+    n_points = pts.point.shape[0]
+    weight = None
+    if resolved.strategy == "mis":
+        n_light, n_bsdf = resolved.light_samples, resolved.n_bsdf
+        beta = 1.0 if resolved.heuristic == "balance" else 2.0
+        weight = _light_weights(light_terms, pmf, n_light, n_bsdf, beta) if n_bsdf else None
+        bsdf = _bsdf_values(bsdf_terms, n_points, pmf, n_light, n_bsdf, beta)
+    elif resolved.strategy == "env":
+        n_light, n_bsdf, bsdf = slots, 0, np.zeros((n_points, 1))
+    else:
+        n_light, n_bsdf = 0, slots
+        bsdf = _bsdf_values(bsdf_terms, n_points, None, 0, slots, 1.0)
+    zero = np.zeros(n_points)
+    mean_l, choice, point, visibility, noise_l = zero, zero, zero, zero, zero
+    if n_light:
+        moments = _light_moments(light_terms, weight)
+        mean_l, choice, point, visibility = _light_variance(moments, pmf)
+        m, _, s2, _ = moments
+        noise_l = np.where(pmf > 0.0, s2 - m * m, 0.0).sum(axis=1) / light_terms.g.shape[2]
+    var_bsdf = bsdf.var(axis=1) if n_bsdf else zero
+    terms = {
+        "choice": choice / max(n_light, 1),
+        "point": point / max(n_light, 1),
+        "visibility": visibility / max(n_light, 1),
+        "bsdf": var_bsdf / max(n_bsdf, 1),
+    }
+    # per camera sample: what it sees itself plus the direct light at its point (estimated: noise is that estimate's
+    # variance, taken out of the spread within the pixel), and its terms (0 where there is nothing to shade)
+    row = cams.shaded
+    shaded = row >= 0
+    value = cams.seen.copy()
+    value[shaded] += (mean_l + bsdf.mean(axis=1))[row[shaded]]
+    noise = np.zeros(row.size)
+    noise[shaded] = (noise_l + var_bsdf / bsdf.shape[1])[row[shaded]]
+    per_pixel = value.reshape(-1, PER_PIXEL)
+    guard = per_pixel.mean(axis=1) ** 2 + DARK
+    shares = {}
+    for name, term in terms.items():
+        t = np.zeros(row.size)
+        t[shaded] = term[row[shaded]]
+        shares[name] = float(np.sum(cams.weight * t.reshape(-1, PER_PIXEL).mean(axis=1) / guard))
+    spread = per_pixel.var(axis=1, ddof=1) - noise.reshape(-1, PER_PIXEL).mean(axis=1)
+    result.splits.append(
+        Split(
+            label,
+            resolved.light_sampler if n_light else "-",
+            **shares,
+            pixel=float(np.sum(cams.weight * spread / guard)),
+        )
+    )
+
+
+@contextmanager
+def _quiet_compiling():
+    """Numba's SSA pass notes, while compiling _rays_see, variables of the inlined light-pdf dispatch it cannot place
+    ("an internal pedantic check"): not the user's concern, and the code it compiles is right (the tests compare the
+    split with renders)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", NumbaIRAssumptionWarning)
+        yield
+
+
+def _built(name: str, lights, scene):
+    environment = scene.environment
+    return build_selector(
+        name,
+        lights,
+        env_irradiance=environment.irradiance_terms if environment is not None else None,
+        env_irradiance_compensated=environment.compensated_irradiance_terms if environment is not None else None,
+    )
+
+
+def _placeholder():
+    from ..emitters.envmap import placeholder_environment
+
+    return placeholder_environment()

@@ -1,0 +1,61 @@
+"""Light selectors for the tests: each breaks the contract (lightprobe/lab/selectors.py) in one way."""
+
+import numpy as np
+
+
+class _Uniform:
+    def select(self, ctx, u):
+        n = ctx.lights.count
+        light = np.minimum((u * n).astype(np.int64), n - 1)
+        return light, np.full(len(ctx), 1.0 / n)
+
+    def pmf(self, ctx, light):
+        return np.full(len(ctx), 1.0 / ctx.lights.count)
+
+
+class OutOfRange(_Uniform):
+    def select(self, ctx, u):
+        light, pmf = super().select(ctx, u)
+        return light + 1, pmf  # the last light's pick is past the table
+
+
+class ZeroForItsPick(_Uniform):
+    def select(self, ctx, u):
+        light, pmf = super().select(ctx, u)
+        return light, np.where(light == 0, 0.0, pmf)
+
+
+class NotNormalised(_Uniform):
+    def pmf(self, ctx, light):
+        return np.full(len(ctx), 1.1 / ctx.lights.count)
+
+
+class SelectSaysOtherwise(_Uniform):
+    def select(self, ctx, u):
+        light, pmf = super().select(ctx, u)
+        return light, pmf * 0.5
+
+
+class PicksTheFirstTooOften(_Uniform):
+    """Its pmf() is uniform, its picks are not: light 0 gets half of them."""
+
+    def select(self, ctx, u):
+        n = ctx.lights.count
+        light = np.where(u < 0.5, 0, np.minimum(((u - 0.5) * 2 * n).astype(np.int64), n - 1))
+        return light, np.full(len(ctx), 1.0 / n)
+
+
+class Raises(_Uniform):
+    def pmf(self, ctx, light):
+        raise RuntimeError("no pmf today")
+
+
+class WrongShape(_Uniform):
+    def pmf(self, ctx, light):
+        return np.full((len(ctx), 2), 0.5)
+
+
+class FloatIndices(_Uniform):
+    def select(self, ctx, u):
+        light, pmf = super().select(ctx, u)
+        return light.astype(np.float64), pmf
