@@ -1,18 +1,28 @@
 #!/usr/bin/env python3
-"""How far each light selector is from the best possible one, on a suite scene (issue 59, item 3's oracle).
+"""How far each light selector is from the oracle, where the default render's variance comes from, and what
+resampling the light sample (RIS) could give, on the suite's scenes (issue 59, items 2 and 3).
 
-    python benchmarks/selection_oracle.py                    # the building, 300 points, 16 samples per light
-    python benchmarks/selection_oracle.py --scene city --points 200
+    python benchmarks/selection_oracle.py                          # building, area, many, ceiling, dome, glossy
+    python benchmarks/selection_oracle.py --scenes building --candidates 1 2 4 8 16 32
 
-At ``--points`` shading points the camera sees (pixel centres, Lambertian surfaces), every bounded light's true
-contribution C_l = (albedo / pi) integral of L cos V over the light is estimated by brute force: ``--light-samples``
-stratified samples on each light, each with its shadow ray.  A selector that picks light l with probability p_l
-(then samples the light exactly) has a one-sample estimate of sum C with relative second moment
-sum_l (C_l^2 / p_l) / (sum C)^2; 1 is the best possible (the oracle, p_l proportional to C_l, visibility included),
-and it minus 1 is the relative variance that the choice of light adds.  Printed per selector, the mean and the median
-over the points, for the BVH (what lightprobe picks by default), the learned selector (what a 64-spp render of the
-scene learned: ``light_sampler = "learned"``), and two oracles: the unoccluded one (p_l proportional to the light's
-contribution without shadows: the best any selector blind to visibility can do) and the true one (1 by construction).
+Per scene, from ``lightprobe.experiments.light_choice`` (what ``compare``'s report shows): every selector's
+light-sample variance over the oracle's (lightprobe's uniform, power, bvh; the selection a 64-spp
+``light_sampler = "learned"`` render learned; the unoccluded oracle, the oracle, the variance-optimal choice), and
+the default strategy's one-sample variance split into the choice of light, the point on it, visibility, the BSDF
+sample and the pixel.
+
+RIS: resampled importance sampling of the light sample over M candidates drawn as today (a BVH pick, then the light's
+own sampling), the target the unshadowed contribution lum(f L cos): one candidate kept in proportion to its weight
+w = target / (pmf p), the estimate V f L cos / target x mean(w) (Talbot et al. 2005), unbiased for any M.  Its
+variance is simulated at the same shading points from the brute-force tables (``--trials`` RIS draws a point), light
+sampling alone.  What M candidates cost is measured: a render of the default strategy's ``light_samples`` stage time
+per light sample (a pick and a light sample) plus its ``finish`` stage time per slot (the BSDF evaluation a
+candidate's target needs); the predicted efficiency against M = 1 is then
+
+    (V_light(1) + V_rest) T / ((V_light(M) + V_rest) (T + (M - 1) n_light t_candidate))
+
+with V_rest the split's BSDF and pixel terms and T the render's seconds per camera sample: an upper bound under MIS,
+whose weights, taken from the source density, give resampled samples less (decisions.md 24).
 """
 
 from __future__ import annotations
@@ -20,6 +30,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -27,152 +38,104 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-
-def _learned_selector(scene, spp: int):
-    """The selector a render of ``scene`` at ``spp`` learned (and that render's shading points at 1 spp)."""
-    from lightprobe.integrators import light_learning
-    from lightprobe.integrators.wavefront import RenderSettings, render
-
-    kept = {}
-    original = light_learning.Learning.learn
-
-    def learn(self):
-        kept["selector"] = original(self)
-        return kept["selector"]
-
-    light_learning.Learning.learn = learn
-    try:
-        render(scene, RenderSettings(spp=spp, light_sampler="learned", seed=7))
-    finally:
-        light_learning.Learning.learn = original
-    return kept["selector"]
+SCENES = ("building", "area", "many", "ceiling", "dome", "glossy")
 
 
-def _shading_points(scene, count: int, seed: int):
-    """(points, normals, albedo luminance) of up to ``count`` pixel centres whose camera ray meets a Lambertian
-    surface, each point offset along its normal toward the camera."""
-    from lightprobe.bsdfs.lambert import LAMBERT
+def ris_variance(g, seen, pmf, weight, m: int, trials: int, rng) -> float:
+    """The weighted mean over the points of the RIS estimator's variance / (mean^2 + 0.01), M = ``m`` candidates
+    from ``pmf`` (then a uniform pick among a light's samples)."""
+    n_points, n_lights, k = g.shape
+    truth = np.where(seen, g, 0.0).mean(axis=2).sum(axis=1)
+    out = np.zeros(n_points)
+    for i in range(n_points):
+        if truth[i] <= 0.0:
+            continue
+        cdf = np.cumsum(pmf[i])
+        light = np.minimum(np.searchsorted(cdf / cdf[-1], rng.random((trials, m)), side="right"), n_lights - 1)
+        sample = rng.integers(0, k, (trials, m))
+        w = g[i, light, sample] / pmf[i][light]
+        total = w.sum(axis=1)
+        kept = np.minimum((np.cumsum(w, axis=1) < (rng.random(trials) * total)[:, None]).sum(axis=1), m - 1)
+        estimate = np.where(total > 0.0, seen[i, light, sample][np.arange(trials), kept] * total / m, 0.0)
+        out[i] = estimate.var() / (truth[i] ** 2 + 0.01)
+    return float(np.sum(weight * out))
+
+
+def candidate_cost(scene_name: str, spp: int) -> tuple[float, float, int]:
+    """(seconds per camera sample, seconds per RIS candidate, light samples per camera sample) of a default render."""
     from lightprobe.integrators import wavefront
-    from lightprobe.integrators.wavefront import RenderSettings
+    from lightprobe.integrators.wavefront import RenderSettings, render
+    from lightprobe.reference_scenes import build
 
-    kept = {}
-    original = wavefront._Pass.run
-
-    def run(self, acc, pixels, spp_now, sample_start):
-        rays = original(self, acc, pixels, spp_now, sample_start)
-        n = pixels.size * spp_now
-        kept.update(point=self.cams.point[:n].copy(), normal=self.cams.gnormal[:n].copy(),
-                    material=self.cams.material[:n].copy(), pixels=pixels.copy(), arrays=self.scene)  # fmt: skip
-        return rays
-
-    wavefront._Pass.run = run
+    settings = RenderSettings(spp=spp, adaptive=False, seed=1)
+    render(build(scene_name), RenderSettings(spp=1, adaptive=False))  # compiled and warm
+    wavefront.PROFILE = {}
     try:
-        wavefront.render(scene, RenderSettings(spp=1, adaptive=False, seed=seed))
+        result = render(build(scene_name), settings)
+        profile = dict(wavefront.PROFILE)
     finally:
-        wavefront._Pass.run = original
-    arrays = kept["arrays"]
-    material = kept["material"]
-    lambert = (material >= 0) & (arrays.material_kind[np.maximum(material, 0)] == LAMBERT)
-    rows = np.flatnonzero(lambert)
-    rows = np.random.default_rng(seed).choice(rows, min(count, rows.size), replace=False)
-    albedo = np.array([_albedo(scene, m) for m in material[rows]])
-    return kept["point"][rows], kept["normal"][rows], albedo
-
-
-def _albedo(scene, material_index: int) -> float:
-    """The luminance of a Lambertian material's albedo, by its index in the scene's materials."""
-    from lightprobe.color import luminance
-
-    material = list(scene.materials.values())[material_index]
-    return float(luminance(np.asarray(material.albedo, dtype=np.float64)))
-
-
-def contributions(scene, lights, points, normals, albedo, per_light: int, tracer) -> tuple[np.ndarray, np.ndarray]:
-    """(with shadows, without) each bounded light's contribution at each point: (points, lights) arrays of the
-    luminance of (albedo / pi) L cos / pdf averaged over ``per_light`` stratified samples of the light."""
-    from lightprobe.emitters.kinds import flag_rows
-    from lightprobe.emitters.lights import sample_batch
-
-    bounded = np.flatnonzero(~flag_rows(lights.kind, "infinite"))
-    n, k = points.shape[0], per_light
-    side = int(np.sqrt(k))
-    grid = (np.stack(np.meshgrid(np.arange(side), np.arange(side), indexing="ij"), -1).reshape(-1, 2) + 0.5) / side
-    rng = np.random.default_rng(3)
-    seen = np.zeros((n, bounded.size))
-    open_ = np.zeros((n, bounded.size))
-    p = np.repeat(points, grid.shape[0], axis=0)
-    nrm = np.repeat(normals, grid.shape[0], axis=0)
-    for j, light in enumerate(bounded):
-        u = (np.tile(grid, (n, 1)) + rng.random((n * grid.shape[0], 2)) / side) % 1.0
-        s = sample_batch(lights, int(light), p, nrm, u)
-        w, dist, radiance, pdf = s[:, 0:3], s[:, 3], s[:, 4:7], s[:, 7]
-        cos = np.maximum(np.einsum("ij,ij->i", w, nrm), 0.0)
-        lum = radiance @ np.array([0.212671, 0.715160, 0.072169])
-        value = np.where(pdf > 0.0, lum * cos / np.where(pdf > 0.0, pdf, 1.0), 0.0)
-        live = value > 0.0
-        blocked = np.zeros(value.size, bool)
-        if live.any():
-            origins = p[live] + 1e-4 * nrm[live]  # off the surface, on the lit side (cos > 0)
-            blocked[live] = tracer.occluded(origins, w[live], dist[live] * (1.0 - 1e-4))
-        open_[:, j] = value.reshape(n, -1).mean(axis=1)
-        seen[:, j] = np.where(blocked, 0.0, value).reshape(n, -1).mean(axis=1)
-    scale = (albedo / np.pi)[:, None]
-    return seen * scale, open_ * scale
-
-
-def relative_second_moment(c: np.ndarray, pmf: np.ndarray) -> np.ndarray:
-    """Per point, sum_l C_l^2 / p_l / (sum C)^2 (inf where a light that gives something has p_l = 0)."""
-    total = c.sum(axis=1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        terms = np.where(c > 0.0, c * c / pmf, 0.0)
-    return terms.sum(axis=1) / np.maximum(total * total, 1e-300)
+        wavefront.PROFILE = None
+    stats = result.stats
+    samples = result.counts.size * spp
+    n_light, n_bsdf = stats["lights_per_sample"] * stats["n_env"], stats["n_bsdf"]
+    per_candidate = profile.get("light_samples", 0.0) / (samples * n_light) + profile.get("finish", 0.0) / (
+        samples * (n_light + n_bsdf)
+    )
+    return stats["seconds"] / samples, per_candidate, n_light
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--scene", default="building")
-    parser.add_argument("--points", type=int, default=300)
-    parser.add_argument("--light-samples", type=int, default=16, help="per light and point (a square number)")
+    parser.add_argument("--scenes", nargs="+", default=list(SCENES))
+    parser.add_argument("--points", type=int, default=512, help="camera samples measured (4 a pixel)")
     parser.add_argument("--learn-spp", type=int, default=64, help="the render whose learning is measured")
+    parser.add_argument("--candidates", type=int, nargs="+", default=[1, 2, 4, 8, 16])
+    parser.add_argument("--trials", type=int, default=4000, help="RIS draws at each point")
+    parser.add_argument("--cost-spp", type=int, default=16, help="the render that times a candidate")
     args = parser.parse_args()
-    from lightprobe.emitters.selection import LightSampler
-    from lightprobe.geometry.raytracer import RayTracer
+    warnings.filterwarnings("ignore", module="numba")
+    from lightprobe.experiments.light_choice import measure
+    from lightprobe.integrators.wavefront import RenderSettings, render, settings_for
     from lightprobe.reference_scenes import build
 
-    start = time.perf_counter()
-    scene = build(args.scene)
-    lights = scene.light_table()
-    learned = _learned_selector(build(args.scene), args.learn_spp)
-    points, normals, albedo = _shading_points(build(args.scene), args.points, seed=11)
-    tracer = RayTracer(scene.compile())
-    try:
-        seen, unoccluded = contributions(scene, lights, points, normals, albedo, args.light_samples, tracer)
-    finally:
-        tracer.close()
-    bvh = LightSampler("bvh", lights)
-    mine = LightSampler("bvh", lights)
-    mine.arrays = learned
-    n_bounded = seen.shape[1]
-    rows = {"bvh": [], "learned": []}
-    for i in range(points.shape[0]):
-        for name, sampler in (("bvh", bvh), ("learned", mine)):
-            pmf = sampler.pmf(points[i], normals[i])[:n_bounded]
-            rows[name].append(pmf / max(pmf.sum(), 1e-300))  # given a bounded pick (no infinite light here)
-    lit = seen.sum(axis=1) > 0.0
-    print(f"{args.scene}: {points.shape[0]} Lambertian points, {lit.sum()} lit; {n_bounded} lights; "
-          f"{args.light_samples} samples a light; the share of their unoccluded light that arrives: "
-          f"{seen[lit].sum() / unoccluded[lit].sum():.3f}")  # fmt: skip
-    selectors = {
-        "bvh": np.array(rows["bvh"]),
-        "learned": np.array(rows["learned"]),
-        "unoccluded oracle": unoccluded / np.maximum(unoccluded.sum(axis=1, keepdims=True), 1e-300),
-        "oracle": seen / np.maximum(seen.sum(axis=1, keepdims=True), 1e-300),
-    }
-    for name, pmf in selectors.items():
-        m = relative_second_moment(seen[lit], pmf[lit]) - 1.0
-        print(f"  {name:18s} relative variance added by the choice of light: mean {np.mean(m):9.3f}  "
-              f"median {np.median(m):8.3f}  90th percentile {np.quantile(m, 0.9):9.3f}")  # fmt: skip
-    print(f"  ({time.perf_counter() - start:.0f} s)")
+    for name in args.scenes:
+        start = time.perf_counter()
+        learned = render(build(name), RenderSettings(spp=args.learn_spp, light_sampler="learned", seed=3))
+        scene = build(name)
+        strategies = [
+            ("mis", settings_for(scene, RenderSettings(adaptive=False)), None),
+            ("learned", settings_for(scene, RenderSettings(adaptive=False, light_sampler="learned")),
+             learned.accumulator.learned),
+        ]  # fmt: skip
+        found = measure(scene, strategies, points=args.points, keep_tables=True)
+        if found is None or found.skipped:
+            print(f"{name}: not measured ({'fewer than two lights' if found is None else found.skipped})")
+            continue
+        print(f"== {name}: {found.points} points, {found.lights} lights, {found.per_light} samples a light, "
+              f"{100 * found.arriving:.1f} % of the unoccluded light arrives ({found.seconds:.1f} s)")  # fmt: skip
+        for row in found.selectors:
+            print(f"  {row.name:42s} choice {row.choice:10.4g}  light sample {row.total:10.4g}  "
+                  f"x oracle {row.vs_oracle:9.3g}")  # fmt: skip
+        for split in found.splits:
+            parts = {k: getattr(split, k) for k in ("choice", "point", "visibility", "bsdf", "pixel")}
+            shares = "  ".join(f"{k} {100 * v / split.total:5.1f} %" for k, v in parts.items())
+            print(f"  split {split.label:8s} [{split.selector}] {shares}  one-sample relMSE {split.total:.4g}")
+        tables, default = found.tables, found.splits[0]
+        rng = np.random.default_rng(1)
+        ris = {m: ris_variance(tables["g"], tables["seen"], tables["pmfs"]["bvh"], tables["weight"], m, args.trials,
+                               rng) for m in args.candidates}  # fmt: skip
+        seconds, per_candidate, n_light = candidate_cost(name, args.cost_spp)
+        light = default.choice + default.point + default.visibility
+        rest = default.bsdf + default.pixel
+        print(f"  RIS over BVH candidates (light sampling alone; a candidate {1e9 * per_candidate:.0f} ns, a camera "
+              f"sample {1e9 * seconds:.0f} ns, {n_light} light samples each):")  # fmt: skip
+        for m, v in ris.items():
+            scale = v / ris[args.candidates[0]]
+            cost = (seconds + (m - 1) * n_light * per_candidate) / seconds
+            efficiency = (light + rest) / (light * scale + rest) / cost
+            print(f"    M = {m:3d}: light-sample variance {v:9.4g} ({scale:6.3f} of M = 1), time x {cost:5.2f}, "
+                  f"predicted efficiency x {efficiency:5.2f}")  # fmt: skip
+        print(f"  ({time.perf_counter() - start:.0f} s)", flush=True)
     return 0
 
 

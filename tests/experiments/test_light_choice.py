@@ -125,8 +125,15 @@ def test_nothing_blocked_no_visibility_term():
 def test_measured_twice_the_same():
     runs = [("env", RenderSettings(strategy="env"), None)]
     first = lc.measure(lit_floor(), runs, points=64, seed=3)
-    second = lc.measure(lit_floor(), runs, points=64, seed=3)
+    second = lc.measure(lit_floor(), runs, points=64, seed=3, keep_tables=True)
     assert first.splits == second.splits and first.selectors == second.selectors
+    # the tables behind the selectors' rows, for experiments beyond the report (benchmarks/selection_oracle.py)
+    assert first.tables is None
+    g, pmfs = second.tables["g"], second.tables["pmfs"]
+    assert g.shape == (second.points, 3, second.per_light) == second.tables["seen"].shape
+    assert set(pmfs) == {row.name for row in second.selectors}
+    np.testing.assert_allclose(pmfs["oracle"].sum(axis=1), 1.0)
+    assert second.tables["weight"].sum() == pytest.approx(1.0)
 
 
 def test_scenes_without_a_choice_or_with_too_many_lights():

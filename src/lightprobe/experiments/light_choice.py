@@ -137,6 +137,10 @@ class LightChoice:
     skipped: str | None = None
     #: per strategy label, the variance of one camera sample that its render measured (relMSE; compare fills it)
     measured: dict[str, float] = field(default_factory=dict)
+    #: with ``measure(..., keep_tables=True)``: the light samples of the selectors' table (``g``, ``seen``: (points,
+    #: lights, samples) of lum(f L cos) / p and the shadow rays' verdicts), every selector's pmf (points, lights) and
+    #: the points' weights, for experiments beyond the report (benchmarks/selection_oracle.py)
+    tables: dict | None = field(default=None, repr=False)
 
 
 # --- shading points -------------------------------------------------------------------------------------------------
@@ -460,6 +464,7 @@ def measure(
     bsdf_samples: int = 64,
     seed: int = 11,
     user_selectors=(),
+    keep_tables: bool = False,
 ) -> LightChoice | None:
     """The oracle table and each strategy's split (``strategies``: (label, settings, the learned table of its
     render or None)), at ``points`` camera samples (``PER_PIXEL`` in each pixel measured); None for a scene with
@@ -469,10 +474,10 @@ def measure(
     variance over its points is heavy-tailed where a glossy lobe meets a broad light, and few samples underestimate
     it)."""
     with _quiet_compiling():
-        return _measure(scene, strategies, points, per_light, bsdf_samples, seed, user_selectors)
+        return _measure(scene, strategies, points, per_light, bsdf_samples, seed, user_selectors, keep_tables)
 
 
-def _measure(scene, strategies, points, per_light, bsdf_samples, seed, user_selectors) -> LightChoice | None:
+def _measure(scene, strategies, points, per_light, bsdf_samples, seed, user_selectors, keep_tables):
     start = time.perf_counter()
     lights = scene.light_table()
     n_lights = lights.kind.shape[0]
@@ -514,7 +519,7 @@ def _measure(scene, strategies, points, per_light, bsdf_samples, seed, user_sele
                 )
             return cache[key]
 
-        _selectors(result, scene, strategies, user_selectors, lights, arrays, cams, terms_for, seed)
+        _selectors(result, scene, strategies, user_selectors, lights, arrays, cams, terms_for, seed, keep_tables)
         for label, settings, table in strategies:
             _split(result, scene, label, settings, table, cams, arrays, terms_for)
     finally:
@@ -549,7 +554,7 @@ def check_selectors(scene: Scene, user_selectors, *, points: int = 64, seed: int
         guarded.pmf_matrix(pts.point, pts.gnormal, lights, seed=seed)
 
 
-def _selectors(result, scene, strategies, user_selectors, lights, arrays, cams, terms_for, seed) -> None:
+def _selectors(result, scene, strategies, user_selectors, lights, arrays, cams, terms_for, seed, keep_tables) -> None:
     """The table of selectors, light sampling alone (no MIS weight), with the first strategy's light sampling."""
     pts = cams.points
     plan = resolve(scene, strategies[0][1] if strategies else RenderSettings())
@@ -574,6 +579,8 @@ def _selectors(result, scene, strategies, user_selectors, lights, arrays, cams, 
     pmfs["variance-optimal"] = rms / np.maximum(rms.sum(axis=1, keepdims=True), 1e-300)
     oracle_mean, *oracle_parts = _light_variance(moments, pmfs["oracle"])
     weight = cams.point_weights()
+    if keep_tables:
+        result.tables = {"g": light_terms.g, "seen": light_terms.seen, "pmfs": pmfs, "weight": weight}
     oracle_total = _relative(sum(oracle_parts), oracle_mean, weight)
     for name, pmf in pmfs.items():
         mean, choice, point, visibility = _light_variance(moments, pmf)
