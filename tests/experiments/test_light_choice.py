@@ -218,3 +218,14 @@ def test_compare_reports_the_light_choice(tmp_path, capsys):
     # off: no section
     assert main([*args, "--strategies", "mis", "--light-choice-points", "0", "-o", str(bad)]) == 0
     assert "Light choice" not in bad.read_text()
+
+
+def test_a_large_image_classifies_a_subset_of_its_pixels():
+    """Above EDGE_PIXELS pixels the edge strata are found at a random subset: the points still fill the budget and the
+    pixels' weights still sum to one."""
+    scene = lit_floor()
+    scene.camera = scene.camera.with_resolution(320, 240)
+    assert 320 * 240 > lc.EDGE_PIXELS
+    found = lc.measure(scene, [("mis", RenderSettings(), None)], points=256, seed=4, keep_tables=True)
+    assert found.points == 256 and found.tables["weight"].sum() == pytest.approx(1.0)
+    assert all(np.isfinite(x) and x >= 0 for x in (found.splits[0].choice, found.splits[0].point))

@@ -1,13 +1,14 @@
 """The choice of light at the camera's shading points: how far each light selector is from the best possible one
 (the oracle), and where a render's variance comes from (the choice of light, the point on it, visibility, the BSDF
-sample).
+sample, the pixel).
 
-At ``points`` shading points the camera sees (random pixels, jittered, as a render's first hits), every light's
-contribution is estimated by brute force: ``per_light`` stratified samples on each light (the renderer's own light
-sampling, ``emitters.lights.light_sample_of``), each with its shadow ray, and ``bsdf_samples`` BSDF directions with
-the rays they trace.  For light l with selection probability P_l, the light-sample estimator of one sample is
-X = w g V / P_l, with g = f L cos / p (luminance; p the density of the point on the light), V the shadow ray's
-verdict and w the strategy's MIS weight.  Its variance splits exactly by the law of total variance::
+At ``points`` camera samples (``PER_PIXEL`` jittered ones in each of a stratified sample of the pixels: half from the
+edges, weighted back to the image), every light's contribution to each first hit is estimated by brute force:
+``per_light`` stratified samples on each light (the renderer's own light sampling,
+``emitters.lights.light_sample_of``), each with its shadow ray, and ``bsdf_samples`` BSDF directions with the rays
+they trace.  For light l with selection probability P_l, the light-sample estimator of one sample is X = w g V / P_l,
+with g = f L cos / p (luminance; p the density of the point on the light), V the shadow ray's verdict and w the
+strategy's MIS weight.  Its variance splits exactly by the law of total variance::
 
     Var X = [sum_l m_l^2 / P_l - (sum_l m_l)^2]                   the choice of light      (m_l = E[w g V | l])
           + sum_l c_l^2 Var(w g | l) / P_l                         the point on the light   (c_l = m_l / E[w g | l])
@@ -17,15 +18,17 @@ the point term being what the variance would be if each light's shadows were spr
 is half hidden counts as a light of half the brightness); visibility is what the shadows' unevenness adds (it can
 be slightly negative where a shadow happens to hide the part of a light the sampling over-weights).  The BSDF
 sample's variance is the fourth term.  A camera sample of ``n_light`` light samples and ``n_bsdf`` BSDF samples has
-variance Var X / n_light + Var B / n_bsdf (independent samples: the renderer's Sobol' points do better), and each term
-is reported as its share of a 1-spp relMSE: the mean over the points of variance / (mean^2 + 0.01).
+variance Var X / n_light + Var B / n_bsdf (independent samples: the renderer's Sobol' points do better); the fifth,
+the pixel's, is the spread of what a pixel's camera samples see and their direct light (less the brute force's own
+noise).  Each term is reported as its share of a 1-spp relMSE: the image's mean of variance / (mean^2 + 0.01).
 
 For the selectors (light sampling alone, no MIS weight), the table gives the variance the choice adds and the whole
-light-sample variance relative to the **oracle**, P_l proportional to m_l: the best any selector can do at that point,
-visibility included: its choice adds nothing.  The **unoccluded oracle** (P_l proportional to E[g | l], shadows
-ignored) is the best a selector blind to visibility can do.  The **variance-optimal** selector, P_l proportional to
-sqrt(E[(g V)^2 | l]), minimises the whole sum_l E[(g V)^2 | l] / P_l (Cauchy-Schwarz): below the oracle where lights
-differ in how unevenly they light the point.  A user's selector (:mod:`lightprobe.lab.selectors`) joins the table.
+light-sample variance relative to the **oracle**, P_l proportional to m_l: what a selector that knew every light's
+contribution, visibility included, would pick; its choice adds nothing.  The **unoccluded oracle** (P_l
+proportional to E[g | l], shadows ignored) is the best a selector blind to visibility can do.  The
+**variance-optimal** selector, P_l proportional to sqrt(E[(g V)^2 | l]), minimises the whole
+sum_l E[(g V)^2 | l] / P_l (Cauchy-Schwarz): below the oracle where lights differ in how unevenly they light the
+point.  A user's selector (:mod:`lightprobe.lab.selectors`) joins the table.
 """
 
 from __future__ import annotations
@@ -76,13 +79,14 @@ MIN_POINTS = 16
 PER_PIXEL = 4
 #: rays through each pixel (a regular grid) that find the edges: pixels where they meet more than one surface
 EDGE_TRIALS = 16
+#: pixels classified as edge or not at most (a random subset of a larger image)
+EDGE_PIXELS = 1 << 16
 #: the relMSE's guard against dark pixels (analysis/metrics.py)
 DARK = 0.01
 #: the selectors of the renderer that every table lists (the strategies' own are added)
 BUILTIN_SELECTORS = ("uniform", "power", "bvh")
 #: the strategies whose variance is split: light samples, BSDF samples, or both under MIS
 SPLIT_STRATEGIES = ("mis", "env", "brdf")
-_LUMINANCE = (0.212671, 0.715160, 0.072169)
 
 
 @dataclass
@@ -131,7 +135,8 @@ class LightChoice:
     splits: list[Split] = field(default_factory=list)
     #: strategies whose variance is not split (hemisphere sampling, a laboratory technique), with the reason
     unsplit: dict[str, str] = field(default_factory=dict)
-    #: shading points left out because their material is textured (their BSDF here would be the untextured one)
+    #: pixels left out because a camera sample there met a textured material (its BSDF here would be the untextured
+    #: one)
     textured: int = 0
     seconds: float = 0.0
     skipped: str | None = None
@@ -185,28 +190,33 @@ def _first_hits(scene, arrays, lights, env, tracer, pixels, jitter):
 def _camera_samples(scene: Scene, arrays, lights, env, tracer: RayTracer, n_pixels: int, seed: int) -> _CameraSamples:
     """``PER_PIXEL`` camera samples (jittered) in each of ``n_pixels`` pixels, and their first hits' shading points.
     The pixels are drawn in two strata (a stratified sample of the image, weighted to stay unbiased): pixels whose
-    ``PER_PIXEL`` trial rays meet more than one surface, or see different emitted light (edges: few, where the spread
-    within a pixel is), get half of them; the rest, the other half.  Pixels where a sample meets a textured material
-    are left out (its BSDF here would be the untextured one)."""
+    ``EDGE_TRIALS`` grid rays meet more than one surface, or see different emitted light (edges: few, where the
+    spread within a pixel is), get half of them; the rest, the other half.  An image of more than ``EDGE_PIXELS``
+    pixels is classified at that many random ones (the strata's sizes scaled up from them).  Pixels where a sample
+    meets a textured material are left out (its BSDF here would be the untextured one)."""
     width, height = scene.camera.resolution
     rng = np.random.default_rng(seed)
-    every = np.repeat(np.arange(width * height, dtype=np.int64), EDGE_TRIALS)
+    n_image = width * height
+    tried = np.arange(n_image, dtype=np.int64)
+    if n_image > EDGE_PIXELS:
+        tried = np.sort(rng.choice(n_image, EDGE_PIXELS, replace=False)).astype(np.int64)
+    every = np.repeat(tried, EDGE_TRIALS)
     side = int(math.sqrt(EDGE_TRIALS))
     cells = (np.stack(np.meshgrid(np.arange(side), np.arange(side), indexing="ij"), -1).reshape(-1, 2) + 0.5) / side
-    hits, _, _, seen = _first_hits(scene, arrays, lights, env, tracer, every, np.tile(cells, (width * height, 1)))
+    hits, _, _, seen = _first_hits(scene, arrays, lights, env, tracer, every, np.tile(cells, (tried.size, 1)))
     surface_id = (hits[1].astype(np.int64) * (1 << 40) + hits[2].astype(np.int64)).reshape(-1, EDGE_TRIALS)
     seen = seen.reshape(-1, EDGE_TRIALS)
     edge = (surface_id != surface_id[:, :1]).any(axis=1) | (
         np.abs(seen - seen[:, :1]) > 1e-3 * (np.abs(seen[:, :1]) + 1e-3)
     ).any(axis=1)
-    strata = [np.flatnonzero(edge), np.flatnonzero(~edge)]
+    strata = [tried[edge], tried[~edge]]
     wanted = min(strata[0].size, n_pixels // 2)
     wanted = [wanted, min(strata[1].size, n_pixels - wanted)]
     chosen, weight = [], []
     for members, count in zip(strata, wanted, strict=True):
-        if count:
+        if count:  # each chosen pixel stands for its stratum's share of the image over the pixels chosen from it
             chosen.append(rng.choice(members, count, replace=False))
-            weight.append(np.full(count, members.size / count / (width * height)))
+            weight.append(np.full(count, members.size / count / tried.size))
     chosen, weight = np.concatenate(chosen), np.concatenate(weight)
     pixels = np.repeat(chosen, PER_PIXEL)
     hits, origin, dirs, seen = _first_hits(scene, arrays, lights, env, tracer, pixels, rng.random((pixels.size, 2)))

@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from ..emitters.kinds import KINDS, LightArrays, flag_rows
-from ..emitters.selection import _light_bounds
+from ..emitters.selection import _light_bounds, power_of_lights
 from .technique_errors import TechniqueError, _row, _TooLong, _user_line
 from .techniques import DEFAULT_TIME_LIMIT, _time_limit, load_module
 
@@ -69,8 +69,6 @@ class LightSet:
     @classmethod
     def of(cls, lights: LightArrays) -> LightSet:
         lo, hi, _, w, _, _, _ = _light_bounds(lights)
-        from ..emitters.selection import power_of_lights
-
         infinite = flag_rows(lights.kind, "infinite")
         center = np.where(infinite[:, None], np.nan, 0.5 * (lo + hi))
         normal = np.where(np.isin(lights.kind, [KINDS["rectangle"].code, KINDS["triangle"].code])[:, None], w, 0.0)
