@@ -666,13 +666,21 @@ def check_command(
 ) -> None:
     """Check a sampling technique written in Python against its own pdf: it runs and returns finite, unit
     directions; nothing below the surface (hemisphere techniques); sample()'s pdf equals pdf(); the pdf integrates
-    to 1; a chi-square test of the samples. Exit status 0 when every check passes, 1 when one fails."""
+    to 1; a chi-square test of the samples. A light selector (select(ctx, u), pmf(ctx, light)) is checked on a scene
+    of every kind of light: pmfs summing to 1, indices in range, select's pmf = pmf(), a chi-square test of its picks.
+    Exit status 0 when every check passes, 1 when one fails."""
     from .lab.check import check_technique, figure_png, write_html
-    from .lab.techniques import load_technique
+    from .lab.techniques import TechniqueError, load_technique
 
     if output.suffix.lower() not in (".html", ".htm"):
         raise LightprobeError(f"{output}: the page is an .html file")
-    tech = load_technique(technique, time_limit=time_limit)
+    try:
+        tech = load_technique(technique, time_limit=time_limit)
+    except TechniqueError as exc:  # not a technique: a light selector?
+        if "is not a technique" not in str(exc) and "(techniques found: none)" not in str(exc):
+            raise
+        _check_selector(technique, exc, seed=seed, time_limit=time_limit, as_json=as_json)
+        return
     report = check_technique(
         tech, samples=samples, seed=seed, material=_material_option(material), environment=_envmap_option(envmap)
     )
@@ -683,6 +691,35 @@ def check_command(
     typer.echo(json.dumps(report.as_dict()) if as_json else report.text())
     _echo_err(f"wrote {output} and {png}")
     if not report.passed:
+        raise typer.Exit(1)
+
+
+def _check_selector(spec: str, not_a_technique: Exception, *, seed: int, time_limit: float, as_json: bool) -> None:
+    """``lightprobe check`` of a light selector: its checks on the test scene, printed; exit status 1 if one fails."""
+    from .experiments.light_choice import SELECTOR_CHECKS, check_selector
+    from .lab.selectors import load_selector
+    from .lab.techniques import TechniqueError
+
+    try:
+        selector = load_selector(spec, time_limit=time_limit)
+    except TechniqueError as exc:
+        if "is not a selector" in str(exc) or "(selectors found: none)" in str(exc):
+            raise not_a_technique from None  # neither: the technique's message, as before selectors
+        raise
+    try:
+        passed, failure = check_selector(selector, seed=seed), None
+    except TechniqueError as exc:
+        passed, failure = [], str(exc)
+    if as_json:
+        typer.echo(json.dumps({"selector": selector.label, "passed": failure is None, "checks": list(SELECTOR_CHECKS),
+                               "failure": failure}))  # fmt: skip
+    elif failure is None:
+        typer.echo(f"{selector.label}: every check passed on a scene of every kind of light")
+        for line in passed:
+            typer.echo(f"  passed: {line}")
+    else:
+        typer.echo(f"{selector.label}: FAILED: {failure}")
+    if failure is not None:
         raise typer.Exit(1)
 
 

@@ -229,3 +229,21 @@ def test_a_large_image_classifies_a_subset_of_its_pixels():
     found = lc.measure(scene, [("mis", RenderSettings(), None)], points=256, seed=4, keep_tables=True)
     assert found.points == 256 and found.tables["weight"].sum() == pytest.approx(1.0)
     assert all(np.isfinite(x) and x >= 0 for x in (found.splits[0].choice, found.splits[0].point))
+
+
+def test_check_a_selector(capsys):
+    """``lightprobe check`` knows a selector from a technique: every check on the scene of every kind of light."""
+    import json
+
+    from lightprobe.cli import main
+
+    assert main(["check", f"{EXAMPLES}:PowerOverDistance"]) == 0
+    out = capsys.readouterr().out
+    assert "every check passed" in out and out.count("passed: ") == len(lc.SELECTOR_CHECKS)
+    assert main(["check", f"{BAD}:PicksTheFirstTooOften", "--json"]) == 1
+    verdict = json.loads(capsys.readouterr().out)
+    assert verdict["passed"] is False and "check: picks follow pmf()" in verdict["failure"]
+    assert main(["check", f"{BAD}:Nope"]) == 2
+    assert "no selector named 'Nope'" in capsys.readouterr().err
+    kinds = lc.selector_test_scene().light_table().kind
+    assert len(set(kinds.tolist())) == 5  # rectangles, a sphere, a point, a spot and the sky

@@ -66,10 +66,21 @@ from ..integrators.stages.setup import emitter_of
 from ..integrators.stages.shadows import ray_to_light
 from ..integrators.wavefront import _compensated_materials, compensation_for, resolve
 from ..lab.render import _camera_batch, _shading_batch
+from ..lab.selectors import PICK_POINTS, PICKS
 from ..sampling.mis import balance_heuristic, power_heuristic
 from ..scene import Scene
 
-__all__ = ["RAY_BUDGET", "LightChoice", "SelectorRow", "Split", "check_selectors", "measure"]
+__all__ = [
+    "RAY_BUDGET",
+    "SELECTOR_CHECKS",
+    "LightChoice",
+    "SelectorRow",
+    "Split",
+    "check_selector",
+    "check_selectors",
+    "measure",
+    "selector_test_scene",
+]
 
 #: light samples (each with its shadow ray) the brute force may take: points x lights x per_light
 RAY_BUDGET = 1 << 22
@@ -693,3 +704,44 @@ def _placeholder():
     from ..emitters.envmap import placeholder_environment
 
     return placeholder_environment()
+
+
+# --- lightprobe check for a selector ----------------------------------------------------------------------------------
+#: what ``check_selector`` verifies, in order (each a check the guard makes)
+SELECTOR_CHECKS = (
+    "select and pmf run, with (N,) results of the right dtype",
+    "pmfs sum to 1 over the lights at every point",
+    "select's light indices in range, each with pmf > 0",
+    "select's pmf = pmf()",
+    f"picks follow pmf() (chi-square, {PICKS} picks at {PICK_POINTS} points)",
+)
+
+
+def selector_test_scene():
+    """The scene ``lightprobe check`` tries a selector on: a floor and a wall seen from above, lit by rectangles of
+    three sizes and powers, an emissive sphere, a point light, a spot light and a grey sky (every kind of row a
+    selector meets, bounded and infinite)."""
+    from ..bsdfs import Lambert, Phong
+    from ..emitters.envmap import EnvironmentMap
+    from ..emitters.procedural import constant
+    from ..emitters.punctual import PointLight, SpotLight
+    from ..geometry.camera import Camera
+    from ..geometry.shapes import Rectangle, Sphere
+    from ..scene import Scene
+
+    scene = Scene(Camera([0, 3, 4], [0, 0, 0], fov=50, resolution=(32, 24)), EnvironmentMap.from_array(constant(0.2)))
+    scene.add(Rectangle.ground(size=12), Lambert(0.5), name="floor")
+    scene.add(Rectangle([-3, 0, -2], [0, 2, 0], [0, 0, 4]), Phong(0.3, 0.4, 30), name="wall")
+    for i, (x, size, emission) in enumerate(((-1.5, 0.3, 40.0), (0.0, 0.8, 5.0), (1.5, 1.5, 1.0))):
+        scene.add(Rectangle([x, 2.5, -0.5], [size, 0, 0], [0, 0, size]), None, emission=emission, name=f"panel{i}")
+    scene.add(Sphere([1.0, 0.4, 1.0], 0.2), None, emission=8.0, name="bulb")
+    scene.add_light(PointLight([-1.0, 1.0, 1.5], 3.0))
+    scene.add_light(SpotLight([2.0, 2.0, 0.0], [2.0, 0.0, 0.0], 20.0, cone_angle=25.0))
+    return scene
+
+
+def check_selector(selector, *, points: int = 64, seed: int = 0) -> list[str]:
+    """Every check of :data:`SELECTOR_CHECKS` on :func:`selector_test_scene` at ``points`` shading points; the
+    checks passed, or a :class:`TechniqueError` naming the first that failed."""
+    check_selectors(selector_test_scene(), [selector], points=points, seed=seed)
+    return list(SELECTOR_CHECKS)
