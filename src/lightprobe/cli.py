@@ -604,6 +604,8 @@ def compare_command(
         from .experiments.compare import light_choice
         from .experiments.light_choice import LightChoice
 
+        if not quiet and len(scene.light_table().kind) >= 2:
+            _echo_err("measuring the light choice: every light at each of the shading points, by brute force ...")
         try:
             choice = light_choice(scene, runs, ref_image, user_selectors=user_selectors, points=light_choice_points)
         except LightprobeError as exc:  # a user selector failed at a point the first check did not see: keep the rest

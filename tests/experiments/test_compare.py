@@ -130,3 +130,17 @@ def test_an_adaptive_strategy_at_equal_time_plans_each_round_to_its_budget(scene
     assert run.seconds == run.rounds[-1]["seconds"] <= 1.1 * budget, run.rounds
     assert run.rounds[-1]["spp"] > 2 * run.rounds[0]["spp"]  # eight times the seconds buy more samples
     assert np.isfinite(run.image).all() and run.metrics["bias_low"] <= 0.0 <= run.metrics["bias_high"]
+
+
+def test_a_learned_selection_learns_in_compares_rounds():
+    """A ``light_sampler=learned`` strategy's first round holds more than the 4 samples it learns from (its rounds
+    began at 1 spp, learned nothing and picked as the BVH); its later rounds continue with what it learned."""
+    from lightprobe.integrators.light_learning import cells_learned
+    from lightprobe.reference_scenes import build
+
+    scene = build("building", resolution=(32, 24))
+    reference = np.full((24, 32, 3), 0.1)  # the metrics are not what is tested
+    learned, bvh = compare(scene, ["mis/light_sampler=learned", "mis"], reference, spp=16, base=RenderSettings(seed=2))
+    assert learned.learned is not None and cells_learned(learned.learned) > 0
+    assert [r["spp"] for r in learned.rounds] == [8.0, 16.0] and bvh.rounds[0]["spp"] == 1.0
+    assert not np.array_equal(learned.image, bvh.image)

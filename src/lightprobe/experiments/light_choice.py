@@ -60,7 +60,7 @@ from ..errors import ParameterError
 from ..geometry.frame import to_local
 from ..geometry.intersect import MISS, ray_offset, surface
 from ..geometry.raytracer import RayTracer
-from ..integrators.light_learning import restored
+from ..integrators.light_learning import cells_learned, restored
 from ..integrators.settings import RenderSettings
 from ..integrators.stages.setup import emitter_of
 from ..integrators.stages.shadows import ray_to_light
@@ -588,7 +588,7 @@ def _selectors(result, scene, strategies, user_selectors, lights, arrays, cams, 
     for label, settings, table in strategies:
         if settings.light_sampler == "learned":  # what its render learned; one that learned nothing picks as the BVH
             learned = resolve(scene, settings).selector
-            if table is not None:
+            if table is not None and cells_learned(table) > 0:
                 pmfs[f"learned ({label})"] = _selector_pmf(restored(learned, table), pts, compensated)
             else:
                 pmfs[f"learned ({label}): learned nothing, the bvh"] = _selector_pmf(learned, pts, compensated)
