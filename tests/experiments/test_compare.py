@@ -138,8 +138,8 @@ def test_a_learned_selection_learns_in_compares_rounds():
     from lightprobe.integrators.light_learning import cells_learned
     from lightprobe.reference_scenes import build
 
-    scene = build("building", resolution=(32, 24))
-    reference = np.full((24, 32, 3), 0.1)  # the metrics are not what is tested
+    scene = build("many")  # 64 x 48: the test references' scene, whose stages other tests compile too
+    reference = np.full((48, 64, 3), 0.1)  # the metrics are not what is tested
     learned, bvh = compare(scene, ["mis/light_sampler=learned", "mis"], reference, spp=16, base=RenderSettings(seed=2))
     assert learned.learned is not None and cells_learned(learned.learned) > 0
     assert [r["spp"] for r in learned.rounds] == [8.0, 16.0] and bvh.rounds[0]["spp"] == 1.0
