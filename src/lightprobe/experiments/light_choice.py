@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba.core.errors import NumbaIRAssumptionWarning
 
-from .._numba import jit_parallel, prange
+from .._numba import jit
 from ..bsdfs.dispatch import bsdf_eval, bsdf_pdf
 from ..bsdfs.dispatch import sample_batch as bsdf_sample_batch
 from ..emitters.area import STRATEGIES as LIGHT_STRATEGIES
@@ -252,13 +252,13 @@ def _camera_samples(scene: Scene, arrays, lights, env, tracer: RayTracer, n_pixe
 
 
 # --- light samples --------------------------------------------------------------------------------------------------
-@jit_parallel
+@jit
 def _light_rows(lights, env, strategy, point, gnormal, error, frame, wo, kinds, params, material, compensated,
                 per_light, u, out, ray):  # fmt: skip
     """Row r = (point i, light l, sample j), i-major: out[r] = (g = lum(f L cos) / p, p, the BSDF's pdf at the
     direction (0 for a delta light), delta), ray[r] = its shadow ray (origin, direction, length; length 0: none)."""
     n_lights = lights.kind.shape[0]
-    for r in prange(u.shape[0]):
+    for r in range(u.shape[0]):
         i = r // (n_lights * per_light)
         light = (r // per_light) % n_lights
         px, py, pz = point[i, 0], point[i, 1], point[i, 2]
@@ -331,12 +331,12 @@ def _light_terms(arrays, lights, env, tracer, pts: _Points, compensated, strateg
 
 
 # --- BSDF samples ---------------------------------------------------------------------------------------------------
-@jit_parallel
+@jit
 def _rays_see(s, lights, env, strategy, point, gnormal, compensated, owner, origins, dirs, weight, hits, light_of,
               value, light_pdf):  # fmt: skip
     kind, index, prim, b1, b2, t = hits[1], hits[2], hits[3], hits[4], hits[5], hits[0]
     first = first_infinite(lights)
-    for r in prange(dirs.shape[0]):
+    for r in range(dirs.shape[0]):
         i = owner[r]
         px, py, pz = point[i, 0], point[i, 1], point[i, 2]
         nx, ny, nz = gnormal[i, 0], gnormal[i, 1], gnormal[i, 2]
