@@ -608,8 +608,8 @@ def compare_command(
             _echo_err("measuring the light choice: every light at each of the shading points, by brute force ...")
         try:
             choice = light_choice(scene, runs, ref_image, user_selectors=user_selectors, points=light_choice_points)
-        except LightprobeError as exc:  # a user selector failed at a point the first check did not see: keep the rest
-            choice_error = exc
+        except Exception as exc:  # a user selector failed at a point the first check did not see (or worse): the
+            choice_error = exc  # report keeps every strategy's renders, says why, and the command ends with the error
             choice = LightChoice(points=0, lights=0, per_light=0, bsdf_samples=0, skipped=str(exc))
     write_report(
         output,

@@ -215,6 +215,11 @@ def test_compare_reports_the_light_choice(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert code != 0 and not bad.exists()
     assert len(err.splitlines()) == 1 and "NotNormalised.pmf" in err and "check: pmfs sum to 1" in err
+    # a selector that fails only where it is measured, after the renders: the report keeps them, says why, status 2
+    late = tmp_path / "late.html"
+    code = main([*args, "--strategies", "mis", "-o", str(late), "--selector", f"{BAD}:FailsOnLargeBatches"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and late.exists() and "Not measured: " in late.read_text() and "too many points" in err[-1]
     # off: no section
     assert main([*args, "--strategies", "mis", "--light-choice-points", "0", "-o", str(bad)]) == 0
     assert "Light choice" not in bad.read_text()

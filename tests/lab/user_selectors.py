@@ -59,3 +59,12 @@ class FloatIndices(_Uniform):
     def select(self, ctx, u):
         light, pmf = super().select(ctx, u)
         return light.astype(np.float64), pmf
+
+
+class FailsOnLargeBatches(_Uniform):
+    """Passes the check before the renders (64 points), fails where the light choice measures it (more)."""
+
+    def pmf(self, ctx, light):
+        if len(ctx) > 100:
+            raise ValueError("too many points")
+        return super().pmf(ctx, light)
