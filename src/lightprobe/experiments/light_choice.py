@@ -172,7 +172,8 @@ class _Points:
 
 @dataclass
 class _CameraSamples:
-    pixel: np.ndarray  # (S,) which of the measured pixels each camera sample is in
+    """``PER_PIXEL`` camera samples in each measured pixel, a pixel's consecutive."""
+
     weight: np.ndarray  # (pixels,) each measured pixel's weight in a mean over the image (they sum to 1)
     seen: np.ndarray  # (S,) luminance of what it sees directly
     shaded: np.ndarray  # (S,) its row in the points, or -1 (nothing to shade)
@@ -181,8 +182,7 @@ class _CameraSamples:
 
     def point_weights(self) -> np.ndarray:
         """Each point's weight in a mean over the image's shaded camera samples."""
-        rows = self.shaded >= 0
-        w = self.weight[self.pixel[rows]]
+        w = np.repeat(self.weight, PER_PIXEL)[self.shaded >= 0]
         return w / w.sum()
 
 
@@ -198,22 +198,25 @@ def _first_hits(scene, arrays, lights, env, tracer, pixels, jitter):
     return hits, origin, dirs, seen
 
 
-def _camera_samples(scene: Scene, arrays, lights, env, tracer: RayTracer, n_pixels: int, seed: int) -> _CameraSamples:
-    """``PER_PIXEL`` camera samples (jittered) in each of ``n_pixels`` pixels, and their first hits' shading points.
-    The pixels are drawn in two strata (a stratified sample of the image, weighted to stay unbiased): pixels whose
-    ``EDGE_TRIALS`` grid rays meet more than one surface, or see different emitted light (edges: few, where the
-    spread within a pixel is), get half of them; the rest, the other half.  An image of more than ``EDGE_PIXELS``
-    pixels is classified at that many random ones (the strata's sizes scaled up from them).  Pixels where a sample
-    meets a textured material are left out (its BSDF here would be the untextured one)."""
+def _cell_centres(side: int) -> np.ndarray:
+    """The centres of a side x side grid's cells in [0, 1)^2, (side^2, 2)."""
+    cells = np.stack(np.meshgrid(np.arange(side), np.arange(side), indexing="ij"), -1).reshape(-1, 2)
+    return (cells + 0.5) / side
+
+
+def _stratified_pixels(scene: Scene, arrays, lights, env, tracer: RayTracer, n_pixels: int, rng):
+    """(pixels, their weights in a mean over the image) of ``n_pixels`` pixels drawn in two strata (a stratified
+    sample of the image, weighted to stay unbiased): pixels whose ``EDGE_TRIALS`` grid rays meet more than one
+    surface, or see different emitted light (edges: few, where the spread within a pixel is), get half of them; the
+    rest, the other half.  An image of more than ``EDGE_PIXELS`` pixels is classified at that many random ones (the
+    strata's sizes scaled up from them)."""
     width, height = scene.camera.resolution
-    rng = np.random.default_rng(seed)
     n_image = width * height
     tried = np.arange(n_image, dtype=np.int64)
     if n_image > EDGE_PIXELS:
         tried = np.sort(rng.choice(n_image, EDGE_PIXELS, replace=False)).astype(np.int64)
     every = np.repeat(tried, EDGE_TRIALS)
-    side = int(math.sqrt(EDGE_TRIALS))
-    cells = (np.stack(np.meshgrid(np.arange(side), np.arange(side), indexing="ij"), -1).reshape(-1, 2) + 0.5) / side
+    cells = _cell_centres(int(math.sqrt(EDGE_TRIALS)))
     hits, _, _, seen = _first_hits(scene, arrays, lights, env, tracer, every, np.tile(cells, (tried.size, 1)))
     surface_id = (hits[1].astype(np.int64) * (1 << 40) + hits[2].astype(np.int64)).reshape(-1, EDGE_TRIALS)
     seen = seen.reshape(-1, EDGE_TRIALS)
@@ -228,7 +231,13 @@ def _camera_samples(scene: Scene, arrays, lights, env, tracer: RayTracer, n_pixe
         if count:  # each chosen pixel stands for its stratum's share of the image over the pixels chosen from it
             chosen.append(rng.choice(members, count, replace=False))
             weight.append(np.full(count, members.size / count / tried.size))
-    chosen, weight = np.concatenate(chosen), np.concatenate(weight)
+    return np.concatenate(chosen), np.concatenate(weight)
+
+
+def _camera_samples(scene: Scene, arrays, lights, env, tracer: RayTracer, chosen, weight, rng) -> _CameraSamples:
+    """``PER_PIXEL`` camera samples (jittered) in each pixel of ``chosen`` (``weight``: the pixels' weights), and
+    their first hits' shading points.  Pixels where a sample meets a textured material are left out (its BSDF here
+    would be the untextured one)."""
     pixels = np.repeat(chosen, PER_PIXEL)
     hits, origin, dirs, seen = _first_hits(scene, arrays, lights, env, tracer, pixels, rng.random((pixels.size, 2)))
     t, kind, index, prim, b1, b2 = hits
@@ -245,10 +254,7 @@ def _camera_samples(scene: Scene, arrays, lights, env, tracer: RayTracer, n_pixe
         material[rows_shaded],
     )  # fmt: skip
     kept = weight[keep]
-    return _CameraSamples(
-        np.repeat(np.arange(keep.size), PER_PIXEL), kept / max(kept.sum(), 1e-300), seen[rows], index_of, points,
-        int(textured.sum()),
-    )  # fmt: skip
+    return _CameraSamples(kept / max(kept.sum(), 1e-300), seen[rows], index_of, points, int(textured.sum()))
 
 
 # --- light samples --------------------------------------------------------------------------------------------------
@@ -256,16 +262,16 @@ def _camera_samples(scene: Scene, arrays, lights, env, tracer: RayTracer, n_pixe
 def _light_rows(lights, env, strategy, point, gnormal, error, frame, wo, kinds, params, material, compensated,
                 per_light, u, out, ray):  # fmt: skip
     """Row r = (point i, light l, sample j), i-major: out[r] = (g = lum(f L cos) / p, p, the BSDF's pdf at the
-    direction (0 for a delta light), delta), ray[r] = its shadow ray (origin, direction, length; length 0: none)."""
+    direction (0 for a delta light: its MIS weight is 1)); where g > 0, ray[r] = its shadow ray (origin, direction,
+    length)."""
     n_lights = lights.kind.shape[0]
     for r in range(u.shape[0]):
         i = r // (n_lights * per_light)
         light = (r // per_light) % n_lights
         px, py, pz = point[i, 0], point[i, 1], point[i, 2]
         nx, ny, nz = gnormal[i, 0], gnormal[i, 1], gnormal[i, 2]
-        for c in range(4):
+        for c in range(3):
             out[r, c] = 0.0
-        ray[r, 6] = 0.0
         ls = light_sample_of(lights, env, light, strategy, compensated[i], px, py, pz, nx, ny, nz, u[r, 0], u[r, 1])
         if ls.pdf <= 0.0 or (ls.r == 0.0 and ls.g == 0.0 and ls.b == 0.0):
             continue
@@ -277,11 +283,9 @@ def _light_rows(lights, env, strategy, point, gnormal, error, frame, wo, kinds, 
         lum = (0.212671 * f[0] * ls.r + 0.715160 * f[1] * ls.g + 0.072169 * f[2] * ls.b) * wi[2]
         if not lum > 0.0:
             continue
-        delta = is_delta(lights, light)
         out[r, 0] = lum / ls.pdf
         out[r, 1] = ls.pdf
-        out[r, 2] = 0.0 if delta else bsdf_pdf(kinds[m], params[m], w_o, wi)
-        out[r, 3] = 1.0 if delta else 0.0
+        out[r, 2] = 0.0 if is_delta(lights, light) else bsdf_pdf(kinds[m], params[m], w_o, wi)
         qx, qy, qz = ray_offset(px, py, pz, nx, ny, nz, error[i], ls.wx, ls.wy, ls.wz)
         if ls.distance < math.inf:
             o = ray_to_light(lights, light, px, py, pz, qx, qy, qz, ls.wx, ls.wy, ls.wz, ls.distance)
@@ -304,7 +308,7 @@ def _light_terms(arrays, lights, env, tracer, pts: _Points, compensated, strateg
     at a time (the rays' records stay under ~40 MB)."""
     n_points, n_lights = pts.point.shape[0], lights.kind.shape[0]
     side = round(math.sqrt(per_light))
-    grid = (np.stack(np.meshgrid(np.arange(side), np.arange(side), indexing="ij"), -1).reshape(-1, 2) + 0.5) / side
+    grid = _cell_centres(side)
     shape = (n_points, n_lights, per_light)
     g, pdf, pb = np.zeros(shape), np.zeros(shape), np.zeros(shape)
     seen = np.zeros(shape, np.bool_)
@@ -313,7 +317,7 @@ def _light_terms(arrays, lights, env, tracer, pts: _Points, compensated, strateg
         hi = min(n_points, lo + chunk)
         rows = (hi - lo) * n_lights * per_light
         u = (np.tile(grid, ((hi - lo) * n_lights, 1)) + (rng.random((rows, 2)) - 0.5) / side) % 1.0
-        out = np.empty((rows, 4))
+        out = np.empty((rows, 3))
         ray = np.empty((rows, 7))
         _light_rows(
             lights, env, LIGHT_STRATEGIES[strategy], pts.point[lo:hi], pts.gnormal[lo:hi], pts.error[lo:hi],
@@ -523,7 +527,9 @@ def _measure(scene, strategies, points, per_light, bsdf_samples, seed, user_sele
     env = (scene.environment if scene.environment is not None else _placeholder()).kernel
     rng = np.random.default_rng(seed)
     try:
-        cams = _camera_samples(scene, arrays, lights, env, tracer, n_pixels, seed)
+        rng_pixels = np.random.default_rng(seed)
+        chosen, weight = _stratified_pixels(scene, arrays, lights, env, tracer, n_pixels, rng_pixels)
+        cams = _camera_samples(scene, arrays, lights, env, tracer, chosen, weight, rng_pixels)
         pts = cams.points
         result.points, result.textured = pts.point.shape[0], cams.textured
         if result.points == 0:
@@ -566,7 +572,11 @@ def check_selectors(scene: Scene, user_selectors, *, points: int = 64, seed: int
     env = (scene.environment if scene.environment is not None else _placeholder()).kernel
     try:
         with _quiet_compiling():
-            pts = _camera_samples(scene, arrays, lights, env, tracer, max(1, points // PER_PIXEL), seed).points
+            # random pixels: the checks need shading points, not the measurement's stratified sample of the image
+            rng = np.random.default_rng(seed)
+            width, height = scene.camera.resolution
+            chosen = rng.choice(width * height, min(width * height, max(1, points // PER_PIXEL)), replace=False)
+            pts = _camera_samples(scene, arrays, lights, env, tracer, chosen, np.ones(chosen.size), rng).points
     finally:
         tracer.close()
     if pts.point.shape[0] == 0:
