@@ -342,13 +342,13 @@ def compare(
 
 def per_sample_relmse(run: StrategyRun, reference: np.ndarray) -> float:
     """The variance of one camera sample as a relMSE, from the run's own samples: the mean over the pixels of
-    lum(variance of the mean) x count / (lum(reference)^2 + 0.01) (the spread of the samples, not the error of the
-    image: a Sobol' render's image does better)."""
+    lum(variance of the mean) x count / (lum(reference)^2 + ``metrics.RELMSE_EPSILON``) (the spread of the samples,
+    not the error of the image: a Sobol' render's image does better)."""
     from ..color import luminance
 
     ref = luminance(np.asarray(reference[..., :3], dtype=np.float64))
     spread = luminance(np.asarray(run.variance, dtype=np.float64)) * run.counts
-    return float(np.mean(spread / (ref * ref + 0.01)))
+    return float(np.mean(spread / (ref * ref + metrics.RELMSE_EPSILON)))
 
 
 def light_choice(scene: Scene, runs: list[StrategyRun], reference: np.ndarray, *, user_selectors=(), points: int = 512):

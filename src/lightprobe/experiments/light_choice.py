@@ -43,6 +43,7 @@ import numpy as np
 from numba.core.errors import NumbaIRAssumptionWarning
 
 from .._numba import jit
+from ..analysis.metrics import RELMSE_EPSILON
 from ..bsdfs.dispatch import bsdf_eval, bsdf_pdf
 from ..bsdfs.dispatch import sample_batch as bsdf_sample_batch
 from ..emitters.area import STRATEGIES as LIGHT_STRATEGIES
@@ -92,8 +93,6 @@ PER_PIXEL = 4
 EDGE_TRIALS = 16
 #: pixels classified as edge or not at most (a random subset of a larger image)
 EDGE_PIXELS = 1 << 16
-#: the relMSE's guard against dark pixels (analysis/metrics.py)
-DARK = 0.01
 #: the selectors of the renderer that every table lists (the strategies' own are added)
 BUILTIN_SELECTORS = ("uniform", "power", "bvh")
 #: the strategies whose variance is split: light samples, BSDF samples, or both under MIS
@@ -470,8 +469,8 @@ def _light_weights(terms: _LightTerms, pmf: np.ndarray, n_light, n_bsdf, beta) -
 
 
 def _relative(variance: np.ndarray, mean: np.ndarray, weight: np.ndarray) -> float:
-    """The weighted mean of variance / (mean^2 + DARK): a relMSE's terms."""
-    return float(np.sum(weight * variance / (mean * mean + DARK)))
+    """The weighted mean of variance / (mean^2 + RELMSE_EPSILON): a relMSE's terms."""
+    return float(np.sum(weight * variance / (mean * mean + RELMSE_EPSILON)))
 
 
 def _selector_pmf(selector, pts: _Points, compensated) -> np.ndarray:
@@ -673,7 +672,7 @@ def _split(result: LightChoice, scene, label, settings, table, cams: _CameraSamp
     noise = np.zeros(row.size)
     noise[shaded] = (noise_l + var_bsdf / bsdf.shape[1])[row[shaded]]
     per_pixel = value.reshape(-1, PER_PIXEL)
-    guard = per_pixel.mean(axis=1) ** 2 + DARK
+    guard = per_pixel.mean(axis=1) ** 2 + RELMSE_EPSILON
     shares = {}
     for name, term in terms.items():
         t = np.zeros(row.size)
