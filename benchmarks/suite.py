@@ -784,6 +784,9 @@ def main() -> int:
     parser.add_argument("--table-from", metavar="LOG", nargs="+",
                         help="no renders: the table (and --write-docs) from a run's printed output; with several "
                              "logs, each renderer's rows of a scene from the last log that has them")  # fmt: skip
+    parser.add_argument("--lightprobe-only", action="store_true",
+                        help="lightprobe's rows alone (references made or extended as usual); the peers' "
+                             "rows then from an earlier run's log: --table-from OLD.log NEW.log")  # fmt: skip
     parser.add_argument("--cycles-python", metavar="PYTHON",
                         help="the Python with bpy for the Cycles peer [$LIGHTPROBE_CYCLES_PYTHON, else "
                              f"{CYCLES_PYTHON} if it exists]; 'none': no Cycles")  # fmt: skip
@@ -809,7 +812,9 @@ def main() -> int:
     cache.mkdir(parents=True, exist_ok=True)
     os.environ["LIGHTPROBE_SUITE_CACHE"] = str(cache)  # the workers' (the peer kit's assets)
     started = time.perf_counter()
-    bpy_python, no_cycles = cycles_python(args.cycles_python)
+    bpy_python, no_cycles = cycles_python("none" if args.lightprobe_only else args.cycles_python)
+    if args.lightprobe_only:
+        no_cycles = "turned off (--lightprobe-only)"
     header = {"cores": os.cpu_count(), "spp": args.spp, "seeds": args.seeds, "resolution": args.resolution,
               "lightprobe_options": parse_options(args.lightprobe_option), "commit": _commit(),
               "date": datetime.date.today().isoformat(), "cycles": no_cycles or "yes"}  # fmt: skip
@@ -837,7 +842,8 @@ def main() -> int:
                 references[scene]["unoccluded"] = shown["unoccluded"]
             cycles = bpy_python and _cycles_reference(args, scene, top, bpy_python, references, notes)
             for spp in args.spp:
-                rows += _run(args, "mitsuba", scene, "--spp", str(spp))
+                if not args.lightprobe_only:
+                    rows += _run(args, "mitsuba", scene, "--spp", str(spp))
                 rows += _run(args, "lightprobe", scene, "--spp", str(spp))
                 if cycles:
                     rows += _run(args, "cycles", scene, "--spp", str(spp), python=bpy_python)

@@ -140,7 +140,17 @@ def test_a_learned_selection_learns_in_compares_rounds():
 
     scene = build("many")  # 64 x 48: the test references' scene, whose stages other tests compile too
     reference = np.full((48, 64, 3), 0.1)  # the metrics are not what is tested
-    learned, bvh = compare(scene, ["mis/light_sampler=learned", "mis"], reference, spp=16, base=RenderSettings(seed=2))
+    learned, bvh = compare(scene, ["mis", "mis/light_sampler=bvh"], reference, spp=16, base=RenderSettings(seed=2))
+    assert learned.settings.light_sampler == "learned"  # the default
     assert learned.learned is not None and cells_learned(learned.learned) > 0
     assert [r["spp"] for r in learned.rounds] == [8.0, 16.0] and bvh.rounds[0]["spp"] == 1.0
     assert not np.array_equal(learned.image, bvh.image)
+
+
+def test_a_scene_with_nothing_to_learn_keeps_rounds_of_one_two_four_samples(scene_and_reference):
+    """The default (learned) selector on a scene lit by an environment map alone: nothing to learn, so its rounds
+    start at one sample, as every strategy's did before the default changed (decision 117)."""
+    scene, ref = scene_and_reference
+    (run,) = compare(scene, ["mis"], ref.image, equal="spp", spp=4)
+    assert run.settings.light_sampler == "learned" and run.learned is None
+    assert [r["spp"] for r in run.rounds] == [1.0, 2.0, 4.0]

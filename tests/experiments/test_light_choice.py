@@ -200,14 +200,14 @@ def test_compare_reports_the_light_choice(tmp_path, capsys):
     path.write_text(SCENE_FILE)
     out = tmp_path / "report.html"
     args = ["compare", str(path), "--spp", "4", "--reference-spp", "16", "-o", str(out), "-q"]
-    assert main([*args, "--strategies", "mis,mis/light_sampler=learned", "--selector", f"{EXAMPLES}:PowerOverDistance",
-                 "--light-choice-points", "128"]) == 0  # fmt: skip
+    assert main([*args, "--strategies", "mis/light_sampler=bvh,mis/light_sampler=learned", "--selector",
+                 f"{EXAMPLES}:PowerOverDistance", "--light-choice-points", "128"]) == 0  # fmt: skip
     text = out.read_text()
     wanted = ("Light choice", "light_selectors.py:PowerOverDistance", "unoccluded oracle", "variance-optimal",
               "learned (mis/light_sampler=learned)", "point on the light", "visibility", "measured")  # fmt: skip
     for expected in wanted:
         assert expected in text, expected
-    assert text.count("<tr><td>mis</td><td>bvh</td>") == 1  # the split's row of the default strategy
+    assert text.count("<tr><td>mis/light_sampler=bvh</td><td>bvh</td>") == 1  # the split's row of the BVH's strategy
     # a selector that breaks its contract: one line, before anything is rendered (no report)
     capsys.readouterr()
     bad = tmp_path / "bad.html"

@@ -170,9 +170,9 @@ class RenderSettings:
         auto="mis with an environment map and BSDF samples: on diffuse materials",
     )
     light_sampler: str = option(
-        "bvh",
-        "How a light is picked: uniform, power, bvh, or learned (a BVH that learns from the pilot which lights "
-        "reach the shading points, shadows included)",
+        "learned",
+        "How a light is picked: uniform, power, bvh, or learned (the default: the BVH, and what the pilot learns "
+        "of which lights reach the shading points, shadows included)",
         "string",
         choices=lambda: SELECTORS,
         key="light_sampler",

@@ -143,7 +143,7 @@ Example (every key shown; optional ones have their default)::
     seed = 0
     sampler = "sobol"                   # sobol (Owen-scrambled Sobol') | independent
     env_candidates = 1                  # > 1: resampled environment samples (RIS) from this many candidates
-    light_sampler = "bvh"               # uniform | power | bvh | learned
+    light_sampler = "learned"           # uniform | power | bvh | learned (a BVH that learns)
     lights_per_sample = 2               # lights chosen per camera sample (K); default: 1 with an environment map
                                         # or one delta light alone, else 2
     light_strategy = "solid-angle"      # area | solid-angle | hemisphere | cosine
