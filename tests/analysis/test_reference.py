@@ -66,6 +66,9 @@ def test_a_checkpoint_of_another_render_is_refused(scene_file, tmp_path):
     render_reference(scene, RenderSettings(spp=2, seed=3), out, chunk=2, scene_id="s")
     with pytest.raises(LightprobeError, match=r"ref.exr.checkpoint.npz: checkpoint of a different render \(seed"):
         render_reference(scene, RenderSettings(spp=4, seed=4), out, chunk=2, scene_id="s")
+    # each setting with what it was and what it is now (a default that changed since, say)
+    with pytest.raises(LightprobeError, match=r"differ\): light_sampler 'learned' in the checkpoint, 'bvh' now; use"):
+        render_reference(scene, RenderSettings(spp=4, seed=3, light_sampler="bvh"), out, chunk=2, scene_id="s")
     with pytest.raises(LightprobeError, match="scene differ"):
         render_reference(scene, RenderSettings(spp=4, seed=3), out, chunk=2, scene_id="other")
     checkpoint_path(out).write_bytes(b"not a checkpoint")

@@ -48,6 +48,25 @@ def test_a_render_continued_from_its_statistics_learns_what_the_whole_render_lea
         render(other, RenderSettings(spp=9, first_sample=7, **options), resume=carried)
 
 
+def test_a_reference_in_short_chunks_and_sample_ranges_on_dask_pick_as_one_whole_render(scene, tmp_path):
+    """A reference's first chunk holds the pilot the selection learns from (4 samples) and one more, whatever
+    --chunk says; on Dask the range from sample 0 is rendered first and the other ranges pick with what it learned:
+    both give the image of one whole render (before, chunks of 2 never learned, and Dask's later ranges never did)."""
+    pytest.importorskip("distributed", reason="Dask distributed is not installed (pip install -e '.[test]')")
+    from lightprobe.analysis.distributed import render_on_dask
+    from lightprobe.analysis.reference import render_reference
+
+    settings = RenderSettings(spp=12, seed=5, adaptive=False)  # the default selection: learned
+    whole = render(scene, settings)
+    assert whole.stats["learned_cells"] > 0
+    chunked = render_reference(scene, settings, tmp_path / "ref.exr", chunk=2)
+    np.testing.assert_array_equal(chunked.image, whole.image)
+    ranged = render_on_dask(scene, settings, chunk=3, workers=1)  # its process loads the kernels compiled here
+    assert ranged.stats["ranges"] == 4  # samples 0-4 (the pilot and one more), 5-7, 8-10, 11
+    assert ranged.accumulator.learned is not None
+    np.testing.assert_allclose(ranged.image, whole.image, rtol=1e-6, atol=1e-9)
+
+
 def test_a_render_past_sample_0_has_no_pilot_and_picks_with_the_bvh(scene):
     learned = render(scene, RenderSettings(spp=6, first_sample=4, light_sampler="learned"))
     bvh = render(scene, RenderSettings(spp=6, first_sample=4, light_sampler="bvh"))

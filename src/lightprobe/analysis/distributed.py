@@ -4,8 +4,11 @@ A render of samples 0 ... spp - 1 splits into ranges [a, b); each range is one t
 (every random number is a pure function of its seed, pixel, sample index and dimension, so a range rendered on any
 worker gives the same numbers) and returns its per-pixel statistics.  The ranges are merged in range order with
 Chan, Golub and LeVeque's pairwise update, so the result does not depend on which worker finished first, and equals
-a single-process render up to float64 rounding.  Dask's scheduler re-runs the task of a worker that is lost; the
-other ranges are kept.  No job queue of our own: a ``LocalCluster`` by default, or any scheduler address.
+a single-process render up to float64 rounding.  A render that learns its light selection learns it from its first
+samples (integrators/light_learning.py): the range that holds them is rendered first, and the other ranges pick
+with what it learned, as the single process does after its pilot.  Dask's scheduler re-runs the task of a worker
+that is lost; the other ranges are kept.  No job queue of our own: a ``LocalCluster`` by default, or any scheduler
+address.
 """
 
 from __future__ import annotations
@@ -14,7 +17,15 @@ import contextlib
 import dataclasses
 
 from ..errors import LightprobeError
-from ..integrators.wavefront import Accumulator, RenderResult, RenderSettings, render, result_from
+from ..integrators.light_learning import UNIFORM_PILOT
+from ..integrators.wavefront import (
+    Accumulator,
+    RenderResult,
+    RenderSettings,
+    learns_light_selection,
+    render,
+    result_from,
+)
 from ..scene import Scene
 
 __all__ = ["dask_client", "render_on_dask", "sample_ranges"]
@@ -27,10 +38,22 @@ def sample_ranges(spp: int, chunk: int, first: int = 0) -> list[tuple[int, int]]
     return [(a, min(chunk, first + spp - a)) for a in range(first, first + spp, chunk)]
 
 
-def _render_range(scene: Scene, settings: RenderSettings, first: int, count: int) -> tuple[dict, float]:
+def _render_range(
+    scene: Scene, settings: RenderSettings, first: int, count: int, learned: dict | None = None
+) -> tuple[dict, float]:
     part = dataclasses.replace(settings.uniform_unless_adaptive(), spp=count, first_sample=first, time_limit=None)
-    result = render(scene, part)
+    result = render(scene, part, learned=learned)
     return result.accumulator.to_arrays(), result.stats["seconds"]
+
+
+def _pilot_range(ranges: list[tuple[int, int]], spp: int) -> list[tuple[int, int]]:
+    """``ranges`` with the first one long enough to learn the light selection from its first UNIFORM_PILOT samples
+    and render at least one more, as a single render of ``spp`` samples does (where ``spp`` is more than those)."""
+    first, count = ranges[0]
+    wanted = min(spp, max(count, UNIFORM_PILOT + 1))
+    if count >= wanted:
+        return ranges
+    return [(first, wanted), *(sample_ranges(spp - wanted, count, first + wanted) if spp > wanted else [])]
 
 
 @contextlib.contextmanager
@@ -81,19 +104,31 @@ def render_on_dask(
         raise LightprobeError("a render split into sample ranges cannot take adaptive counts: leave adaptive off")
     settings.validate()
     ranges = sample_ranges(settings.spp, chunk, settings.first_sample)
+    learned = resume.learned if resume is not None else None
+    # a range from sample 0 of a render that learns: rendered first, and what it learned goes to the other ranges
+    learns_first = learned is None and settings.first_sample == 0 and learns_light_selection(scene, settings)
+    if learns_first:
+        ranges = _pilot_range(ranges, settings.spp)
     with dask_client(scheduler, workers, threads_per_worker, connect_timeout) as client:
         per_task = dataclasses.replace(settings, threads=settings.threads or threads_per_worker)
         scene_on_workers = client.scatter(scene, broadcast=True)
+        parts = []
+        if learns_first:
+            (a, n), ranges = ranges[0], ranges[1:]
+            parts.append(client.submit(_render_range, scene_on_workers, per_task, a, n, pure=False).result())
+            learned = Accumulator.from_arrays(parts[0][0]).learned
         # pure=False: every call gets fresh task keys, never another render's cached result
-        futures = [client.submit(_render_range, scene_on_workers, per_task, a, n, pure=False) for a, n in ranges]
-        parts = client.gather(futures)
+        futures = [
+            client.submit(_render_range, scene_on_workers, per_task, a, n, learned, pure=False) for a, n in ranges
+        ]
+        parts += client.gather(futures)
     acc = resume
     for arrays, _ in parts:  # in range order: the merge does not depend on which task finished first
         part = Accumulator.from_arrays(arrays)
         acc = part if acc is None else acc.merged(part)
     width, height = scene.camera.resolution
     stats = {
-        "ranges": len(ranges),
+        "ranges": len(parts),
         "chunk": chunk,
         "task_seconds": sum(seconds for _, seconds in parts),
         "scheduler": scheduler or f"LocalCluster({workers} x {threads_per_worker})",

@@ -28,12 +28,14 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import LightprobeError
+from ..integrators.light_learning import UNIFORM_PILOT
 from ..integrators.settings import DIFFUSE, RESOLVED_PER_SCENE
 from ..integrators.wavefront import (
     Accumulator,
     RenderResult,
     RenderSettings,
     compensation_for,
+    learns_light_selection,
     lit_by_the_map_alone,
     render,
     result_from,
@@ -146,8 +148,14 @@ def _load(path: Path, identity: dict, n_pixels: int, scene: Scene) -> Accumulato
             diff.append("scene")
         if meta.get("compensation") != identity["compensation"]:  # automatic, its rule changed (decisions.md 98)
             diff.append("mis_compensation")
+        given = meta.get("settings", {})
+        values = "".join(  # what each setting was and is: e.g. a default that changed since (decisions.md 117)
+            f"{k} {given.get(k)!r} in the checkpoint, {identity['settings'].get(k)!r} now; "
+            for k in diff
+            if k in given or k in identity["settings"]
+        )
         raise LightprobeError(
-            f"{path}: checkpoint of a different render ({', '.join(diff) or 'settings'} differ); "
+            f"{path}: checkpoint of a different render ({', '.join(diff) or 'settings'} differ): {values}"
             "use the same settings, or move it away to start afresh"
         )
     if acc.count.size != n_pixels or acc.count.min() != acc.count.max():
@@ -219,8 +227,11 @@ def render_reference(
         _save(ckpt, acc, identity)
         if on_chunk is not None:
             on_chunk(done, settings.spp)
+    # a render that learns its light selection learns it from its first UNIFORM_PILOT samples where it has more: the
+    # first chunk holds them and one more, so that a reference in short chunks picks as one whole render does
+    pilot_chunk = done == 0 and chunk <= UNIFORM_PILOT and learns_light_selection(scene, settings)
     while done < settings.spp:
-        n = min(chunk, settings.spp - done)
+        n = min(max(chunk, UNIFORM_PILOT + 1) if pilot_chunk and done == 0 else chunk, settings.spp - done)
         limit = None
         if settings.time_limit is not None:
             limit = settings.time_limit - (time.perf_counter() - start)

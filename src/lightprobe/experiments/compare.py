@@ -36,8 +36,8 @@ import numpy as np
 
 from ..analysis import metrics
 from ..errors import LightprobeError
-from ..integrators.light_learning import UNIFORM_PILOT, learns
-from ..integrators.wavefront import RenderSettings, render, resolve, result_from, settings_for
+from ..integrators.light_learning import UNIFORM_PILOT
+from ..integrators.wavefront import RenderSettings, learns_light_selection, render, result_from, settings_for
 from ..scene import Scene
 
 __all__ = ["PRESETS", "StrategyRun", "compare", "light_choice", "parse_strategy"]
@@ -147,12 +147,6 @@ def _measure(image, variance, reference, reference_variance, mask=None) -> dict:
     }
 
 
-def _can_learn(scene: Scene, settings: RenderSettings) -> bool:
-    """Whether a render of ``scene`` with ``settings`` learns its light selection (:func:`learns`)."""
-    plan = resolve(scene, settings)
-    return learns(plan.selector, plan.settings.strategy, plan.settings.light_sampler)
-
-
 def run_strategy(
     scene: Scene,
     label: str,
@@ -190,7 +184,7 @@ def run_strategy(
     # the pilot, whole (in time mode it may overrun the budget: its seconds say so); a shorter one would learn nothing.
     # Only where there is something to learn (two bounded lights or more, light samples taken): the default selector
     # is the learned one, and an environment map's strategies keep their rounds of 1, 2, 4, ... samples
-    learning = lab is None and settings.light_sampler == "learned" and _can_learn(scene, settings)
+    learning = lab is None and settings.light_sampler == "learned" and learns_light_selection(scene, settings)
     target = 2 * UNIFORM_PILOT if learning else 1
     # the report states the allocation and heuristic actually used; a strategy's rounds continue each other, so its
     # counts are uniform unless it asks for adaptive ones (adaptive=true: separate renders, _adaptive_rounds)

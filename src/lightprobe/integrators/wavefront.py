@@ -63,6 +63,7 @@ __all__ = [
     "RenderResult",
     "RenderSettings",
     "kernels_cached",
+    "learns_light_selection",
     "plan_for",
     "render",
     "resolve",
@@ -215,6 +216,14 @@ def resolve(scene: Scene, settings: RenderSettings | None = None, *, resumed: bo
     )
 
 
+def learns_light_selection(scene: Scene, settings: RenderSettings | None = None) -> bool:
+    """Whether a render of ``scene`` with ``settings`` can learn its light selection (``light_sampler`` learned,
+    light samples taken, two bounded lights or more: ``light_learning.learns``); it does so from its first samples
+    (``light_learning.pilot_for``) where it has more than those."""
+    plan = resolve(scene, settings)
+    return light_learning.learns(plan.selector, plan.settings.strategy, plan.settings.light_sampler)
+
+
 def _check(scene: Scene, settings: RenderSettings, alone: bool) -> None:
     if settings.strategy == "mis":
         for name, bsdf in scene.materials.items():
@@ -265,7 +274,9 @@ def _compensated_materials(kinds: np.ndarray, compensated) -> np.ndarray:
 class _Pass:
     """One render's stages and buffers: :meth:`run` renders one pass into an accumulator."""
 
-    def __init__(self, scene, render_plan: RenderPlan, arrays, tracer, largest_pass, threads, resumed=None):
+    def __init__(
+        self, scene, render_plan: RenderPlan, arrays, tracer, largest_pass, threads, resumed=None, learned=None
+    ):
         threads_max = max(threads, numba.config.NUMBA_NUM_THREADS)
         settings, plan = render_plan.settings, render_plan.pipeline
         self.plan = plan
@@ -316,8 +327,10 @@ class _Pass:
         if light_learning.learns(self.sel, settings.strategy, settings.light_sampler):
             pilot = light_learning.pilot_for(settings.spp, settings.adaptive)
             if resumed is not None and resumed.learned is not None:
-                self.sel = light_learning.restored(self.sel, resumed.learned)
-                self.learned = resumed.learned
+                learned = resumed.learned
+            if learned is not None:
+                self.sel = light_learning.restored(self.sel, learned)
+                self.learned = learned
             elif settings.first_sample == 0 and pilot < settings.spp and (settings.adaptive or not settings.time_limit):
                 n_pixels = int(np.prod(scene.camera.resolution))
                 self.learning = light_learning.Learning(
@@ -375,11 +388,14 @@ def render(
     progress: Callable[[dict], None] | None = None,
     tracer: RayTracer | None = None,
     resume: Accumulator | None = None,
+    learned: dict | None = None,
 ) -> RenderResult:
     """Render ``scene``; ``progress(stats)`` is called after every pass.  Ctrl-C keeps what has been accumulated
     (``stats['interrupted']``), as does a time limit (``stats['stopped_by_time_limit']``).  ``resume``: continue
     these statistics (a copy) with samples ``settings.first_sample`` onward; resuming where a render stopped gives
-    the same bits as an uninterrupted render."""
+    the same bits as an uninterrupted render.  ``learned``: the light selection a render of the samples before
+    ``settings.first_sample`` learned (its ``accumulator.learned``), for a sample range rendered apart from them
+    (``analysis/distributed.py``): it picks as the whole render would (``resume``'s, if it carries one, wins)."""
     t_setup = time.perf_counter()
     render_plan = resolve(scene, settings, resumed=resume is not None)
     if render_plan.settings.threads is not None:
@@ -388,12 +404,12 @@ def render(
     _warn_of_unreached_delta_lights(render_plan)
     helpers = []  # processes compiling some of the stages of a first render of this kind (precompile.py)
     try:
-        return _render_planned(scene, render_plan, helpers, progress, tracer, resume, threads, t_setup)
+        return _render_planned(scene, render_plan, helpers, progress, tracer, resume, threads, t_setup, learned)
     finally:
         precompile.stop(helpers)
 
 
-def _render_planned(scene, render_plan, helpers, progress, tracer, resume, threads, t_setup) -> RenderResult:
+def _render_planned(scene, render_plan, helpers, progress, tracer, resume, threads, t_setup, learned=None):
     """:func:`render` of its :class:`RenderPlan`; ``helpers`` (empty): where it puts the processes it starts to
     compile some of its stages, which it stops once its own warm-up has compiled (or loaded) them all."""
     settings = render_plan.settings
@@ -416,7 +432,7 @@ def _render_planned(scene, render_plan, helpers, progress, tracer, resume, threa
     acc.adaptive = settings.adaptive  # resolved: a continued render is uniform (or refused above)
     plan = render_plan.pipeline
     largest_pass = max(1, band * spp_pass)
-    work = _Pass(scene, render_plan, arrays, tracer, largest_pass, threads, resume)
+    work = _Pass(scene, render_plan, arrays, tracer, largest_pass, threads, resume, learned)
     kinds = work.lights.kind
     stats = {
         "width": width,
