@@ -236,6 +236,14 @@ class Scene:
     def emitters(self) -> list[SceneObject]:
         return [o for o in self.objects if o.emission is not None]
 
+    @property
+    def bounded_light_count(self) -> int:
+        """The lights the light BVH sorts: a row per emissive sphere, rectangle and mesh triangle, and each point
+        and spot light (the environment, directional lights and the sun are infinitely far)."""
+        from .emitters.punctual import PointLight
+
+        return sum(_light_rows(o) for o in self.emitters) + sum(isinstance(light, PointLight) for light in self.lights)
+
     def light_table(self):
         """The light table (:class:`~lightprobe.emitters.kinds.LightArrays`, world space) of the scene's emissive
         objects and lights: :func:`lightprobe.emitters.table.light_table`."""

@@ -18,7 +18,7 @@ from lightprobe.geometry.camera import Camera
 from lightprobe.geometry.shapes import Rectangle, Sphere
 from lightprobe.integrators import wavefront
 from lightprobe.integrators.accumulation import Accumulator
-from lightprobe.integrators.settings import AUTO_BSDF_SAMPLES, AUTO_ENV_SAMPLES, RESOLVED_PER_SCENE
+from lightprobe.integrators.settings import AUTO_BSDF_SAMPLES, AUTO_ENV_SAMPLES, MANY_LIGHTS_PICKS, RESOLVED_PER_SCENE
 from lightprobe.integrators.wavefront import RenderSettings, render, result_from
 from lightprobe.peer import find_peers, peer_scene
 from lightprobe.scene import Scene
@@ -187,6 +187,10 @@ def test_two_lights_are_picked_per_camera_sample_unless_one_light_is_all_there_i
     assert k(scene(panel=True)) == 2
     assert k(scene(environment=True, panel=True)) == 2
     assert k(scene(panel=True), lights_per_sample=1) == 1
+    # many lights (64 rows of the light BVH or more): 4 picks (decisions.md 118), where the slots hold them
+    grid = [PointLight([x - 4.0, 2, z - 4.0], 0.1) for x in range(8) for z in range(8)]
+    assert k(scene(*grid[:63])) == 2 and k(scene(*grid)) == MANY_LIGHTS_PICKS == 4
+    assert k(scene(*grid), n_env=15) == 4 and k(scene(*grid), n_env=16) == 2  # 1 + 4 x 16 > 64 slots
     assert k(scene(environment=True), lights_per_sample=3) == 3
     lit = scene(panel=True, environment=True)
     auto = render(lit, RenderSettings(spp=4, seed=5)).image
@@ -435,7 +439,7 @@ def test_split_sample_ranges_resume_bit_for_bit_and_merge_exactly(sampler):
 
 @pytest.mark.parametrize("name", ["area", "many"])
 def test_scenes_with_lights_render_the_same_bits_on_any_threads_and_pass_size_and_resume_bit_for_bit(name):
-    """The reference scenes with area lights under their defaults (decision 97: two light picks per camera sample,
+    """The reference scenes with area lights under their defaults (decisions 97, 118: 2 or 4 light picks per sample,
     two BSDF samples beside the sky; the outline control variate on, with entries in this image): the same image and
     variance for 1 or 2 threads and any pass size, and a render resumed from a sample range is the whole render, bit
     for bit.  (The determinism tests above use an environment-lit scene, whose one light is picked without a
@@ -446,7 +450,8 @@ def test_scenes_with_lights_render_the_same_bits_on_any_threads_and_pass_size_an
     scene = build(name, resolution=(20, 12), lights=200 if name == "many" else None)
     for adaptive in (None, False):
         base = render(scene, RenderSettings(spp=16, threads=2, adaptive=adaptive))
-        assert base.stats["lights_per_sample"] == 2 and base.stats["outline_pixels"] > 0
+        picks = MANY_LIGHTS_PICKS if name == "many" else 2  # 200 lights; the area scene's 18 (decisions.md 118)
+        assert base.stats["lights_per_sample"] == picks and base.stats["outline_pixels"] > 0
         assert base.stats["adaptive"] == (adaptive is None)
         for settings in (
             RenderSettings(spp=16, threads=1, adaptive=adaptive),

@@ -41,6 +41,11 @@ DIFFUSE = "diffuse"  # mis_compensation's automatic choice: the compensated PDF 
 # n_bsdf=None and n_env=None in scenes lit by an environment map alone (decisions.md 33, 34, 93); else 1 each
 AUTO_BSDF_SAMPLES = 8
 AUTO_ENV_SAMPLES = 8
+# from this many bounded lights (light BVH rows: emissive triangles, spheres, rectangles, point and spot lights) a
+# camera sample picks MANY_LIGHTS_PICKS lights, not 2: where the choice of light is most of the error, the picks of one
+# camera sample share one stratified set of pick numbers (decisions.md 118)
+MANY_LIGHTS = 64
+MANY_LIGHTS_PICKS = 4
 # the fields whose None RenderSettings.resolved turns into a value chosen for the scene
 RESOLVED_PER_SCENE = ("n_bsdf", "n_env", "heuristic", "lights_per_sample", "adaptive")
 # adaptive=None: adaptive counts at spp >= 16, a pilot of 4 spp or more (at 8 spp, a 2-spp pilot, they cut the
@@ -185,7 +190,7 @@ class RenderSettings:
         minimum=1,  # at most 64 slots in all: validate()
         key="lights_per_sample",
         flags=("--lights-per-sample",),
-        auto="1 if an environment map or one delta light is the only light, else 2",
+        auto="1 if an environment map or one delta light is the only light, 4 with 64 bounded lights or more, else 2",
     )
     light_strategy: str = option(
         "solid-angle",
@@ -286,7 +291,12 @@ class RenderSettings:
         return (1 if self.n_bsdf is None else self.n_bsdf) + self.light_samples
 
     def resolved(
-        self, environment_only: bool, one_delta_light: bool = False, environment: bool = False, resumed: bool = False
+        self,
+        environment_only: bool,
+        one_delta_light: bool = False,
+        environment: bool = False,
+        resumed: bool = False,
+        bounded_lights: int = 0,
     ) -> RenderSettings:
         """These settings with the automatic choices made, for a scene lit by an environment map alone or not
         (``one_delta_light``: by one point, spot or delta directional light alone; ``environment``: the scene has an
@@ -301,17 +311,21 @@ class RenderSettings:
         Where anything but an environment map alone lights the scene, K = 2 lights are picked per camera sample: the
         light samples' variance is most of such a scene's error (each pick's own Sobol' pair halves it), so a second
         pick lowers the error 1.7-1.9x for 1.4-1.5x the time (decisions.md 97); one delta light alone keeps K = 1 (its
-        sample is always the same direction). An environment map beside other lights takes 2 BSDF samples, which are how
+        sample is always the same direction); a scene of 64 bounded lights or more takes K = 4, where the choice of
+        light is most of the error and the picks' stratified numbers lower it faster than 1 / K (decisions.md 118).
+        An environment map beside other lights takes 2 BSDF samples, which are how
         MIS finds the map's broad light (1.2-1.3x the efficiency of 1 on three such scenes; without a map a second one
         loses 9-18 %).  Adaptive counts as :meth:`adaptive_counts` decides (``resumed``: the render continues
         another)."""
-        k = self.lights_per_sample
-        if k is None:
-            k = 1 if environment_only or one_delta_light else 2
         n_bsdf = self.n_bsdf
         if n_bsdf is None:
             n_bsdf = AUTO_BSDF_SAMPLES if environment_only else 2 if environment else 1
         n_env = self.n_env if self.n_env is not None else (AUTO_ENV_SAMPLES if environment_only else 1)
+        k = self.lights_per_sample
+        if k is None:
+            # many lights take more picks where the 64 slots of a camera sample hold them
+            many = bounded_lights >= MANY_LIGHTS and n_bsdf + MANY_LIGHTS_PICKS * n_env <= 64
+            k = 1 if environment_only or one_delta_light else MANY_LIGHTS_PICKS if many else 2
         heuristic = self.heuristic if self.heuristic is not None else ("balance" if environment_only else "power")
         return replace(
             self,

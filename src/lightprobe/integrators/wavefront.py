@@ -125,6 +125,7 @@ def _settings_for(scene: Scene, settings: RenderSettings, alone: bool, delta_lig
         one_delta_light=one_delta_light,
         environment=scene.environment is not None,
         resumed=resumed,
+        bounded_lights=scene.bounded_light_count,
     )
 
 
