@@ -410,7 +410,7 @@ def render(
         precompile.stop(helpers)
 
 
-def _render_planned(scene, render_plan, helpers, progress, tracer, resume, threads, t_setup, learned=None):
+def _render_planned(scene, render_plan, helpers, progress, tracer, resume, threads, t_setup, learned) -> RenderResult:
     """:func:`render` of its :class:`RenderPlan`; ``helpers`` (empty): where it puts the processes it starts to
     compile some of its stages, which it stops once its own warm-up has compiled (or loaded) them all."""
     settings = render_plan.settings
