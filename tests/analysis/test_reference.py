@@ -89,8 +89,8 @@ def test_a_checkpoint_made_under_another_automatic_rule_is_refused(scene_file, t
     out = tmp_path / "ref.exr"
     resolved = Settings.resolved
 
-    def old_rule(self, environment_only, one_delta_light=False, environment=False, resumed=False):
-        new = resolved(self, environment_only, one_delta_light, environment, resumed)
+    def old_rule(self, environment_only, one_delta_light=False, environment=False, resumed=False, bounded_lights=0):
+        new = resolved(self, environment_only, one_delta_light, environment, resumed, bounded_lights)
         if environment_only:
             return new
         return dataclasses.replace(
