@@ -17,7 +17,7 @@ import contextlib
 import dataclasses
 
 from ..errors import LightprobeError
-from ..integrators.light_learning import UNIFORM_PILOT
+from ..integrators.light_learning import first_range
 from ..integrators.wavefront import (
     Accumulator,
     RenderResult,
@@ -47,10 +47,10 @@ def _render_range(
 
 
 def _pilot_range(ranges: list[tuple[int, int]], spp: int) -> list[tuple[int, int]]:
-    """``ranges`` with the first one long enough to learn the light selection from its first UNIFORM_PILOT samples
-    and render at least one more, as a single render of ``spp`` samples does (where ``spp`` is more than those)."""
+    """``ranges`` with the first one long enough to learn the light selection as a single render of ``spp`` samples
+    does (``light_learning.first_range``)."""
     first, count = ranges[0]
-    wanted = min(spp, max(count, UNIFORM_PILOT + 1))
+    wanted = first_range(count, spp)
     if count >= wanted:
         return ranges
     return [(first, wanted), *(sample_ranges(spp - wanted, count, first + wanted) if spp > wanted else [])]

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import LightprobeError
-from ..integrators.light_learning import UNIFORM_PILOT
+from ..integrators.light_learning import first_range
 from ..integrators.settings import DIFFUSE, RESOLVED_PER_SCENE
 from ..integrators.wavefront import (
     Accumulator,
@@ -227,11 +227,11 @@ def render_reference(
         _save(ckpt, acc, identity)
         if on_chunk is not None:
             on_chunk(done, settings.spp)
-    # a render that learns its light selection learns it from its first UNIFORM_PILOT samples where it has more: the
-    # first chunk holds them and one more, so that a reference in short chunks picks as one whole render does
-    pilot_chunk = done == 0 and chunk <= UNIFORM_PILOT and learns_light_selection(scene, settings)
+    # a render that learns its light selection learns it from its first samples where it has more: the first chunk
+    # holds them and one more (light_learning.first_range), so that a reference in short chunks picks as one render
+    pilot_chunk = done == 0 and first_range(chunk, settings.spp) > chunk and learns_light_selection(scene, settings)
     while done < settings.spp:
-        n = min(max(chunk, UNIFORM_PILOT + 1) if pilot_chunk and done == 0 else chunk, settings.spp - done)
+        n = min(first_range(chunk, settings.spp) if pilot_chunk and done == 0 else chunk, settings.spp - done)
         limit = None
         if settings.time_limit is not None:
             limit = settings.time_limit - (time.perf_counter() - start)

@@ -22,7 +22,16 @@ from ..errors import ParameterError
 from . import adaptive
 from .techniques import ENV, MIS, VISIBLE
 
-__all__ = ["TABLE_FIELDS", "UNIFORM_PILOT", "Learning", "cells_learned", "learns", "restored", "table_of"]
+__all__ = [
+    "TABLE_FIELDS",
+    "UNIFORM_PILOT",
+    "Learning",
+    "cells_learned",
+    "first_range",
+    "learns",
+    "restored",
+    "table_of",
+]
 
 UNIFORM_PILOT = 4  # a uniform render learns from its first 4 samples per pixel
 #: the fields of a learned selector a render's statistics carry (``Accumulator.learned``)
@@ -33,6 +42,13 @@ def pilot_for(spp: int, adaptive_counts: bool) -> int:
     """The samples per pixel a render learns from: the first half of an adaptive render's pilot (its second half
     and the rounds after it use what was learned), or a uniform render's first ``UNIFORM_PILOT``."""
     return max(1, adaptive.pilot_spp(spp) // 2) if adaptive_counts else UNIFORM_PILOT
+
+
+def first_range(chunk: int, spp: int) -> int:
+    """The samples the first of a uniform render's sample ranges (``chunk`` each from sample 0, ``spp`` in all)
+    holds, so that it learns the light selection as one whole render of ``spp`` does: ``chunk``, or the
+    ``UNIFORM_PILOT`` samples it learns from and one more (a range of no more than those learns nothing)."""
+    return min(spp, max(chunk, UNIFORM_PILOT + 1))
 
 
 def learns(selector: LightSelector, strategy: str, light_sampler: str) -> bool:
