@@ -19,11 +19,13 @@ TRIANGLE = AreaLight.triangle([-0.5, 2.0, -0.3], [0.5, 2.0, -0.3], [0.1, 2.0, 0.
 SPHERE = AreaLight.sphere([0.2, 2.0, 0.1], 0.4, 1.5)
 LIGHTS = {"rectangle": RECT_DOWN, "triangle": TRIANGLE, "sphere": SPHERE}
 
-# Reference points (position, normal): near, far, grazing (the light near the horizon of the receiver), just
+# Reference points (position, normal): near, far, where the rectangle is just small enough to be sampled by
+# area (decisions.md 119), grazing (the light near the horizon of the receiver), just
 # above the plane of the light (grazing from the light's side), inside the plane, and behind a one-sided light.
 POINTS = {
     "near": ([0.1, 1.5, 0.0], [0.0, 1.0, 0.0]),
     "far": ([3.0, -20.0, 2.0], [0.0, 1.0, 0.0]),
+    "small": ([0.3, -3.0, 0.2], [0.0, 1.0, 0.0]),  # the rectangle at 0.23 of the distance: area-sampled
     "grazing": ([4.0, 1.8, 0.0], [0.0, 1.0, 0.0]),
     "light-plane-grazing": ([3.0, 1.9, 0.2], [-1.0, 0.0, 0.0]),  # 2 degrees below the light's plane
 }
@@ -218,6 +220,38 @@ def test_the_environment_map_honours_the_same_contract():
     assert np.all(np.isinf(s.distance)) and not s.delta
     np.testing.assert_allclose(env.pdf_li(p, n, s.direction), s.pdf, rtol=1e-12)
     np.testing.assert_allclose(env.eval(s.direction), s.radiance)
+
+
+@pytest.mark.parametrize("kind", ["rectangle", "triangle"])
+def test_a_planar_light_small_seen_from_the_receiver_is_sampled_by_area(kind):
+    """Solid-angle sampling of a rectangle or triangle whose extent is at most SMALL_EXTENT x the distance to its
+    centre falls back to area sampling (decisions.md 119): just beyond that distance every sample's density is
+    |x - x'|^2 / (|cos theta'| A), just within it 1 / Omega, the same for every sample; pdf() agrees either way."""
+    from lightprobe.emitters.area import SMALL_EXTENT
+
+    light = LIGHTS[kind]
+    g = light.geom
+    if kind == "rectangle":
+        centre, extent = g[0:3] + 0.5 * (g[3:6] + g[6:9]), math.hypot(np.linalg.norm(g[3:6]), np.linalg.norm(g[6:9]))
+    else:
+        centre = (g[0:3] + g[3:6] + g[6:9]) / 3
+        extent = math.hypot(np.linalg.norm(g[3:6] - g[0:3]), np.linalg.norm(g[6:9] - g[0:3]))
+    area = float(light.area)
+    below = np.array([0.3, -1.0, 0.2]) / np.linalg.norm([0.3, -1.0, 0.2])  # below the downward-facing light
+    normal = [0.0, 1.0, 0.0]
+    u = np.random.default_rng(7).random((4000, 2))
+    for factor, small in ((1.02, True), (0.98, False)):
+        p = centre + below * extent / SMALL_EXTENT * factor
+        s = light.sample_li(p, normal, u, strategy="solid-angle")
+        assert (s.pdf > 0).all()
+        np.testing.assert_allclose(light.pdf_li(p, normal, s.direction, strategy="solid-angle"), s.pdf, rtol=1e-9)
+        cos_light = np.abs(s.direction @ g[9:12])
+        by_area = s.distance**2 / (cos_light * area)
+        if small:
+            np.testing.assert_allclose(s.pdf, by_area, rtol=1e-9)
+        else:  # uniform in solid angle: one density, which area sampling's would not be
+            np.testing.assert_allclose(s.pdf, s.pdf[0], rtol=1e-9)
+            assert np.ptp(by_area) > 0.05 * s.pdf[0]
 
 
 def test_the_spherical_rectangles_solid_angle_is_its_two_triangles():
