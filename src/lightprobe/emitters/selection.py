@@ -100,7 +100,9 @@ __all__ = [
     "build_selector",
     "infinite_probability",
     "power_of_lights",
+    "receiver_terms",
     "select_light",
+    "select_light_at",
     "selector_pmf",
 ]
 
@@ -611,6 +613,22 @@ def _rescaled(u, lo, width):
 
 
 @jit_inline
+def receiver_terms(sel, px, py, pz, nx, ny, nz, compensated):
+    """What every pick for one receiver shares, worked out once for the K picks of a camera sample (decisions.md
+    120): (the probability of an infinite light, the infinite lights' summed importance, the learned cell, the
+    importances of the tree root's eight children, their sum); the last three only for the BVH's descent."""
+    p_inf, i_inf = 0.0, 0.0
+    if sel.n_lights > sel.n_bounded and sel.mode != UNIFORM:
+        p_inf, i_inf = infinite_probability(sel, px, py, pz, nx, ny, nz, compensated)
+    cell, total = -1, 0.0
+    w = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    if sel.mode == BVH and not _no_bounds(sel):
+        cell = cell_of(sel, px, py, pz)
+        w, total = _child_weights(sel.wide_bounds, 0, px, py, pz, nx, ny, nz)
+    return p_inf, i_inf, cell, w, total
+
+
+@jit_inline
 def select_light(sel, px, py, pz, nx, ny, nz, u, compensated):
     """(light index, probability, u rescaled) for a receiver at p with normal n (``compensated``: its material
     samples the MIS-compensated environment, ``infinite_probability``); (-1, 0, u) when no light can be picked.
@@ -620,13 +638,23 @@ def select_light(sel, px, py, pz, nx, ny, nz, u, compensated):
     leaves each light a scattered subset of the pair's net)."""
     if sel.n_lights == 0:
         return -1, 0.0, u
+    return select_light_at(sel, receiver_terms(sel, px, py, pz, nx, ny, nz, compensated), px, py, pz, nx, ny, nz, u,
+                           compensated)  # fmt: skip
+
+
+@jit_inline
+def select_light_at(sel, terms, px, py, pz, nx, ny, nz, u, compensated):
+    """:func:`select_light` with the receiver's shared ``terms`` (:func:`receiver_terms` of the same receiver and
+    ``compensated``) already worked out: the same light, probability and number, bit for bit."""
+    if sel.n_lights == 0:
+        return -1, 0.0, u
     if sel.mode == UNIFORM:
         x = u * sel.n_lights
         light = min(int(x), sel.n_lights - 1)
         return light, 1.0 / sel.n_lights, _rescaled(x, float(light), 1.0)
     pmf = 1.0
     if sel.n_lights > sel.n_bounded:
-        p_inf, i_inf = infinite_probability(sel, px, py, pz, nx, ny, nz, compensated)
+        p_inf, i_inf = terms[0], terms[1]
         if u < p_inf:
             u = _rescaled(u, 0.0, p_inf)
             n_inf = sel.n_lights - sel.n_bounded
@@ -656,7 +684,7 @@ def select_light(sel, px, py, pz, nx, ny, nz, u, compensated):
     # BVH: down the eight-wide tree, each child in proportion to its weight
     if _no_bounds(sel):
         return -1, 0.0, u
-    return _descend(sel, cell_of(sel, px, py, pz), pmf, px, py, pz, nx, ny, nz, u)
+    return _descend(sel, terms[2], pmf, px, py, pz, nx, ny, nz, u, terms[3], terms[4])
 
 
 # --- learned selection (emitters/selection_learning.py learns the ratios) --------------------------------------------
@@ -702,14 +730,17 @@ def _share(sel, cell, base, w, c, scale, scale_r):
 
 
 @jit_inline
-def _descend(sel, cell, pmf, px, py, pz, nx, ny, nz, u):
+def _descend(sel, cell, pmf, px, py, pz, nx, ny, nz, u, root_w, root_total):
     """select_light's bounded pick (``pmf``: the probability of a bounded light so far): down the eight-wide tree,
     each child by :func:`_share` -- the BVH's share, or, above the cut in a learned ``cell`` (>= 0), the learned
-    mixture.  :func:`_path_pmf` repeats the operations along a light's trail."""
+    mixture; the root's children weigh ``root_w`` (summing to ``root_total``: :func:`receiver_terms`).
+    :func:`_path_pmf` repeats the operations along a light's trail."""
     node = 0
     depth = 0
+    w, total = root_w, root_total
     while True:
-        w, total = _child_weights(sel.wide_bounds, node, px, py, pz, nx, ny, nz)
+        if depth > 0:
+            w, total = _child_weights(sel.wide_bounds, node, px, py, pz, nx, ny, nz)
         scale = 1.0 / total
         scale_r, base = 0.0, 0
         if cell >= 0 and depth < sel.cut_levels:

@@ -29,7 +29,7 @@ from ..._numba import jit, jit_body
 from ...bsdfs.dispatch import bsdf_eval
 from ...emitters.envmap import env_lookup, env_sample_coords, env_sample_full
 from ...emitters.lights import light_sample_of
-from ...emitters.selection import select_light
+from ...emitters.selection import receiver_terms, select_light_at
 from ...geometry.frame import to_local
 from ...sampling.rng import sample_state, uniform, uniform_2d
 from ...simd import LANES
@@ -60,6 +60,9 @@ def light_samples(env, lights, sel, c, cams, slots, lo, hi):
     if slots.light.shape[0] == 0:  # never without its record of the picks (pass_state.py)
         return
     learning = slots.learn.shape[0] > 0
+    # what the K picks of one camera sample share (the root's importances, the learned cell), once per sample
+    last = -1
+    terms = receiver_terms(sel, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, False)
     for r in range(lo, hi):
         if learning:
             slots.learn[r] = -1.0  # not a light sample, unless a light is picked below
@@ -75,7 +78,10 @@ def light_samples(env, lights, sel, c, cams, slots, lo, hi):
             rs = sample_state(c.sampler, c.seed, c.pixels[k // c.spp_pass], c.sample_start + k % c.spp_pass)
             u_pick = pick_number(rs, c.n_bsdf, c.n_per_light, m, c.strategy, r % m, u0)
         compensated = c.compensate[cams.material[k]]
-        light, pmf, u_rest = select_light(sel, px, py, pz, nx, ny, nz, u_pick, compensated)
+        if k != last:
+            terms = receiver_terms(sel, px, py, pz, nx, ny, nz, compensated)
+            last = k
+        light, pmf, u_rest = select_light_at(sel, terms, px, py, pz, nx, ny, nz, u_pick, compensated)
         if light < 0 or pmf <= 0.0:
             slots.state[r] = SLOT_NONE
             continue
