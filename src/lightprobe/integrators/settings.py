@@ -46,6 +46,9 @@ AUTO_ENV_SAMPLES = 8
 # camera sample share one stratified set of pick numbers (decisions.md 118)
 MANY_LIGHTS = 64
 MANY_LIGHTS_PICKS = 4
+# the shading samples (slots: n_bsdf + lights_per_sample x n_env) one camera sample holds; with LAST_SAMPLE, a sample
+# index times the slots stays below 2^63 (sampling.rng.group_slot numbers a group's members k n + j)
+MAX_SLOTS = 64
 # the fields whose None RenderSettings.resolved turns into a value chosen for the scene
 RESOLVED_PER_SCENE = ("n_bsdf", "n_env", "heuristic", "lights_per_sample", "adaptive")
 # adaptive=None: adaptive counts at spp >= 16, a pilot of 4 spp or more (at 8 spp, a 2-spp pilot, they cut the
@@ -241,11 +244,11 @@ class RenderSettings:
         # automatic counts: at least 1 each (render checks the counts it resolves them to again)
         n_bsdf = 1 if self.n_bsdf is None else self.n_bsdf
         n_env = 1 if self.n_env is None else self.n_env
-        if n_bsdf + n_env < 1 or n_bsdf + n_env > 64:
+        if n_bsdf + n_env < 1 or n_bsdf + n_env > MAX_SLOTS:
             raise ParameterError(
                 f"bsdf and env sample counts (n_bsdf, n_env) must be >= 0 with 1 to 64 in all, got {n_bsdf} and {n_env}"
             )
-        if self.shading_samples > 64:
+        if self.shading_samples > MAX_SLOTS:
             raise ParameterError(
                 f"lights_per_sample must be >= 1 with at most 64 shading samples in all (n_bsdf + lights_per_sample "
                 f"x n_env), got {self.lights_per_sample}"
@@ -324,7 +327,7 @@ class RenderSettings:
         k = self.lights_per_sample
         if k is None:
             # many lights take more picks where the 64 slots of a camera sample hold them
-            many = bounded_lights >= MANY_LIGHTS and n_bsdf + MANY_LIGHTS_PICKS * n_env <= 64
+            many = bounded_lights >= MANY_LIGHTS and n_bsdf + MANY_LIGHTS_PICKS * n_env <= MAX_SLOTS
             k = 1 if environment_only or one_delta_light else MANY_LIGHTS_PICKS if many else 2
         heuristic = self.heuristic if self.heuristic is not None else ("balance" if environment_only else "power")
         return replace(
