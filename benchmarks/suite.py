@@ -894,10 +894,10 @@ def _commit() -> str:
 
 def _table_from(args) -> int:
     """The table of earlier runs from their printed output (one JSON object per line; a run cut short gives the
-    rows it finished).  With several logs, a renderer's rows of a scene come from the last log that has that
-    renderer's rows of it (a run of some scenes after a change replaces lightprobe's and the peers' rows there and
-    keeps another peer's), references merge, and the table says which commit measured what; the logs must share
-    resolution, seeds and lightprobe options."""
+    rows it finished).  With several logs, a renderer's rows of a scene at an spp come from the last log that has
+    that renderer's rows of it at that spp (a run of some scenes after a change replaces lightprobe's and the peers'
+    rows there and keeps another peer's; a run at 256 spp alone keeps the 16- and 64-spp rows), references merge,
+    and the table says which commit measured what; the logs must share resolution, seeds and lightprobe options."""
     from lightprobe.reference_scenes import SUITE
 
     rows, references, notes, header, measured = [], {}, {}, None, {}
@@ -931,18 +931,23 @@ def _table_from(args) -> int:
                     raise SystemExit(f"{log}: its {key} {this[key]} differs from the first log's {header[key]}")
             this = {**this, "spp": sorted(set(header["spp"]) | set(this["spp"]))}
         header = this
-        measures = {(row["scene"], row["renderer"]) for row in got}
-        rows = [row for row in rows if (row["scene"], row["renderer"]) not in measures] + got
+        measures = {(row["scene"], row["renderer"], row["spp"]) for row in got}
+        rows = [row for row in rows if (row["scene"], row["renderer"], row["spp"]) not in measures] + got
         for scene, ref in refs.items():
             references.setdefault(scene, {}).update(ref)
-        for scene, renderer in measures:
-            measured[scene, renderer] = (this.get("commit") or "unknown", this.get("date") or "an unknown date")
+        for key in measures:
+            measured[key] = (this.get("commit") or "unknown", this.get("date") or "an unknown date")
     args.resolution, args.seeds, args.spp = header["resolution"], header["seeds"], header["spp"]
     args.lightprobe_option = [f"{k}={json.dumps(v)}" for k, v in header["lightprobe_options"].items()]
     if len(set(measured.values())) > 1:
+        runs_of: dict = {}  # (scene, renderer) -> {run: [spp, ...]}
+        for (scene, renderer, spp), run in sorted(measured.items()):
+            runs_of.setdefault((scene, renderer), {}).setdefault(run, []).append(spp)
         by_run: dict = {}
-        for (scene, renderer), run in sorted(measured.items()):
-            by_run.setdefault(run, []).append(f"{scene} {renderer}")
+        for (scene, renderer), runs in runs_of.items():
+            for run, spps in runs.items():  # the spp named only where a renderer's rows of a scene span runs
+                at = f" {'/'.join(map(str, spps))} spp" if len(runs) > 1 else ""
+                by_run.setdefault(run, []).append(f"{scene} {renderer}{at}")
         header = {**header, "commit": "; ".join(f"{c} ({d}: {', '.join(names)})" for (c, d), names in by_run.items()),
                   "date": " / ".join(sorted({d for _, d in by_run}))}  # fmt: skip
     _report(args, header, rows, references, notes, None)

@@ -201,6 +201,17 @@ def test_a_table_from_two_logs_takes_each_renderers_rows_from_the_last_log_that_
     text = capsys.readouterr().out
     # a's and b's lightprobe rows are the new log's (5x, 2x), their Mitsuba rows the old one's
     assert "**5.00x**" in text and "**2.00x**" in text and "**10.00x**" not in text and "**1.00x**" not in text
+    # a later log of one scene at another spp alone adds its rows and keeps the earlier spp's
+    later = log(tmp_path / "later.log", "ddddddd", [
+        _row("mitsuba", "a", 64, "multijitter 1+1", 0.01, 1.0), _row("lightprobe", "a", 64, "defaults", 0.0025, 1.0),
+    ])  # fmt: skip
+    args.table_from, args.json = [old, new, later], str(tmp_path / "table.json")
+    assert suite._table_from(args) == 0
+    text = capsys.readouterr().out
+    assert "**5.00x**" in text and "**2.00x**" in text and "**4.00x**" in text
+    commit = json.loads((tmp_path / "table.json").read_text())["header"]["commit"]
+    assert "a lightprobe 16 spp" in commit and "a lightprobe 64 spp" in commit and "b lightprobe)" in commit
+    args.json = None
     args.table_from = [old, log(tmp_path / "small.log", "ccccccc", [], resolution=(64, 48))]
     with pytest.raises(SystemExit, match="resolution"):
         suite._table_from(args)
