@@ -240,9 +240,9 @@ class Scene:
     def bounded_light_count(self) -> int:
         """The lights the light BVH sorts: a row per emissive sphere, rectangle and mesh triangle, and each point
         and spot light (the environment, directional lights and the sun are infinitely far)."""
-        from .emitters.punctual import PointLight
+        from .emitters.kinds import KINDS
 
-        return sum(_light_rows(o) for o in self.emitters) + sum(isinstance(light, PointLight) for light in self.lights)
+        return sum(_light_rows(o) for o in self.emitters) + sum(not KINDS[light.kind].infinite for light in self.lights)
 
     def light_table(self):
         """The light table (:class:`~lightprobe.emitters.kinds.LightArrays`, world space) of the scene's emissive

@@ -36,7 +36,7 @@ from ..bsdfs.lambert import LAMBERT
 from ..bsdfs.phong import PHONG
 from ..emitters.area import STRATEGIES as LIGHT_STRATEGIES
 from ..emitters.envmap import BILINEAR, placeholder_environment
-from ..emitters.kinds import KINDS, LightArrays, light_counts
+from ..emitters.kinds import LightArrays, light_counts
 from ..emitters.lights import is_delta, light_arrays
 from ..emitters.selection import LightSelector, build_selector
 from ..errors import LightprobeWarning, ParameterError
@@ -161,7 +161,7 @@ def plan_for(scene: Scene, settings: RenderSettings) -> pipeline.Plan:
     lanes = environment_lanes.compiles()
     return pipeline.Plan(
         environment_alone=alone,
-        bounded_lights=bool(scene.emitters) or any(not KINDS[light.kind].infinite for light in scene.lights),
+        bounded_lights=scene.bounded_light_count > 0,
         emissive_surfaces=bool(scene.emitters),
         meshes=scene.triangle_count > 0,
         resampled=settings.env_candidates > 1,
