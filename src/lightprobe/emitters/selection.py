@@ -636,8 +636,6 @@ def select_light(sel, px, py, pz, nx, ny, nz, u, compensated):
     the renderer picks with the first number of the light sample's 2D pair and gives the pair back to the light
     with this number in its place, so each light's samples keep the pair's stratification (a separate pick number
     leaves each light a scattered subset of the pair's net)."""
-    if sel.n_lights == 0:
-        return -1, 0.0, u
     return select_light_at(sel, receiver_terms(sel, px, py, pz, nx, ny, nz, compensated), px, py, pz, nx, ny, nz, u,
                            compensated)  # fmt: skip
 
