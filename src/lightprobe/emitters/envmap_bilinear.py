@@ -34,7 +34,7 @@ import math
 
 import numpy as np
 
-from .._numba import jit, jit_inline, jit_parallel, prange
+from .._numba import jit, jit_inline
 from ..sampling.distributions import ONE_MINUS_EPSILON, find_interval
 
 __all__ = ["BilinearDensity", "build_bilinear"]
@@ -95,11 +95,10 @@ def node_weight(lum, sines, offset, j, i):
     return x * sines[j] if x > 0.0 else 0.0
 
 
-@jit_parallel
+@jit  # serial, as _guide: a parallel loop's compile costs a first render more than it saves (decisions.md 121)
 def _row_sums(lum, sines, offset, out):
     ny, n1 = out.shape
-    for jp in prange(ny):
-        j = np.int64(jp)  # a signed row (parfor indices can be unsigned; min() with a signed one gives a float)
+    for j in range(ny):
         prev = node_weight(lum, sines, offset, j, 0)
         run = 0.0
         out[j, 0] = 0.0
@@ -110,13 +109,13 @@ def _row_sums(lum, sines, offset, out):
             prev = nxt
 
 
-@jit_parallel
+@jit
 def _guide(sums, out):
     """out[j, g] = the largest i < n - 1 with sums[j, i] <= g / G sums[j, n - 1] (G = out.shape[1] - 1), for each
     row of running sums (j, n); -1 for a row whose total is not positive."""
     rows, n = sums.shape
     buckets = out.shape[1] - 1
-    for j in prange(rows):
+    for j in range(rows):
         total = sums[j, n - 1]
         if not total > 0.0:
             for g in range(buckets + 1):

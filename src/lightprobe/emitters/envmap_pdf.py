@@ -34,9 +34,9 @@ WEIGHT_MODES = {"bilinear": 0, "texel": 1, "blur": 2}
 _SUPPORT_BLUR = 1e-4  # share of pbrt's blurred luminance added to bilinear weights: no lit direction gets pdf 0
 
 
-@jit_parallel
+@jit  # serial: a parallel loop's compile costs a new user's first render more than it saves (decisions.md 121)
 def _luminance(image, weights, out):
-    for j in prange(image.shape[0]):
+    for j in range(image.shape[0]):
         for i in range(image.shape[1]):
             out[j, i] = weights[0] * image[j, i, 0] + weights[1] * image[j, i, 1] + weights[2] * image[j, i, 2]
 
