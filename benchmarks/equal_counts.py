@@ -58,8 +58,10 @@ def mitsuba_times(scene_name: str, resolution, spp: int, repeats: int) -> dict[s
 
     mi, mr = suite._mitsuba()
     times = {}
+    # the peer kit's assets are made once into the suite's cache, as suite.py does
+    cache = Path(os.environ.setdefault("LIGHTPROBE_SUITE_CACHE", str(Path.home() / ".cache" / "lightprobe-suite")))
+    cache.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp:
-        os.environ.setdefault("LIGHTPROBE_SUITE_CACHE", tmp)
         for power in (False, True) if scene_name in suite.MANY_LIGHTS else (False,):
             d = suite._mitsuba_scene(mi, mr, scene_name, resolution, tmp, power=power, spp=spp)
             scene = mi.load_dict(d)
@@ -87,7 +89,7 @@ def main() -> int:
     parser.add_argument("--threads", type=int, default=None, help="lightprobe's threads [all cores]")
     parser.add_argument("--no-mitsuba", action="store_true")
     args = parser.parse_args()
-    from lightprobe.reference_scenes import SUITE
+    from lightprobe.reference_scenes import SUITE, unavailable
 
     unknown = [s for s in args.scenes if s not in SUITE]
     if unknown:
@@ -104,6 +106,10 @@ def main() -> int:
     print(json.dumps({"cores": os.cpu_count(), "spp": args.spp, "resolution": args.resolution}), flush=True)
     rows = []
     for name in args.scenes:
+        why = unavailable(name)
+        if why is not None:
+            print(json.dumps({"scene": name, "skipped": why}), flush=True)
+            continue
         row = {"scene": name}
         for selector in args.selectors:
             seconds, profile = lightprobe_times(name, args.resolution, args.spp, args.repeats, selector, args.threads)
