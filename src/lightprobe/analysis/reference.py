@@ -229,9 +229,9 @@ def render_reference(
             on_chunk(done, settings.spp)
     # a render that learns its light selection learns it from its first samples where it has more: the first chunk
     # holds them and one more (light_learning.first_range), so that a reference in short chunks picks as one render
-    first = chunk
-    if done == 0 and first_range(chunk, settings.spp) > chunk and learns_light_selection(scene, settings):
-        first = first_range(chunk, settings.spp)
+    first = first_range(chunk, settings.spp)
+    if first <= chunk or done > 0 or not learns_light_selection(scene, settings):
+        first = chunk
     while done < settings.spp:
         n = min(first if done == 0 else chunk, settings.spp - done)
         limit = None
