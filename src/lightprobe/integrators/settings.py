@@ -246,12 +246,13 @@ class RenderSettings:
         n_env = 1 if self.n_env is None else self.n_env
         if n_bsdf + n_env < 1 or n_bsdf + n_env > MAX_SLOTS:
             raise ParameterError(
-                f"bsdf and env sample counts (n_bsdf, n_env) must be >= 0 with 1 to 64 in all, got {n_bsdf} and {n_env}"
+                f"bsdf and env sample counts (n_bsdf, n_env) must be >= 0 with 1 to {MAX_SLOTS} in all, got {n_bsdf} "
+                f"and {n_env}"
             )
         if self.shading_samples > MAX_SLOTS:
             raise ParameterError(
-                f"lights_per_sample must be >= 1 with at most 64 shading samples in all (n_bsdf + lights_per_sample "
-                f"x n_env), got {self.lights_per_sample}"
+                f"lights_per_sample must be >= 1 with at most {MAX_SLOTS} shading samples in all "
+                f"(n_bsdf + lights_per_sample x n_env), got {self.lights_per_sample}"
             )
         if self.mis_compensation and self.strategy != "mis":
             raise ParameterError("mis_compensation needs strategy 'mis' (the compensated PDF is zero on dim texels)")
