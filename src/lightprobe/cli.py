@@ -361,6 +361,7 @@ def render_command(
         + (f"-{stats['spp_max']}" if stats["spp_max"] != stats["spp_done"] else "")
         + " spp"
         + (f" (adaptive, {result.counts.mean():.1f} on average)" if stats["adaptive"] else "")
+        + (f", {stats['lights_per_sample']} light picks (a probe's choice)" if "picks_probe" in stats else "")
         + f" in {stats['seconds']:.2f} s, {stats['samples_per_s'] / 1e6:.2f} M samples/s, "
         f"{stats['rays_per_s'] / 1e6:.2f} M rays/s{note}",
         err=True,

@@ -74,13 +74,16 @@ def test_a_render_past_sample_0_has_no_pilot_and_picks_with_the_bvh(scene):
     np.testing.assert_array_equal(learned.image, bvh.image)
 
 
-def test_a_learning_render_agrees_with_mitsuba_on_the_building():
+@pytest.mark.parametrize("picks", [None, 16])
+def test_a_learning_render_agrees_with_mitsuba_on_the_building(picks):
     # Mitsuba 3's direct integrator, emitters sampled by power, 65,536 spp (benchmarks/mitsuba_references.py
     # --scenes building): per-pixel and pooled z-tests as every reference case, with our own variance (Mitsuba's
-    # per-sample variance here is many times ours: as a floor it would leave the pooled test blind to a 10 % bias)
+    # per-sample variance here is many times ours: as a floor it would leave the pooled test blind to a 10 % bias);
+    # and with the 16 picks a probe chooses for the building in a larger image (decisions.md 123)
     from .test_references import assert_agrees_with_mitsuba
 
-    options = {"light_sampler": "learned", "spp": 1024, "adaptive": False}
+    spp = 1024 if picks is None else 256
+    options = {"light_sampler": "learned", "spp": spp, "adaptive": False, "lights_per_sample": picks}
     ours = assert_agrees_with_mitsuba("building", build("building", resolution=(64, 48)), options, False)
     assert ours.stats["learned_cells"] > 0
 

@@ -25,6 +25,7 @@ from ..integrators.wavefront import (
     learns_light_selection,
     render,
     result_from,
+    settings_for,
 )
 from ..scene import Scene
 
@@ -103,6 +104,10 @@ def render_on_dask(
     if settings.adaptive:
         raise LightprobeError("a render split into sample ranges cannot take adaptive counts: leave adaptive off")
     settings.validate()
+    if settings.lights_per_sample is None:
+        # every range picks as many lights as the whole render (a probe may choose K: integrators/picks.py, whose
+        # rule sees a range's own samples)
+        settings = dataclasses.replace(settings, lights_per_sample=settings_for(scene, settings).lights_per_sample)
     ranges = sample_ranges(settings.spp, chunk, settings.first_sample)
     learned = resume.learned if resume is not None else None
     # a range from sample 0 of a render that learns: rendered first, and what it learned goes to the other ranges

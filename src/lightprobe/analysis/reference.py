@@ -209,6 +209,10 @@ def render_reference(
     settings.validate()
     width, height = scene.camera.resolution
     identity = _identity(scene, settings, scene_id)
+    if settings.lights_per_sample is None:
+        # the chunks pick as many lights as the whole reference (a probe may choose K: integrators/picks.py, whose
+        # rule sees a chunk's range, not the reference's)
+        settings = dataclasses.replace(settings, lights_per_sample=identity["settings"]["lights_per_sample"])
     ckpt = checkpoint_path(out)
     acc = _load(ckpt, identity, width * height, scene)
     done = int(acc.count[0]) if acc is not None else 0

@@ -78,10 +78,11 @@ def with_cut(sel: LightSelector, max_entries: int = MAX_ENTRIES) -> LightSelecto
     if child.shape[0] == 0:
         raise ValueError("learned selection needs a light BVH")
     depth = np.full(child.shape[0], -1, np.int64)
-    depth[0] = 0
-    for node in range(child.shape[0]):  # children have larger indices than their parent (geometry/wide_tree.py)
-        kids = child[node][child[node] >= 0]
-        depth[kids] = depth[node] + 1
+    level, nodes = 0, np.zeros(1, np.int64)
+    while nodes.size:  # a level of the tree at a time, from the root (every node has one parent)
+        depth[nodes] = level
+        kids = child[nodes].ravel()
+        level, nodes = level + 1, kids[kids >= 0]
     cut = 1
     while np.count_nonzero(depth < cut + 1) * WIDTH <= max_entries and np.any(depth == cut):
         cut += 1
@@ -96,12 +97,15 @@ class Records:
     ``samples`` first samples of every ``stride``-th pixel, ``slots`` light slots each.  ``light`` -1: no sample
     there (a camera ray that met no surface, a slot that picked no bounded light, a sample not rendered)."""
 
-    def __init__(self, pixels: int, pilot: int, slots: int, limit: int | None = None):
-        if limit is None:  # a quarter of the pilot's light samples: learning costs a few percent of the pilot
-            limit = min(MAX_RECORDS, max(MIN_RECORDS, pixels * pilot * max(1, slots) // 4))
+    def __init__(self, pixels: int, pilot: int, slots: int, limit: int | None = None, stride: int | None = None):
         self.slots = max(1, slots)
-        self.samples = max(1, min(pilot, limit // max(1, pixels * self.slots)))
-        self.stride = max(1, -(-pixels * self.slots * self.samples // limit))
+        if stride is not None:  # the pixels a render samples are every stride-th (integrators/picks.py's probe)
+            self.samples, self.stride = max(1, pilot), stride
+        else:
+            if limit is None:  # a quarter of the pilot's light samples: learning costs a few percent of the pilot
+                limit = min(MAX_RECORDS, max(MIN_RECORDS, pixels * pilot * max(1, slots) // 4))
+            self.samples = max(1, min(pilot, limit // max(1, pixels * self.slots)))
+            self.stride = max(1, -(-pixels * self.slots * self.samples // limit))
         n = -(-pixels // self.stride) * self.slots * self.samples
         self.point = np.zeros((n, 3), np.float32)
         self.normal = np.zeros((n, 3), np.float32)

@@ -94,11 +94,21 @@ class Learning:
     """One render's learning: the selector with its cut (picking as the BVH until :meth:`learn`), the records of
     the pilot's light samples, and the learned selector."""
 
-    def __init__(self, selector: LightSelector, pixels: int, pilot: int, strategy: int, n_bsdf: int, m: int):
+    def __init__(
+        self,
+        selector: LightSelector,
+        pixels: int,
+        pilot: int,
+        strategy: int,
+        n_bsdf: int,
+        m: int,
+        stride: int | None = None,
+    ):
         self.selector = with_cut(selector)
         self.first = n_bsdf if strategy == MIS else 0  # a camera sample's first light slot
         self.slots = m - self.first if strategy in (MIS, ENV) else 0
-        self.records = Records(pixels, pilot, self.slots)
+        # stride: a render of every stride-th pixel alone (the probe of integrators/picks.py) records all it renders
+        self.records = Records(pixels, pilot, self.slots, stride=stride)
         self.recording = True
 
     def record(self, records: tuple) -> None:

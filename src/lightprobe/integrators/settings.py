@@ -193,7 +193,8 @@ class RenderSettings:
         minimum=1,  # at most 64 slots in all: validate()
         key="lights_per_sample",
         flags=("--lights-per-sample",),
-        auto="1 if an environment map or one delta light is the only light, 4 with 64 bounded lights or more, else 2",
+        auto="1 if an environment map or one delta light is the only light, 4 with 64 bounded lights or more (in a "
+        "render long enough, 4, 8 or 16 as a probe of the image finds best), else 2",
     )
     light_strategy: str = option(
         "solid-angle",
@@ -316,7 +317,8 @@ class RenderSettings:
         light samples' variance is most of such a scene's error (each pick's own Sobol' pair halves it), so a second
         pick lowers the error 1.7-1.9x for 1.4-1.5x the time (decisions.md 97); one delta light alone keeps K = 1 (its
         sample is always the same direction); a scene of 64 bounded lights or more takes K = 4, where the choice of
-        light is most of the error and the picks' stratified numbers lower it faster than 1 / K (decisions.md 118).
+        light is most of the error and the picks' stratified numbers lower it faster than 1 / K (decisions.md 118); a
+        render long enough then has its driver choose 4, 8 or 16 by a probe (integrators/picks.py, decisions.md 123).
         An environment map beside other lights takes 2 BSDF samples, which are how
         MIS finds the map's broad light (1.2-1.3x the efficiency of 1 on three such scenes; without a map a second one
         loses 9-18 %).  Adaptive counts as :meth:`adaptive_counts` decides (``resumed``: the render continues

@@ -27,7 +27,7 @@ from __future__ import annotations
 import time
 import warnings
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numba
 import numpy as np
@@ -47,7 +47,7 @@ from ..geometry.shapes import Rectangle, Sphere
 from ..sampling.rng import SAMPLERS
 from ..scene import Scene
 from ..simd import LANES
-from . import adaptive, light_learning, outlines, pipeline, precompile
+from . import adaptive, light_learning, outlines, picks, pipeline, precompile
 from .accumulation import Accumulator, RenderResult, result_from
 from .pass_state import PassConstants, camera_buffers, slot_buffers, views
 from .schedule import pass_pixels
@@ -112,8 +112,18 @@ def _delta_lights(scene: Scene, table: LightArrays | None = None) -> int:
 
 def settings_for(scene: Scene, settings: RenderSettings, resumed: bool = False) -> RenderSettings:
     """``settings`` with the automatic choices made as :func:`render` makes them for ``scene`` (``resumed``: a
-    render that continues another)."""
-    return _settings_for(scene, settings, _environment_alone(scene, settings), _delta_lights(scene), resumed)
+    render that continues another), the number of light picks included where a probe chooses it
+    (integrators/picks.py: then this renders the probe, a second or two)."""
+    resolved = _settings_for(scene, settings, _environment_alone(scene, settings), _delta_lights(scene), resumed)
+    if not picks.probes(scene, settings, resolved):
+        return resolved
+    plan = resolve(scene, settings, resumed=resumed)
+    arrays = scene.compile()
+    tracer = RayTracer(arrays, threads=numba.get_num_threads())
+    try:
+        return _probed(scene, plan, arrays, tracer, numba.get_num_threads(), [])[0].settings
+    finally:
+        tracer.close()
 
 
 def _settings_for(scene: Scene, settings: RenderSettings, alone: bool, delta_lights: int, resumed: bool):
@@ -188,6 +198,9 @@ class RenderPlan:
     delta_lights: int  # point and spot lights and directional lights of angle 0
     compensated: bool | str  # compensation_for: True, False or DIFFUSE
     pipeline: pipeline.Plan  # what the scene needs, and so the stages
+    # the render chooses its light picks (settings.lights_per_sample, until then MANY_LIGHTS_PICKS) by a probe
+    # (integrators/picks.py); settings_for makes the same choice
+    probe_picks: bool = False
 
 
 def resolve(scene: Scene, settings: RenderSettings | None = None, *, resumed: bool = False) -> RenderPlan:
@@ -214,7 +227,78 @@ def resolve(scene: Scene, settings: RenderSettings | None = None, *, resumed: bo
         delta_lights=delta_lights,
         compensated=compensation_for(scene, resolved),
         pipeline=plan_for(scene, resolved),  # the stages follow the resolved pick count
+        probe_picks=picks.probes(scene, settings, resolved),
     )
+
+
+def _probed(scene, render_plan: RenderPlan, arrays, tracer, threads, helpers) -> tuple[RenderPlan, dict]:
+    """(``render_plan`` with its light picks chosen by the probe of integrators/picks.py, what the probe found):
+    a learned selection learned once, from ``light_learning.UNIFORM_PILOT`` samples of the probe's pixels with the
+    largest K; then, for each candidate K, the probe's pixels at ``picks.PROBE_SPP`` samples with each of
+    ``picks.PROBE_SEEDS`` (uniform counts, picking with what was learned), the relMSE between the two images, and
+    the K of highest efficiency.  The first render compiles the stages here (``helpers``: where it puts the
+    processes it starts for that, as :func:`_render_planned`); the seconds are the probe's alone."""
+    settings = render_plan.settings
+    width, height = scene.camera.resolution
+    n_pixels = width * height
+    pixels, stride = picks.probe_pixels(width, height)
+    fields = outlines.pass_fields(scene.camera, render_plan.lights, tracer, settings.outline_control_variate)
+    ks = picks.candidates(settings)
+    buffers, learned = None, None
+
+    def probe_pass(k: int, seed: int, spp: int) -> _Pass:
+        nonlocal buffers
+        probe_settings = replace(
+            settings, lights_per_sample=k, seed=seed, spp=spp, first_sample=0, adaptive=False, time_limit=None
+        )
+        # the same stages: K > 1 picks leave them as they are (plan_for)
+        work = _Pass(
+            scene,
+            replace(render_plan, settings=probe_settings),
+            arrays,
+            tracer,
+            pixels.size * spp,
+            threads,
+            learned=learned,
+            outline_fields=fields,
+            record_stride=stride,
+        )
+        if buffers is None:  # made once, for the largest K: every other pass uses leading views of them
+            work.make_buffers()
+            buffers = work.cams, work.slots
+        work.cams, work.slots = buffers
+        return work
+
+    pilot = light_learning.UNIFORM_PILOT
+    work = probe_pass(max(ks), picks.PROBE_SEEDS[0], max(picks.PROBE_SPP, pilot + 1))
+    _warm_up(work, n_pixels, helpers)
+    start = _clock()
+    if work.learning is not None:
+        work.run(Accumulator(n_pixels), pixels, pilot, 0)
+        work.learn()
+        learned = work.learned
+    errors = {}
+    for k in ks:
+        images = []
+        for seed in picks.PROBE_SEEDS:
+            acc = Accumulator(n_pixels)
+            probe_pass(k, seed, picks.PROBE_SPP).run(acc, pixels, picks.PROBE_SPP, 0)
+            images.append(acc.mean[pixels])
+        errors[k] = picks.relmse(*images)
+    k = picks.chosen(errors)
+    plan = replace(render_plan, settings=replace(settings, lights_per_sample=k), probe_picks=False)
+    found = {"relmse": {str(key): e for key, e in errors.items()}, "pixels": int(pixels.size), "chosen": k}
+    return plan, {**found, "seconds": _clock() - start, "outline_fields": fields}
+
+
+def _warm_up(work: _Pass, n_pixels: int, helpers: list) -> None:
+    """Every stage of ``work`` run on one pixel: loads their cached machine code, or compiles it (a first render of
+    this kind, with helper processes compiling some of the stages beside it: precompile.py)."""
+    plan = work.plan
+    if not _group_cached(plan):
+        helpers += precompile.start(plan.stages(), work.records(Accumulator(n_pixels), pass_pixels(0, 1), 1, 0))
+    work.run(Accumulator(n_pixels), pass_pixels(0, 1), 1, 0)
+    precompile.stop(helpers)
 
 
 def learns_light_selection(scene: Scene, settings: RenderSettings | None = None) -> bool:
@@ -276,8 +360,22 @@ class _Pass:
     """One render's stages and buffers: :meth:`run` renders one pass into an accumulator."""
 
     def __init__(
-        self, scene, render_plan: RenderPlan, arrays, tracer, largest_pass, threads, resumed=None, learned=None
+        self,
+        scene,
+        render_plan: RenderPlan,
+        arrays,
+        tracer,
+        largest_pass,
+        threads,
+        resumed=None,
+        learned=None,
+        *,
+        outline_fields: dict | None = None,
+        record_stride: int | None = None,
     ):
+        """``outline_fields``: ``outlines.pass_fields`` already worked out for this render (the probe's passes
+        share them); ``record_stride``: the render samples every ``record_stride``-th pixel alone (the probe), and
+        a learned selection records all of them."""
         threads_max = max(threads, numba.config.NUMBA_NUM_THREADS)
         settings, plan = render_plan.settings, render_plan.pipeline
         self.plan = plan
@@ -317,7 +415,7 @@ class _Pass:
             pixels=np.zeros(0, np.int64),
             spp_pass=1,
             sample_start=0,
-            **outlines.pass_fields(scene.camera, lights, tracer, settings.outline_control_variate),
+            **(outline_fields or outlines.pass_fields(scene.camera, lights, tracer, settings.outline_control_variate)),
         )
         self.m = m
         self.largest = largest_pass
@@ -335,7 +433,7 @@ class _Pass:
             elif settings.first_sample == 0 and pilot < settings.spp and (settings.adaptive or not settings.time_limit):
                 n_pixels = int(np.prod(scene.camera.resolution))
                 self.learning = light_learning.Learning(
-                    self.sel, n_pixels, pilot, self.constants.strategy, settings.n_bsdf, m
+                    self.sel, n_pixels, pilot, self.constants.strategy, settings.n_bsdf, m, stride=record_stride
                 )
                 self.sel = self.learning.selector
 
@@ -413,10 +511,14 @@ def render(
 def _render_planned(scene, render_plan, helpers, progress, tracer, resume, threads, t_setup, learned) -> RenderResult:
     """:func:`render` of its :class:`RenderPlan`; ``helpers`` (empty): where it puts the processes it starts to
     compile some of its stages, which it stops once its own warm-up has compiled (or loaded) them all."""
-    settings = render_plan.settings
     arrays = scene.compile()
     own_tracer = tracer is None
     tracer = tracer or RayTracer(arrays, threads=threads)
+    probe, outline_fields = None, None
+    if render_plan.probe_picks:
+        render_plan, probe = _probed(scene, render_plan, arrays, tracer, threads, helpers)
+        outline_fields = probe.pop("outline_fields")
+    settings = render_plan.settings
     width, height = scene.camera.resolution
     n_pixels = width * height
     m = settings.shading_samples
@@ -433,7 +535,9 @@ def _render_planned(scene, render_plan, helpers, progress, tracer, resume, threa
     acc.adaptive = settings.adaptive  # resolved: a continued render is uniform (or refused above)
     plan = render_plan.pipeline
     largest_pass = max(1, band * spp_pass)
-    work = _Pass(scene, render_plan, arrays, tracer, largest_pass, threads, resume, learned)
+    work = _Pass(
+        scene, render_plan, arrays, tracer, largest_pass, threads, resume, learned, outline_fields=outline_fields
+    )
     kinds = work.lights.kind
     stats = {
         "width": width,
@@ -455,6 +559,8 @@ def _render_planned(scene, render_plan, helpers, progress, tracer, resume, threa
         "stopped_by_time_limit": False,
         "triangles": scene.triangle_count,
     }
+    if probe is not None:
+        stats["picks_probe"] = probe
     stats["time_limit"] = settings.time_limit
 
     def over_image(sample_start: int, spp_now: int):
@@ -551,18 +657,16 @@ def _render_planned(scene, render_plan, helpers, progress, tracer, resume, threa
             # made under the Ctrl-C handler: populating their pages can take a second or more per GB on this VM,
             # and a Ctrl-C meanwhile waits for the first pass like any other
             work.make_buffers()
-            if not _group_cached(plan):
-                helpers += precompile.start(plan.stages(), work.records(Accumulator(n_pixels), pass_pixels(0, 1), 1, 0))
-            # warm up every stage on one pixel (loads cached machine code) before the clock starts
-            work.run(Accumulator(n_pixels), pass_pixels(0, 1), 1, 0)
-            precompile.stop(helpers)
+            _warm_up(work, n_pixels, helpers)  # before the clock starts
             if settings.adaptive:
                 adaptive.warm_up()
             if PROFILE is not None:
                 PROFILE.clear()  # the warm-up (and any compiling) is not the render
             counted_before = work.ray_counts.sum()
-            stats["setup_seconds"] = time.perf_counter() - t_setup
-            start = _clock()
+            # the probe's seconds are the render's (its efficiency pays for them), not its setup's
+            probe_seconds = probe["seconds"] if probe is not None else 0.0
+            stats["setup_seconds"] = max(0.0, time.perf_counter() - t_setup - probe_seconds)
+            start = _clock() - probe_seconds
             for pixels, spp_now, sample_start, pixels_done in passes():
                 stats["shadow_rays"] += work.run(acc, pixels, spp_now, sample_start)
                 stats["camera_rays"] += pixels.size * spp_now

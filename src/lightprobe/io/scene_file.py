@@ -145,7 +145,8 @@ Example (every key shown; optional ones have their default)::
     env_candidates = 1                  # > 1: resampled environment samples (RIS) from this many candidates
     light_sampler = "learned"           # uniform | power | bvh | learned (a BVH that learns)
     lights_per_sample = 2               # lights chosen per camera sample (K); default: 1 with an environment map
-                                        # or one delta light alone, 4 with 64 bounded lights or more, else 2
+                                        # or one delta light alone, 4 with 64 bounded lights or more
+                                        # (4, 8 or 16 by a probe in long renders), else 2
     light_strategy = "solid-angle"      # area | solid-angle | hemisphere | cosine
 
 Every mistake is a :class:`~lightprobe.errors.SceneError` naming the file and the table at fault.
