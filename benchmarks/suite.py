@@ -41,6 +41,17 @@ the relMSE's scale), pooled as sum(lp - ref) / sqrt(sum(var)) over the image (pe
 over 8 x 8-pixel blocks (the largest |z| and the share of blocks beyond |z| = 4, about 6e-5 for an unbiased image).
 Then the minimum and the geometric mean of the ratios.  Benchmarks print figures; they never assert speed.
 
+``--spread``: no references at all.  Every configuration's relMSE is its variance, measured from the spread
+between its seeds (``--seeds``, at least 2: the sample variance of each pixel, for two half their squared
+difference, over (m^2 + 0.01), where m is the mean of every render of the scene, each weighted by its spp;
+averaged over the pixels and channels), which is its MSE because every
+configuration compared is unbiased (lightprobe's and Mitsuba's are z-tested against each other in tests/, and here
+again: lightprobe's seeds' mean against the mean of all of Mitsuba's renders of the scene, with the variances the
+seeds give; the blocks' z is only indicative there: a pixel's variance from two seeds is mostly too small where
+a rare bright sample decides it).  It has no floor, so it needs no hours of reference on a fresh machine: the
+suite at 16 and 64 spp runs in about an hour.  The images are kept in ``--cache``/spread until the scene's metrics
+are made.  Cycles is left out (its conductors converge to another image, whose bias the spread cannot see).
+
 Blender Cycles (``bpy``), the second peer, where its light tree should make it the stronger one: a Python with
 ``bpy`` (``--cycles-python``, else $LIGHTPROBE_CYCLES_PYTHON, else :data:`CYCLES_PYTHON` if it exists; none: the
 suite says so once and goes on without Cycles).  The suite's Python writes each scene's description as plain
@@ -194,6 +205,12 @@ def pooled_z(images: list[np.ndarray], variances: list[np.ndarray], spp: int, re
     # none of lightprobe's samples met leaves both variance estimates far too small, and a block of them a false z
     diff = mean - ref["mean"]
     total = var + var_ref + (2e-4 * ref["mean"]) ** 2 + ABSOLUTE**2
+    return _z(diff, total)
+
+
+def _z(diff: np.ndarray, total: np.ndarray) -> dict:
+    """The pooled z of a difference of images (H, W, 3) with the variance ``total`` of each pixel's difference:
+    the image's (the channel of largest |z|), and over 8 x 8 blocks the largest |z| and the share beyond 4."""
     image_z = diff.sum(axis=(0, 1)) / np.sqrt(total.sum(axis=(0, 1)))
     h, w = diff.shape[:2]
     hb, wb = h // BLOCK, w // BLOCK
@@ -205,6 +222,57 @@ def pooled_z(images: list[np.ndarray], variances: list[np.ndarray], spp: int, re
         "z_blocks_max": float(np.abs(block_z).max()),
         "z_blocks_over4": float(np.mean(np.abs(block_z) > 4.0)),
     }
+
+
+def spread_dir(cache, scene: str, resolution, spp: int) -> Path:
+    """Where ``--spread``'s workers keep a scene's images at ``spp`` until the parent has measured them."""
+    w, h = resolution
+    return Path(cache) / "spread" / f"{scene}_{w}x{h}_{spp}spp"
+
+
+def _seed_variance(images: list[np.ndarray]) -> np.ndarray:
+    """Each pixel's variance of one image, from independent images of it (the sample variance: for two, half
+    their squared difference)."""
+    return np.var(np.stack(images), axis=0, ddof=1)
+
+
+def spread_metrics(rows: list[dict]) -> list[dict]:
+    """``--spread``'s rows of one scene (their ``images``: the files of their seeds' images) with relMSE, the
+    variance between seeds over (m^2 + 0.01), m the mean of every image weighted by its spp, and efficiency; the
+    lightprobe rows also with the pooled z of their seeds' mean against the mean of Mitsuba's images (every
+    configuration and spp, each image's variance from its configuration's seeds).  The files are then removed."""
+    images = {id(row): [np.load(f).astype(np.float64) for f in row["images"]] for row in rows}
+    weight = sum(row["spp"] * len(images[id(row)]) for row in rows)
+    mean = sum(row["spp"] * sum(images[id(row)]) for row in rows) / weight
+    variance = {id(row): _seed_variance(images[id(row)]) for row in rows}
+    peers = [row for row in rows if row["renderer"] == "mitsuba"]
+    peer_images = sum(len(images[id(row)]) for row in peers)
+    out = []
+    for row in rows:
+        done = {k: v for k, v in row.items() if k != "images"}
+        done["relmse"] = float(np.mean(variance[id(row)] / (mean * mean + 0.01)))
+        done["efficiency"] = 1.0 / (done["relmse"] * done["seconds"])
+        if row["renderer"] == "lightprobe" and peers:
+            mine = images[id(row)]
+            peer_mean = sum(sum(images[id(p)]) for p in peers) / peer_images
+            peer_var = sum(len(images[id(p)]) * variance[id(p)] for p in peers) / peer_images**2
+            diff = np.mean(mine, axis=0) - peer_mean
+            total = variance[id(row)] / len(mine) + peer_var + (2e-4 * mean) ** 2 + ABSOLUTE**2
+            done |= _z(diff, total)
+        out.append(done)
+    for row in rows:
+        for f in row["images"]:
+            Path(f).unlink(missing_ok=True)
+    return out
+
+
+def _keep(args, renderer: str, config: str, seed: int, image) -> str:
+    """``--spread``: an image kept for the parent (float32 .npy); its path."""
+    folder = spread_dir(args.cache, args.scene, args.resolution, args.spp)
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"{renderer}_{config.replace(' ', '_').replace('+', 'p')}_{seed}.npy"
+    np.save(path, np.asarray(image, np.float32))
+    return str(path)
 
 
 def parse_options(pairs: list[str]) -> dict:
@@ -425,7 +493,7 @@ def mitsuba_reference(args) -> None:
 def mitsuba_runs(args) -> None:
     """Every Mitsuba configuration at ``--spp``, ``--seeds`` images each: one JSON line per configuration."""
     mi, mr = _mitsuba()
-    ref = load_reference(reference_file(Path(args.cache), args.scene, args.resolution))
+    ref = None if args.spread else load_reference(reference_file(Path(args.cache), args.scene, args.resolution))
     weightings = (False, True) if args.scene in MANY_LIGHTS else (False,)
     with tempfile.TemporaryDirectory() as tmp:
         for power in weightings:
@@ -438,18 +506,26 @@ def mitsuba_runs(args) -> None:
                 for n in (1, 4):
                     integrator = _integrator(mi, n)
                     mi.render(scene, sensor=sensor, integrator=integrator, spp=args.spp, seed=10_000)  # compile
-                    errors, seconds = [], []
+                    errors, seconds, kept = [], [], []
+                    config = f"{sampler} {n}+{n}" + (" power" if power else "")
                     for s in range(args.seeds):
                         begin = time.perf_counter()
                         image = mi.render(scene, sensor=sensor, integrator=integrator, spp=args.spp, seed=s + 1)
                         x = np.array(image, dtype=np.float64)
                         seconds.append(time.perf_counter() - begin)
-                        errors.append(relmse(x, ref["mean"]))
-                    e, t = float(np.mean(errors)), float(np.median(seconds))
-                    config = f"{sampler} {n}+{n}" + (" power" if power else "")
-                    print(json.dumps({"renderer": "mitsuba", "scene": args.scene, "spp": args.spp, "config": config,
-                                      "relmse": e, "seconds": t, "efficiency": 1.0 / (e * t),
-                                      "load_s": round(load, 2)}), flush=True)  # fmt: skip
+                        if ref is None:
+                            kept.append(_keep(args, "mitsuba", config, s, x))
+                        else:
+                            errors.append(relmse(x, ref["mean"]))
+                    t = float(np.median(seconds))
+                    row = {"renderer": "mitsuba", "scene": args.scene, "spp": args.spp, "config": config,
+                           "seconds": t, "load_s": round(load, 2)}  # fmt: skip
+                    if ref is None:
+                        row["images"] = kept
+                    else:
+                        e = float(np.mean(errors))
+                        row |= {"relmse": e, "efficiency": 1.0 / (e * t)}
+                    print(json.dumps(row), flush=True)
 
 
 def _lightprobe_build(args):
@@ -474,20 +550,27 @@ def lightprobe_runs(args) -> None:
     from lightprobe.integrators.wavefront import RenderSettings, render
 
     options = parse_options(args.lightprobe_option)
-    ref = load_reference(reference_file(Path(args.cache), args.scene, args.resolution))
+    ref = None if args.spread else load_reference(reference_file(Path(args.cache), args.scene, args.resolution))
     scene = _lightprobe_build(args)
     render(scene, RenderSettings(spp=4, seed=10_000, **options))  # compile
-    errors, seconds, images, variances = [], [], [], []
+    errors, seconds, images, variances, kept = [], [], [], [], []
     for s in range(args.seeds):
         r = render(_lightprobe_build(args), RenderSettings(spp=args.spp, seed=s + 20, **options))
         images.append(r.image.astype(np.float64))
         variances.append(r.variance.astype(np.float64))
-        errors.append(relmse(images[-1], ref["mean"]))
         seconds.append(r.stats["seconds"])
-    e, t = float(np.mean(errors)), float(np.median(seconds))
-    row = {"renderer": "lightprobe", "scene": args.scene, "spp": args.spp, "config": "defaults", "relmse": e,
-           "seconds": t, "efficiency": 1.0 / (e * t), "options": options}  # fmt: skip
-    row |= pooled_z(images, variances, args.spp, ref)
+        if ref is None:
+            kept.append(_keep(args, "lightprobe", "defaults", s, images[-1]))
+        else:
+            errors.append(relmse(images[-1], ref["mean"]))
+    t = float(np.median(seconds))
+    row = {"renderer": "lightprobe", "scene": args.scene, "spp": args.spp, "config": "defaults", "seconds": t,
+           "options": options}  # fmt: skip
+    if ref is None:
+        row["images"] = kept
+    else:
+        e = float(np.mean(errors))
+        row |= {"relmse": e, "efficiency": 1.0 / (e * t)} | pooled_z(images, variances, args.spp, ref)
     print(json.dumps(row), flush=True)
 
 
@@ -746,7 +829,7 @@ def agreement_table(references: dict) -> str:
 # -------------------------------------------------------------------------------------------------------- main
 
 
-def _run(args, worker: str, scene: str, *extra: str, python: str | None = None) -> list[dict]:
+def _run(args, worker: str, scene: str, *extra: str, python: str | None = None, echo: bool = True) -> list[dict]:
     cmd = [python or sys.executable, __file__, "--worker", worker, "--scene", scene, "--seeds", str(args.seeds),
            "--resolution", *map(str, args.resolution), "--cache", str(args.cache),
            *[x for o in args.lightprobe_option for x in ("--lightprobe-option", o)], *extra]  # fmt: skip
@@ -754,7 +837,7 @@ def _run(args, worker: str, scene: str, *extra: str, python: str | None = None) 
     rows = [json.loads(line) for line in out.stdout.splitlines() if line.startswith("{")]
     if out.returncode != 0:
         raise RuntimeError(f"{worker} worker on {scene} failed:\n{out.stderr[-3000:]}")
-    for row in rows:
+    for row in rows if echo else ():
         print(json.dumps(row), flush=True)
     return rows
 
@@ -780,6 +863,8 @@ def main() -> int:
                         help="the most a reference may run in one call, per scene [8]")  # fmt: skip
     parser.add_argument("--write-docs", action="store_true", help="write the table into docs/performance.md")
     parser.add_argument("--quick", action="store_true", help="16 spp, one seed, references of at most a minute")
+    parser.add_argument("--spread", action="store_true",
+                        help="no references: relMSE from the seeds' spread (--seeds >= 2); no Cycles")  # fmt: skip
     parser.add_argument("--json", help="also write every row to this file")
     parser.add_argument("--table-from", metavar="LOG", nargs="+",
                         help="no renders: the table (and --write-docs) from a run's printed output; with several "
@@ -798,6 +883,8 @@ def main() -> int:
     args = parser.parse_args()
     if args.quick:
         args.spp, args.seeds, args.reference_minutes = [16], 1, 1.0
+    if args.spread and args.seeds < 2:
+        parser.error("--spread measures each configuration's variance between its seeds: --seeds must be >= 2")
     if args.worker:
         os.environ.setdefault("LIGHTPROBE_SUITE_CACHE", args.cache)
         args.spp = args.spp[0]
@@ -812,12 +899,15 @@ def main() -> int:
     cache.mkdir(parents=True, exist_ok=True)
     os.environ["LIGHTPROBE_SUITE_CACHE"] = str(cache)  # the workers' (the peer kit's assets)
     started = time.perf_counter()
-    bpy_python, no_cycles = cycles_python("none" if args.lightprobe_only else args.cycles_python)
+    bpy_python, no_cycles = cycles_python("none" if args.lightprobe_only or args.spread else args.cycles_python)
     if args.lightprobe_only:
         no_cycles = "turned off (--lightprobe-only)"
+    if args.spread:
+        no_cycles = "left out by --spread (its conductors converge to another image)"
     header = {"cores": os.cpu_count(), "spp": args.spp, "seeds": args.seeds, "resolution": args.resolution,
               "lightprobe_options": parse_options(args.lightprobe_option), "commit": _commit(),
-              "date": datetime.date.today().isoformat(), "cycles": no_cycles or "yes"}  # fmt: skip
+              "date": datetime.date.today().isoformat(), "cycles": no_cycles or "yes",
+              "spread": args.spread}  # fmt: skip
     print(json.dumps(header), flush=True)
     rows, references, notes = [], {}, {}
     if no_cycles:
@@ -829,6 +919,14 @@ def main() -> int:
             notes[scene] = f"skipped: {reason}"
             continue
         scene_start = time.perf_counter()
+        if args.spread:
+            try:
+                rows += _spread_scene(args, scene, references)
+            except RuntimeError as exc:
+                print(f"{scene}: failed: {exc}", flush=True)
+                notes[scene] = "failed (see the run's output)"
+            references.setdefault(scene, {})["run_minutes"] = (time.perf_counter() - scene_start) / 60
+            continue
         try:
             top = str(max(args.spp))
             pilot = str(cache / f"{scene}_pilot_{top}spp.npy")
@@ -854,6 +952,24 @@ def main() -> int:
     minutes = (time.perf_counter() - started) / 60
     _report(args, header, rows, references, notes, minutes)
     return 0
+
+
+def _spread_scene(args, scene: str, references: dict) -> list[dict]:
+    """``--spread``: every spp's Mitsuba and lightprobe rows of ``scene``, measured by :func:`spread_metrics` and
+    printed."""
+    shown = _run(args, "occlusion", scene)[0]
+    references[scene] = {"config": "none (relMSE from the spread between seeds)", "spread": True}
+    if shown.get("unoccluded") is not None:
+        references[scene]["unoccluded"] = shown["unoccluded"]
+    raw = []
+    for spp in args.spp:
+        if not args.lightprobe_only:
+            raw += _run(args, "mitsuba", scene, "--spp", str(spp), "--spread", echo=False)
+        raw += _run(args, "lightprobe", scene, "--spp", str(spp), "--spread", echo=False)
+    rows = spread_metrics(raw)
+    for row in rows:
+        print(json.dumps(row), flush=True)
+    return rows
 
 
 def _cycles_reference(args, scene: str, top: str, python: str, references: dict, notes: dict) -> bool:
@@ -991,12 +1107,20 @@ def _report(args, header: dict, rows: list[dict], references: dict, notes: dict,
             "",
             text,
             "",
-            "References (Mitsuba `direct`; floor = mean(var_ref / (ref^2 + 0.01))):",
-            "",
-            "| scene | reference | spp | seconds | floor | Mitsuba load s | unoccluded light power |",
-            "|---|---|---|---|---|---|---|",
         ]
-        for scene, ref in references.items():
+        spread = header.get("spread")
+        if spread:
+            lines[0] += (" No references (`--spread`): each relMSE is the variance between the seeds' images over "
+                         "(m^2 + 0.01), m the mean of all of the scene's renders; the pooled z is lightprobe's "
+                         "seeds' mean against the mean of all of Mitsuba's renders.")  # fmt: skip
+        else:
+            lines += [
+                "References (Mitsuba `direct`; floor = mean(var_ref / (ref^2 + 0.01))):",
+                "",
+                "| scene | reference | spp | seconds | floor | Mitsuba load s | unoccluded light power |",
+                "|---|---|---|---|---|---|---|",
+            ]
+        for scene, ref in references.items() if not spread else ():
             lines.append(f"| {scene} | {ref.get('config', '-')} | {ref.get('spp', '-')} | "
                          f"{_f(ref.get('seconds'), '.0f')} | {_f(ref.get('floor'), '.2g')} | "
                          f"{_f(ref.get('load_s'), '.2f')} | {_f(ref.get('unoccluded'), '.3f')} |")  # fmt: skip

@@ -147,6 +147,37 @@ def test_pooled_z_is_small_for_an_unbiased_image_and_large_for_a_biased_one():
     assert abs(biased["z_image"]) > 10
 
 
+@pytest.mark.parametrize("bias", [1.0, 1.02])
+def test_the_spread_between_seeds_measures_each_configurations_variance_and_its_bias_against_the_peer(tmp_path, bias):
+    # --spread: no reference; synthetic images of known variance (lightprobe's sd 0.01, two Mitsuba configurations'
+    # 0.03 and 0.05), four seeds each: relMSE within a few percent of sd^2 / (truth^2 + 0.01); the pooled z small
+    # for an unbiased lightprobe and large for one 2 % too bright; the image files removed once measured
+    suite = _suite_module()
+    rng = np.random.default_rng(11)
+    truth = rng.uniform(0.2, 1.0, (48, 64, 3))
+    rows = []
+    for renderer, config, sd in (("lightprobe", "defaults", 0.01), ("mitsuba", "a", 0.03), ("mitsuba", "b", 0.05)):
+        files = []
+        for seed in range(4):
+            image = truth * (bias if renderer == "lightprobe" else 1.0) + rng.normal(0, sd, truth.shape)
+            files.append(str(tmp_path / f"{renderer}_{config}_{seed}.npy"))
+            np.save(files[-1], image)
+        rows.append({"renderer": renderer, "config": config, "spp": 64, "seconds": 2.0, "images": files, "sd": sd})
+    measured = suite.spread_metrics(rows)
+    for row in measured:
+        expected = np.mean(row["sd"] ** 2 / (truth**2 + 0.01))
+        assert row["relmse"] == pytest.approx(expected, rel=0.05)
+        assert row["efficiency"] == pytest.approx(1.0 / (row["relmse"] * 2.0))
+        assert "images" not in row
+    z = measured[0]
+    assert "z_image" in z and "z_image" not in measured[1]
+    if bias == 1.0:
+        assert abs(z["z_image"]) < 4 and z["z_blocks_over4"] < 0.05
+    else:
+        assert abs(z["z_image"]) > 10
+    assert not list(tmp_path.iterdir())
+
+
 def test_write_docs_replaces_the_text_between_the_markers(tmp_path):
     suite = _suite_module()
     doc = tmp_path / "performance.md"
