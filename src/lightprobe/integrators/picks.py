@@ -40,11 +40,12 @@ __all__ = [
 ]
 
 CANDIDATES = (4, 8, 16)  # MANY_LIGHTS_PICKS first: the choice when the probe tells nothing apart
-PROBE_SPP = 8  # the first UNIFORM_PILOT of them learn the light selection, the rest use it
+PROBE_SPP = 8  # per pixel and seed, picking with the light selection learned once before (wavefront._probed)
 PROBE_PIXELS = 1024
 PROBE_SEEDS = (7_919, 104_729)  # fixed: every seed of a render chooses the same K
 # a render whose light samples (to its range's end, at MANY_LIGHTS_PICKS) are fewer than the probe's over this
-# share keeps MANY_LIGHTS_PICKS: at 320 x 240 the probe took 6-11 % of a 16-spp render's time (decisions.md 123)
+# share keeps MANY_LIGHTS_PICKS: at 16 spp and 320 x 240 the probe cost the ceiling 9 % and the city 13 % of their
+# efficiency (decisions.md 123)
 PROBE_SHARE = 0.05
 PICK_COST = 0.55  # the time of an extra pick, as a share of a camera sample's time with none (decisions.md 122)
 
