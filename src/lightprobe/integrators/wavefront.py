@@ -231,8 +231,9 @@ def resolve(scene: Scene, settings: RenderSettings | None = None, *, resumed: bo
     )
 
 
-def _probed(scene, render_plan: RenderPlan, arrays, tracer, threads, helpers) -> tuple[RenderPlan, dict]:
-    """(``render_plan`` with its light picks chosen by the probe of integrators/picks.py, what the probe found):
+def _probed(scene, render_plan: RenderPlan, arrays, tracer, threads, helpers) -> tuple[RenderPlan, dict, dict]:
+    """(``render_plan`` with its light picks chosen by the probe of integrators/picks.py, what the probe found, the
+    outline fields it worked out for the render's own pass):
     a learned selection learned once, from ``light_learning.UNIFORM_PILOT`` samples of the probe's pixels with the
     largest K; then, for each candidate K, the probe's pixels at ``picks.PROBE_SPP`` samples with each of
     ``picks.PROBE_SEEDS`` (uniform counts, picking with what was learned), the relMSE between the two images, and
@@ -288,7 +289,7 @@ def _probed(scene, render_plan: RenderPlan, arrays, tracer, threads, helpers) ->
     k = picks.chosen(errors)
     plan = replace(render_plan, settings=replace(settings, lights_per_sample=k), probe_picks=False)
     found = {"relmse": {str(key): e for key, e in errors.items()}, "pixels": int(pixels.size), "chosen": k}
-    return plan, {**found, "seconds": _clock() - start, "outline_fields": fields}
+    return plan, {**found, "seconds": _clock() - start}, fields
 
 
 def _warm_up(work: _Pass, n_pixels: int, helpers: list) -> None:
@@ -516,8 +517,7 @@ def _render_planned(scene, render_plan, helpers, progress, tracer, resume, threa
     tracer = tracer or RayTracer(arrays, threads=threads)
     probe, outline_fields = None, None
     if render_plan.probe_picks:
-        render_plan, probe = _probed(scene, render_plan, arrays, tracer, threads, helpers)
-        outline_fields = probe.pop("outline_fields")
+        render_plan, probe, outline_fields = _probed(scene, render_plan, arrays, tracer, threads, helpers)
     settings = render_plan.settings
     width, height = scene.camera.resolution
     n_pixels = width * height
