@@ -273,7 +273,8 @@ def render_command(
         typer.Option(
             help="Render with your own sampling techniques (lightprobe.lab): FILE.py[:NAME] alone, or "
             "mis:FILE.py[:NAME][+FILE.py[:NAME]] under MIS with lightprobe's technique of the other kind "
-            "(scenes lit by an environment map alone)."
+            "(scenes lit by an environment map alone); or your light selector, sel:FILE.py[:NAME] (select(ctx, "
+            "u), pmf(ctx, light); scenes of two lights or more), or lightprobe's: sel:uniform, sel:power, sel:bvh."
         ),
     ] = None,
     render_options: dict | None = None,
@@ -474,7 +475,8 @@ def compare_command(
         str,
         typer.Option(
             help="Comma-separated: env, brdf, mis-balance, mis-power, ..., each with /key=value overrides; your "
-            "techniques as FILE.py[:NAME] or mis:FILE.py[:NAME][+FILE.py[:NAME]]; lab:mis, lab:brdf, lab:env."
+            "techniques as FILE.py[:NAME] or mis:FILE.py[:NAME][+FILE.py[:NAME]]; lab:mis, lab:brdf, lab:env; "
+            "a light selector rendered by the laboratory: sel:FILE.py[:NAME], sel:uniform, sel:power, sel:bvh."
         ),
     ] = "env,brdf,mis-balance,mis-power",
     equal: Annotated[str, typer.Option(help="spp (equal samples) or time (equal seconds).")] = "spp",

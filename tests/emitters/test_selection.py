@@ -80,6 +80,20 @@ def test_pmf_sums_to_one_and_matches_the_picks(mode, env, compensated):
         assert_picks_follow_the_pmf(sampler, p, nrm, 100 + i, 3 * 3 * len(RECEIVERS), compensated)
 
 
+@pytest.mark.parametrize("mode", list(SELECTORS))
+def test_pmf_of_a_light_per_receiver_is_pmfs_entry(mode):
+    """``pmf_of`` (one light per receiver, the laboratory's selectors' MIS weights) against ``pmf`` (every light of
+    one receiver), and ``select``'s probability: the same numbers."""
+    sampler = LightSampler(mode, LIGHTS, env_irradiance=(40.0, 0.0, 20.0, 5.0))
+    points = np.array([p for p, _ in RECEIVERS] * 3, dtype=np.float64)
+    normals = np.array([n for _, n in RECEIVERS] * 3, dtype=np.float64)
+    lights = np.random.default_rng(5).integers(0, sampler.arrays.n_lights, points.shape[0])
+    each = np.array([sampler.pmf(p, n)[light] for p, n, light in zip(points, normals, lights, strict=True)])
+    np.testing.assert_array_equal(sampler.pmf_of(points, normals, lights), each)
+    picked, pmf = sampler.select(points, normals, np.linspace(0.01, 0.99, points.shape[0]))
+    np.testing.assert_array_equal(sampler.pmf_of(points, normals, picked), pmf)
+
+
 def test_power_selection_is_proportional_to_power_and_uniform_is_uniform():
     from lightprobe.emitters.selection import power_of_lights
 

@@ -1,4 +1,4 @@
-"""Light selectors for the tests: each breaks the contract (lightprobe/lab/selectors.py) in one way."""
+"""Light selectors for the tests: each but the last breaks the contract (lightprobe/lab/selectors.py) in one way."""
 
 import numpy as np
 
@@ -68,3 +68,24 @@ class FailsOnLargeBatches(_Uniform):
         if len(ctx) > 100:
             raise ValueError("too many points")
         return super().pmf(ctx, light)
+
+
+class ByPower:
+    """One that keeps the contract: bounded lights in proportion to their power, the infinite ones sharing a tenth
+    (all of it where no bounded light emits)."""
+
+    def prepare(self, lights):
+        weights = np.where(lights.infinite, 0.0, lights.power)
+        infinite = lights.infinite.sum()
+        share = 0.1 if weights.sum() > 0 and infinite else 1.0
+        if weights.sum() > 0:
+            weights = weights / weights.sum() * (1.0 - share if infinite else 1.0)
+        self.table = np.where(lights.infinite, share / max(infinite, 1), weights)
+        self.cdf = np.cumsum(self.table)
+
+    def select(self, ctx, u):
+        light = np.minimum(np.searchsorted(self.cdf, u * self.cdf[-1], side="right"), len(self.cdf) - 1)
+        return light, self.table[light]
+
+    def pmf(self, ctx, light):
+        return self.table[light]

@@ -826,6 +826,17 @@ def _select_batch(sel, points, normals, u, compensated):
 
 
 @jit_parallel
+def _pmf_rows(sel, points, normals, light, compensated):
+    out = np.empty(light.shape[0])
+    for i in prange(light.shape[0]):
+        out[i] = selector_pmf(
+            sel, points[i, 0], points[i, 1], points[i, 2], normals[i, 0], normals[i, 1], normals[i, 2], light[i],
+            compensated,
+        )  # fmt: skip
+    return out
+
+
+@jit_parallel
 def _pmf_all(sel, p, n, compensated):
     out = np.empty(sel.n_lights)
     for light in prange(sel.n_lights):
@@ -1012,7 +1023,8 @@ def _root_only(lights: LightArrays) -> dict:
 class LightSampler:
     """A selector usable from Python: ``select(points, normals, u) -> (lights, pmf)`` (with ``rescaled=True`` also
     each u rescaled to [0, 1) within the interval that chose its light), ``pmf(point, normal)`` (the probability of
-    every light for one receiver); ``compensated=True`` for a receiver whose material samples the MIS-compensated
+    every light for one receiver), ``pmf_of(points, normals, lights)`` (each receiver's probability of one light);
+    ``compensated=True`` for a receiver whose material samples the MIS-compensated
     environment (weighed by ``env_irradiance_compensated``)."""
 
     def __init__(self, mode: str, lights: LightArrays, *, env_irradiance=None, env_irradiance_compensated=None):
@@ -1027,6 +1039,13 @@ class LightSampler:
         normals = np.ascontiguousarray(np.broadcast_to(np.asarray(normals, dtype=np.float64), (u.size, 3)))
         light, pmf, rest = _select_batch(self.arrays, points, normals, u, bool(compensated))
         return (light, pmf, rest) if rescaled else (light, pmf)
+
+    def pmf_of(self, points, normals, lights, *, compensated: bool = False) -> np.ndarray:
+        """(N,) the probability that :meth:`select` picks ``lights[i]`` for receiver i."""
+        lights = np.ascontiguousarray(np.asarray(lights, dtype=np.int64).reshape(-1))
+        points = np.ascontiguousarray(np.broadcast_to(np.asarray(points, dtype=np.float64), (lights.size, 3)))
+        normals = np.ascontiguousarray(np.broadcast_to(np.asarray(normals, dtype=np.float64), (lights.size, 3)))
+        return _pmf_rows(self.arrays, points, normals, lights, bool(compensated))
 
     def pmf(self, point, normal, *, compensated: bool = False) -> np.ndarray:
         return _pmf_all(

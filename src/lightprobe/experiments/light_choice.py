@@ -35,38 +35,23 @@ from __future__ import annotations
 
 import math
 import time
-import warnings
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba.core.errors import NumbaIRAssumptionWarning
 
-from .._numba import jit
 from ..analysis.metrics import RELMSE_EPSILON
-from ..bsdfs.dispatch import bsdf_eval, bsdf_pdf
 from ..bsdfs.dispatch import sample_batch as bsdf_sample_batch
+from ..color import LUMINANCE_WEIGHTS
 from ..emitters.area import STRATEGIES as LIGHT_STRATEGIES
 from ..emitters.kinds import flag_rows
-from ..emitters.lights import (
-    emitted,
-    first_infinite,
-    infinite_radiance,
-    is_delta,
-    light_pdf_of,
-    light_sample_of,
-)
 from ..emitters.selection import _pmf_all, build_selector
 from ..errors import ParameterError
-from ..geometry.frame import to_local
-from ..geometry.intersect import MISS, ray_offset, surface
 from ..geometry.raytracer import RayTracer
 from ..integrators.light_learning import cells_learned, restored
 from ..integrators.settings import RenderSettings
-from ..integrators.stages.setup import emitter_of
-from ..integrators.stages.shadows import ray_to_light
 from ..integrators.wavefront import _compensated_materials, compensation_for, resolve
-from ..lab.render import _camera_batch, _shading_batch
+from ..lab.camera_samples import camera_batch, shading_batch
+from ..lab.light_render import light_sample_rows, quiet_compiling, what_rays_see
 from ..lab.selectors import PICK_POINTS, PICKS
 from ..sampling.mis import balance_heuristic, power_heuristic
 from ..scene import Scene
@@ -188,12 +173,12 @@ class _CameraSamples:
 def _first_hits(scene, arrays, lights, env, tracer, pixels, jitter):
     """Camera rays through ``pixels`` (``jitter`` in [0, 1)^2), their first hits and the luminance of what each sees
     itself: an emitter's radiance, or the infinite lights' where it leaves the scene (integrators/stages/setup.py)."""
-    dirs = _camera_batch(scene.camera.kernel_array(), pixels, jitter)
+    dirs = camera_batch(scene.camera.kernel_array(), pixels, jitter)
     origin = np.asarray(scene.camera.origin, dtype=np.float64)
     origins = np.ascontiguousarray(np.broadcast_to(origin, dirs.shape))
     hits = tracer.intersect(origins, dirs)
     at_camera = (origin[None, :], origin[None, :], np.zeros(1, np.bool_), np.zeros(dirs.shape[0], np.int64))
-    seen = _what_rays_see(arrays, lights, env, 0, *at_camera, origins, dirs, np.ones_like(dirs), hits)[1].sum(axis=1)
+    seen = what_rays_see(arrays, lights, env, 0, *at_camera, origins, dirs, np.ones_like(dirs), hits)[1].sum(axis=1)
     return hits, origin, dirs, seen
 
 
@@ -240,7 +225,7 @@ def _camera_samples(scene: Scene, arrays, lights, env, tracer: RayTracer, chosen
     pixels = np.repeat(chosen, PER_PIXEL)
     hits, origin, dirs, seen = _first_hits(scene, arrays, lights, env, tracer, pixels, rng.random((pixels.size, 2)))
     t, kind, index, prim, b1, b2 = hits
-    point, gnormal, error, frame, wo, material = _shading_batch(arrays, kind, index, prim, b1, b2, t, origin, dirs)
+    point, gnormal, error, frame, wo, material = shading_batch(arrays, kind, index, prim, b1, b2, t, origin, dirs)
     shaded = (material >= 0) & (wo[:, 2] > 0.0)
     textured = (shaded & (arrays.material_textured[np.maximum(material, 0)] != 0)).reshape(-1, PER_PIXEL).any(axis=1)
     keep = np.flatnonzero(~textured)
@@ -257,43 +242,6 @@ def _camera_samples(scene: Scene, arrays, lights, env, tracer: RayTracer, chosen
 
 
 # --- light samples --------------------------------------------------------------------------------------------------
-@jit
-def _light_rows(lights, env, strategy, point, gnormal, error, frame, wo, kinds, params, material, compensated,
-                per_light, u, out, ray):  # fmt: skip
-    """Row r = (point i, light l, sample j), i-major: out[r] = (g = lum(f L cos) / p, p, the BSDF's pdf at the
-    direction (0 for a delta light: its MIS weight is 1)); where g > 0, ray[r] = its shadow ray (origin, direction,
-    length)."""
-    n_lights = lights.kind.shape[0]
-    for r in range(u.shape[0]):
-        i = r // (n_lights * per_light)
-        light = (r // per_light) % n_lights
-        px, py, pz = point[i, 0], point[i, 1], point[i, 2]
-        nx, ny, nz = gnormal[i, 0], gnormal[i, 1], gnormal[i, 2]
-        for c in range(3):
-            out[r, c] = 0.0
-        ls = light_sample_of(lights, env, light, strategy, compensated[i], px, py, pz, nx, ny, nz, u[r, 0], u[r, 1])
-        if ls.pdf <= 0.0 or (ls.r == 0.0 and ls.g == 0.0 and ls.b == 0.0):
-            continue
-        ts, tt, ns = frame[i, 0:3], frame[i, 3:6], frame[i, 6:9]
-        wi = to_local(ts, tt, ns, ls.wx, ls.wy, ls.wz)
-        w_o = (wo[i, 0], wo[i, 1], wo[i, 2])
-        m = material[i]
-        f = bsdf_eval(kinds[m], params[m], w_o, wi)
-        lum = (0.212671 * f[0] * ls.r + 0.715160 * f[1] * ls.g + 0.072169 * f[2] * ls.b) * wi[2]
-        if not lum > 0.0:
-            continue
-        out[r, 0] = lum / ls.pdf
-        out[r, 1] = ls.pdf
-        out[r, 2] = 0.0 if is_delta(lights, light) else bsdf_pdf(kinds[m], params[m], w_o, wi)
-        qx, qy, qz = ray_offset(px, py, pz, nx, ny, nz, error[i], ls.wx, ls.wy, ls.wz)
-        if ls.distance < math.inf:
-            o = ray_to_light(lights, light, px, py, pz, qx, qy, qz, ls.wx, ls.wy, ls.wz, ls.distance)
-        else:
-            o = (qx, qy, qz, ls.wx, ls.wy, ls.wz, math.inf)
-        for c in range(7):
-            ray[r, c] = o[c]
-
-
 @dataclass
 class _LightTerms:
     g: np.ndarray  # (P, L, K) lum(f L cos) / p, unshadowed
@@ -316,13 +264,16 @@ def _light_terms(arrays, lights, env, tracer, pts: _Points, compensated, strateg
         hi = min(n_points, lo + chunk)
         rows = (hi - lo) * n_lights * per_light
         u = (np.tile(grid, ((hi - lo) * n_lights, 1)) + (rng.random((rows, 2)) - 0.5) / side) % 1.0
-        out = np.empty((rows, 3))
-        ray = np.empty((rows, 7))
-        _light_rows(
+        # row r = (point i, light l, sample j), i-major
+        owner = np.arange(rows, dtype=np.int64) // (n_lights * per_light)
+        light = (np.arange(rows, dtype=np.int64) // per_light) % n_lights
+        rgb, p, p_bsdf, ray = np.empty((rows, 3)), np.empty(rows), np.empty(rows), np.empty((rows, 7))
+        light_sample_rows(
             lights, env, LIGHT_STRATEGIES[strategy], pts.point[lo:hi], pts.gnormal[lo:hi], pts.error[lo:hi],
             pts.frame[lo:hi], pts.wo[lo:hi], arrays.material_kind, arrays.material_params, pts.material[lo:hi],
-            compensated[lo:hi], per_light, u, out, ray,
+            np.ascontiguousarray(compensated[lo:hi]), owner, light, u, rgb, p, p_bsdf, ray,
         )  # fmt: skip
+        out = np.stack([rgb @ LUMINANCE_WEIGHTS, p, p_bsdf], axis=1)  # g = lum(f L cos) / p, p, the BSDF's pdf
         arrives = out[:, 0] > 0.0
         live = np.flatnonzero(arrives)
         if live.size:
@@ -334,54 +285,6 @@ def _light_terms(arrays, lights, env, tracer, pts: _Points, compensated, strateg
 
 
 # --- BSDF samples ---------------------------------------------------------------------------------------------------
-@jit
-def _rays_see(s, lights, env, strategy, point, gnormal, compensated, owner, origins, dirs, weight, hits, light_of,
-              value, light_pdf):  # fmt: skip
-    kind, index, prim, b1, b2, t = hits[1], hits[2], hits[3], hits[4], hits[5], hits[0]
-    first = first_infinite(lights)
-    for r in range(dirs.shape[0]):
-        i = owner[r]
-        px, py, pz = point[i, 0], point[i, 1], point[i, 2]
-        nx, ny, nz = gnormal[i, 0], gnormal[i, 1], gnormal[i, 2]
-        wx, wy, wz = dirs[r, 0], dirs[r, 1], dirs[r, 2]
-        e = 0
-        if kind[r] == MISS:
-            for light in range(first, lights.kind.shape[0]):
-                lr, lg, lb = infinite_radiance(lights, env, light, wx, wy, wz)
-                lum = 0.212671 * weight[r, 0] * lr + 0.715160 * weight[r, 1] * lg + 0.072169 * weight[r, 2] * lb
-                if lum > 0.0:
-                    light_of[r, e] = light
-                    value[r, e] = lum
-                    light_pdf[r, e] = light_pdf_of(lights, env, light, strategy, compensated[i], px, py, pz, nx, ny,
-                                                   nz, wx, wy, wz)  # fmt: skip
-                    e += 1
-            continue
-        light = emitter_of(s, kind[r], index[r], prim[r])
-        if light < 0:
-            continue
-        x = surface(s, kind[r], index[r], prim[r], b1[r], b2[r], origins[r, 0], origins[r, 1], origins[r, 2], wx, wy,
-                    wz, t[r])[0]  # fmt: skip
-        lr, lg, lb = emitted(lights, light, x[0], x[1], x[2], wx, wy, wz)
-        lum = 0.212671 * weight[r, 0] * lr + 0.715160 * weight[r, 1] * lg + 0.072169 * weight[r, 2] * lb
-        if lum > 0.0:
-            light_of[r, 0] = light
-            value[r, 0] = lum
-            light_pdf[r, 0] = light_pdf_of(lights, env, light, strategy, compensated[i], px, py, pz, nx, ny, nz, wx,
-                                           wy, wz)  # fmt: skip
-
-
-def _what_rays_see(s, lights, env, strategy, point, gnormal, compensated, owner, origins, dirs, weight, hits):
-    """For ray r (from point owner[r], ``weight`` its f cos / p): the lights it reaches (the emitter it hits, or
-    every infinite light where it leaves the scene), each with lum(weight L) and the light's density at the
-    direction (for the MIS weight): arrays (R, E) of light (-1: none), value and density, E = the number of infinite
-    lights (at least 1)."""
-    n_entries = max(1, int(flag_rows(lights.kind, "infinite").sum()))
-    out = (np.full((dirs.shape[0], n_entries), -1, np.int64), np.zeros((dirs.shape[0], n_entries)),
-           np.zeros((dirs.shape[0], n_entries)))  # fmt: skip
-    _rays_see(s, lights, env, strategy, point, gnormal, compensated, owner, origins, dirs, weight, hits, *out)
-    return out
-
-
 @dataclass
 class _BsdfTerms:
     owner: np.ndarray  # (R,) the point of each entry
@@ -417,10 +320,10 @@ def _bsdf_terms(arrays, lights, env, tracer, pts: _Points, compensated, strategy
     keep = np.flatnonzero(live)
     if keep.size:
         o, d = np.ascontiguousarray(origins[keep]), np.ascontiguousarray(dirs[keep])
-        light_of[keep], value[keep], light_pdf[keep] = _what_rays_see(
+        light_of[keep], value[keep], light_pdf[keep] = what_rays_see(
             arrays, lights, env, LIGHT_STRATEGIES[strategy], pts.point, pts.gnormal, compensated, owner[keep], o, d,
             np.ascontiguousarray(weight[keep]), tracer.intersect(o, d),
-        )  # fmt: skip
+        )[:3]  # fmt: skip
     return _BsdfTerms(owner, pb, light_of, value, light_pdf)
 
 
@@ -497,7 +400,7 @@ def measure(
     number: samples of each light at each point (default: the most of 16 .. 256 that ``RAY_BUDGET`` allows; a light's
     variance over its points is heavy-tailed where a glossy lobe meets a broad light, and few samples underestimate
     it)."""
-    with _quiet_compiling():
+    with quiet_compiling():
         return _measure(scene, strategies, points, per_light, bsdf_samples, seed, user_selectors, keep_tables)
 
 
@@ -570,7 +473,7 @@ def check_selectors(scene: Scene, user_selectors, *, points: int = 64, seed: int
     tracer = RayTracer(arrays)
     env = (scene.environment if scene.environment is not None else _placeholder()).kernel
     try:
-        with _quiet_compiling():
+        with quiet_compiling():
             # random pixels: the checks need shading points, not the measurement's stratified sample of the image
             rng = np.random.default_rng(seed)
             width, height = scene.camera.resolution
@@ -687,16 +590,6 @@ def _split(result: LightChoice, scene, label, settings, table, cams: _CameraSamp
             pixel=float(np.sum(cams.weight * spread / guard)),
         )
     )
-
-
-@contextmanager
-def _quiet_compiling():
-    """Numba's SSA pass notes, while compiling _rays_see, variables of the inlined light-pdf dispatch it cannot place
-    ("an internal pedantic check"): not the user's concern, and the code it compiles is right (the tests compare the
-    split with renders)."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", NumbaIRAssumptionWarning)
-        yield
 
 
 def _built(name: str, lights, scene):

@@ -29,15 +29,14 @@ import numpy as np
 from numba.core.dispatcher import Dispatcher
 
 from .._numba import jit, jit_parallel, prange
-from ..geometry.camera import camera_ray
 from ..geometry.intersect import MISS
 from ..geometry.raytracer import RayTracer
 from ..integrators.accumulation import Accumulator, RenderResult, result_from
 from ..integrators.batch_estimator import Context, add_samples, shade
 from ..integrators.settings import RenderSettings
-from ..integrators.techniques import store_shading_frame
 from ..sampling.mis import balance_heuristic, power_heuristic
-from ..sampling.rng import SAMPLERS, group_slot, sample_state, sampler_batch, uniform
+from ..sampling.rng import SAMPLERS, sampler_batch
+from .camera_samples import camera_batch, require_untextured, shading_batch, technique_numbers
 from .jit_techniques import (
     HEURISTICS,
     JitContext,
@@ -215,52 +214,6 @@ def _first_invalid(wi, pdf, p_other, weight, has_other):
     return bad
 
 
-@jit_parallel
-def _camera_batch(cam, pixels, jitter):
-    out = np.empty((pixels.shape[0], 3))
-    for i in prange(pixels.shape[0]):
-        out[i, 0], out[i, 1], out[i, 2] = camera_ray(cam, pixels[i], jitter[i, 0], jitter[i, 1])
-    return out
-
-
-@jit_parallel
-def _technique_numbers(sampler, seed, pixels, sample, first, count, dims):
-    """(count, N, dims) numbers of a technique's ``count`` samples per camera sample, laid out as the core lays out
-    a group of shading slots (``integrators.techniques.technique_slot``): under ``sobol`` the group shares the first
-    slot's dimensions and member i of sample k takes sample index k count + i, so a pixel's samples of one technique
-    are one stratified Sobol' set; under ``independent`` member i takes slot ``first + i``."""
-    n = pixels.shape[0]
-    out = np.empty((count, n, dims))
-    for k in prange(n):
-        state = sample_state(sampler, seed, pixels[k], sample)
-        for i in range(count):
-            member, slot = group_slot(state, first, count, i)
-            for d in range(dims):
-                out[i, k, d] = uniform(member, 2 + 3 * slot + d)
-    return out
-
-
-@jit_parallel
-def _shading_batch(s, kind, index, prim, b1, b2, t, cam_origin, dirs):
-    """Point, geometric normal, error bound, shading frame (N, 9), local wo and material (-1: nothing to shade)."""
-    n = dirs.shape[0]
-    point = np.zeros((n, 3))
-    gnormal = np.zeros((n, 3))
-    error = np.zeros(n)
-    frame = np.zeros((n, 9))
-    wo_local = np.zeros((n, 3))
-    material = np.full(n, -1, np.int64)
-    ox, oy, oz = cam_origin[0], cam_origin[1], cam_origin[2]
-    for k in prange(n):
-        if kind[k] == MISS:
-            continue
-        hit = (kind[k], index[k], prim[k], b1[k], b2[k], t[k])
-        store_shading_frame(
-            s, k, hit, ox, oy, oz, dirs[k, 0], dirs[k, 1], dirs[k, 2], point, gnormal, error, frame, wo_local, material
-        )
-    return point, gnormal, error, frame, wo_local, material
-
-
 def _check_scene(scene) -> None:
     if scene.environment is None:
         raise TechniqueError(f"scene {scene.name!r}: user techniques need an environment map; this scene has none")
@@ -270,11 +223,7 @@ def _check_scene(scene) -> None:
             f"scene {scene.name!r}: user techniques render scenes lit by an environment map alone (the exercise's "
             f"setting); this one has {emitting} other light(s)"
         )
-    textured = [name for name, material in scene.materials.items() if material.textures is not None]
-    if textured:
-        raise TechniqueError(
-            f"scene {scene.name!r}: user techniques render untextured materials; {textured[0]!r} has textures"
-        )
+    require_untextured(scene, "user techniques")
 
 
 class _Shader:
@@ -312,20 +261,20 @@ class _Shader:
         samples = np.full(n, sample, dtype=np.int64)
         seed = self.settings.seed
         jitter = sampler_batch(self.sampler, seed, pixels, samples, 2)
-        dirs = _camera_batch(self.cam, pixels, jitter)
+        dirs = camera_batch(self.cam, pixels, jitter)
         t, kind, index, prim, b1, b2 = self.tracer.intersect(np.broadcast_to(self.origin, dirs.shape), dirs)
         value = np.zeros((n, 3))
         miss = kind == MISS
         if miss.any():
             value[miss] = self.env.eval(dirs[miss])
-        point, gnormal, error, frame, wo, material = _shading_batch(
+        point, gnormal, error, frame, wo, material = shading_batch(
             self.arrays, kind, index, prim, b1, b2, t, self.origin, dirs
         )
         frame = frame.reshape(n, 3, 3)
         # each technique's numbers, (count, N, dims), its group of slots starting after the previous technique's
         numbers, first = [], 0
         for count, dims in zip(self.counts, self.dims, strict=True):
-            numbers.append(_technique_numbers(self.sampler, seed, pixels, sample, first, count, dims))
+            numbers.append(technique_numbers(self.sampler, seed, pixels, sample, first, count, dims))
             first += count
         for m in np.unique(material[material >= 0]):
             rows = np.nonzero(material == m)[0]
@@ -403,17 +352,18 @@ class _Shader:
         return out
 
 
-def render_lab(
-    scene, strategy: LabStrategy, settings: RenderSettings | None = None, *, resume=None, progress=None
-) -> RenderResult:
+def render_lab(scene, strategy, settings: RenderSettings | None = None, *, resume=None, progress=None) -> RenderResult:
     """Render ``settings.spp`` samples per pixel from ``settings.first_sample`` (continuing ``resume``, an
-    :class:`Accumulator` at that count) with the techniques of ``strategy``; ``settings.time_limit`` stops the
+    :class:`Accumulator` at that count) with the techniques of ``strategy`` (a :class:`LabStrategy`; or a light
+    selector's, :class:`~lightprobe.lab.light_render.SelectorStrategy`); ``settings.time_limit`` stops the
     render between passes, or stops a technique's call in flight at the limit (a compiled batch: after it) and drops
     its pass (Numba's compiling not counted); Ctrl-C keeps the passes done; ``progress(stats)`` after each pass (the
     render core's stats keys). See the module docstring."""
     from ..integrators.wavefront import resolve
+    from .light_render import LightShader, SelectorStrategy, check_light_scene
 
-    _check_scene(scene)
+    lights = isinstance(strategy, SelectorStrategy)
+    (check_light_scene if lights else _check_scene)(scene)
     # the render core's plan: the settings checked and resolved as a render of the scene resolves them (the
     # laboratory's estimator takes spp samples in every pixel: no adaptive counts)
     settings = resolve(scene, (settings or RenderSettings()).uniform_unless_adaptive()).settings
@@ -422,7 +372,7 @@ def render_lab(
     first = settings.first_sample
     if resume is not None and (problem := resume.resume_problem(first)) is not None:
         raise TechniqueError(problem)
-    shader = _Shader(scene, strategy, settings)
+    shader = (LightShader if lights else _Shader)(scene, strategy, settings)
     start = time.perf_counter()
     stopped = interrupted = False
     pixels_all = np.arange(width * height, dtype=np.int64)
@@ -485,7 +435,11 @@ def _stats(settings, strategy, start, done, stopped, interrupted, shader, acc) -
         "rays_per_s": (camera + shader.rays) / max(seconds, 1e-9),
         "nonfinite_samples": int(acc.nonfinite.sum()),
         "adaptive": False,
-        "estimator": f"lightprobe.lab (user techniques, {'compiled' if shader.compiled else 'NumPy'})",
+        "estimator": (
+            "lightprobe.lab (a light selector)"
+            if not strategy.techniques
+            else f"lightprobe.lab (user techniques, {'compiled' if shader.compiled else 'NumPy'})"
+        ),
         "strategy": strategy.label,
         "directions_per_sample": sum(strategy.counts(settings)),
         "stopped_by_time_limit": stopped,
@@ -504,18 +458,33 @@ _TOKEN = re.compile(r"^(?P<mis>mis:)?(?P<specs>.+?\.py(?::\w+)?(?:\+.+?\.py(?::\
 BUILTIN_TOKENS = {"lab:mis": ("bsdf", "light"), "lab:brdf": ("bsdf",), "lab:env": ("light",)}
 
 
+#: a light selector's strategy (lab/light_render.py): ``sel:FILE.py[:NAME]`` or ``sel:`` and one of lightprobe's
+_SELECTOR_TOKEN = re.compile(r"^sel:(?P<spec>.+?\.py(?::\w+)?|\w+)(?P<overrides>(?:/[^/]*)*)$")
+
+
 def is_lab_token(token: str) -> bool:
-    """Does a strategy token name a user technique (``FILE.py[:NAME]``, ``mis:FILE.py[:NAME][+FILE.py[:NAME]]``) or
-    lightprobe's techniques through the laboratory (``lab:mis``, ``lab:brdf``, ``lab:env``)?"""
-    return ".py" in token or token.strip().split("/")[0] in BUILTIN_TOKENS
+    """Does a strategy token name a user technique (``FILE.py[:NAME]``, ``mis:FILE.py[:NAME][+FILE.py[:NAME]]``),
+    lightprobe's techniques through the laboratory (``lab:mis``, ``lab:brdf``, ``lab:env``) or a light selector
+    (``sel:FILE.py[:NAME]``, ``sel:bvh``)?"""
+    token = token.strip()
+    return ".py" in token or token.split("/")[0] in BUILTIN_TOKENS or token.startswith("sel:")
 
 
 def parse_lab_token(token: str) -> tuple[LabStrategy, list[str]]:
     """The strategy of a token and its ``/key=value`` overrides. ``FILE.py[:NAME]``: the technique alone;
     ``mis:SPEC``: SPEC under MIS with lightprobe's technique of the other kind; ``mis:SPEC+SPEC``: a user BSDF
     technique and a user light technique under MIS."""
+    from .light_render import SelectorStrategy
+    from .selectors import load_selector
     from .techniques import builtin, load_technique
 
+    if token.strip().startswith("sel:"):
+        match = _SELECTOR_TOKEN.match(token.strip())
+        if match is None:
+            raise TechniqueError(f"strategy {token!r}: expected sel:FILE.py[:NAME] or sel:uniform, sel:power, sel:bvh")
+        spec = match["spec"]
+        selector = load_selector(spec) if ".py" in spec else spec
+        return SelectorStrategy(selector), [part for part in match["overrides"].split("/") if part]
     name, *overrides = token.strip().split("/")
     if name in BUILTIN_TOKENS:
         return LabStrategy(tuple(builtin(kind) for kind in BUILTIN_TOKENS[name])), [o for o in overrides if o]
