@@ -12,7 +12,7 @@ keeps what the BVH knows about each point (distance, orientation) and learns onl
   normal, its light, and lum(f L cos) / the density of the point on the light, negated where the shadow ray was
   blocked): a quarter of the pilot's, but no fewer than ``MIN_RECORDS`` and no more than ``MAX_RECORDS``.
 * **Cells.** A k-d tree over the records' points (median splits, leaves of at most ``LEAF_RECORDS`` records):
-  cells follow where the visible points are.
+  cells follow where the visible points are (a uniform grid and image tiles measured against it: decisions.md 127).
 * **Ratios.** For every child of the light tree's nodes in the top ``cut_levels`` levels (at most ``MAX_ENTRIES``
   children), each cell learns rho = RMS(v) / mean(w) over the records whose light's path went through the child:
   v = the record's value / the probability of its light below the child, an unbiased estimate of the child's
