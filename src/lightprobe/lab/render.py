@@ -10,7 +10,8 @@ material and L the environment (Krivanek eqs. 2 and 16)::
 
 What follows the techniques' directions (f, the factor w cos / (n p), the shadow rays, the sum in the core's order)
 is :mod:`lightprobe.integrators.batch_estimator`'s, the one place it is written beside the stages (the shading-point
-tables use it too). The scene must be lit by its environment map alone (the exercise's setting). Camera rays, hit
+tables use it too). The scene must be lit by its environment map alone (the exercise's setting; a scene with other
+lights renders with a light selector instead: :mod:`lightprobe.lab.light_render`). Camera rays, hit
 points and shading frames come from the render core's own routines (``store_shading_frame``), shadow rays from its
 ray tracer (``RayTracer.occluded``, origins offset as the core does), random numbers from its samplers: a pure
 function of (seed, pixel, sample index, dimension). Each pass is one sample of every pixel, added in sample order to the
@@ -221,7 +222,8 @@ def _check_scene(scene) -> None:
     if emitting:
         raise TechniqueError(
             f"scene {scene.name!r}: user techniques render scenes lit by an environment map alone (the exercise's "
-            f"setting); this one has {emitting} other light(s)"
+            f"setting); this one has {emitting} other light(s): a light selector renders it (sel:FILE.py[:NAME], "
+            "sel:bvh)"
         )
     require_untextured(scene, "user techniques")
 
