@@ -26,9 +26,9 @@ Light samples take the plain (uncompensated) environment. Random numbers: camera
 of shading slots and the light samples' (3 numbers each: the pick, and the pair that samples the light or the BSDF),
 a pure function of (seed, pixel, sample index, dimension) as everywhere (``camera_samples.technique_numbers``).
 
-``lightprobe compare SCENE sel:FILE.py[:NAME] sel:bvh ...`` (and ``render --techniques sel:...``) renders with
-it: ``sel:uniform``, ``sel:power`` and ``sel:bvh`` are lightprobe's own selectors through this same estimator, the
-fair comparison for a user's.
+``lightprobe compare SCENE --strategies mis,sel:bvh,sel:FILE.py[:NAME]`` (and ``render --techniques sel:...``)
+renders with it: ``sel:uniform``, ``sel:power`` and ``sel:bvh`` are lightprobe's own selectors through this same
+estimator, the fair comparison for a user's.
 """
 
 from __future__ import annotations
