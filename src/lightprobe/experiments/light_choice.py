@@ -40,7 +40,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..analysis.metrics import RELMSE_EPSILON
-from ..bsdfs.dispatch import sample_batch as bsdf_sample_batch
 from ..color import LUMINANCE_WEIGHTS
 from ..emitters.area import STRATEGIES as LIGHT_STRATEGIES
 from ..emitters.kinds import flag_rows
@@ -51,7 +50,7 @@ from ..integrators.light_learning import cells_learned, restored
 from ..integrators.settings import RenderSettings
 from ..integrators.wavefront import _compensated_materials, compensation_for, resolve
 from ..lab.camera_samples import camera_batch, shading_batch
-from ..lab.light_render import light_sample_rows, quiet_compiling, what_rays_see
+from ..lab.light_render import bsdf_rays, light_sample_rows, quiet_compiling, what_rays_see
 from ..lab.selectors import PICK_POINTS, PICKS
 from ..sampling.mis import balance_heuristic, power_heuristic
 from ..scene import Scene
@@ -297,29 +296,14 @@ class _BsdfTerms:
 def _bsdf_terms(arrays, lights, env, tracer, pts: _Points, compensated, strategy: str, count: int, rng) -> _BsdfTerms:
     n_points = pts.point.shape[0]
     owner = np.repeat(np.arange(n_points), count)
-    wi = np.zeros((owner.size, 3))
-    pb = np.zeros(owner.size)
-    weight = np.zeros((owner.size, 3))
     u = rng.random((owner.size, 3))
-    for m in np.unique(pts.material):
-        rows = np.flatnonzero(pts.material[owner] == m)
-        wi[rows], pb[rows], weight[rows] = bsdf_sample_batch(
-            arrays.material_kind[m], arrays.material_params[m], np.ascontiguousarray(pts.wo[owner[rows]]), u[rows]
-        )
-    live = (pb > 0.0) & np.any(weight != 0.0, axis=1)
-    frame = pts.frame[owner].reshape(-1, 3, 3)  # rows s, t, n: world = local @ frame
-    dirs = np.einsum("ri,rij->rj", wi, frame)
-    dirs /= np.maximum(np.linalg.norm(dirs, axis=1, keepdims=True), 1e-300)
-    ng = pts.gnormal[owner]
-    side = np.where(np.einsum("ij,ij->i", dirs, ng) < 0.0, -1.0, 1.0)
-    origins = pts.point[owner] + (side * pts.error[owner])[:, None] * ng  # intersect.ray_offset
+    pb, weight, keep, o, d = bsdf_rays(arrays, pts.point, pts.gnormal, pts.error, pts.frame, pts.wo, pts.material,
+                                       owner, u)  # fmt: skip
     n_entries = max(1, int(flag_rows(lights.kind, "infinite").sum()))
     light_of = np.full((owner.size, n_entries), -1, np.int64)
     value = np.zeros((owner.size, n_entries))
     light_pdf = np.zeros((owner.size, n_entries))
-    keep = np.flatnonzero(live)
     if keep.size:
-        o, d = np.ascontiguousarray(origins[keep]), np.ascontiguousarray(dirs[keep])
         light_of[keep], value[keep], light_pdf[keep] = what_rays_see(
             arrays, lights, env, LIGHT_STRATEGIES[strategy], pts.point, pts.gnormal, compensated, owner[keep], o, d,
             np.ascontiguousarray(weight[keep]), tracer.intersect(o, d),

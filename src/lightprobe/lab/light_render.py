@@ -60,7 +60,14 @@ from .camera_samples import camera_batch, require_untextured, shading_batch, tec
 from .selectors import GuardedSelector, LightSet, SelectorContext
 from .techniques import RenderClock, TechniqueError
 
-__all__ = ["BUILTIN_SELECTORS", "SelectorStrategy", "light_sample_rows", "quiet_compiling", "what_rays_see"]
+__all__ = [
+    "BUILTIN_SELECTORS",
+    "SelectorStrategy",
+    "bsdf_rays",
+    "light_sample_rows",
+    "quiet_compiling",
+    "what_rays_see",
+]
 
 #: lightprobe's own selectors a ``sel:`` token names (emitters/selection.py; ``learned`` learns from a render's
 #: shadow rays, which this estimator does not keep)
@@ -230,6 +237,27 @@ def what_rays_see(s, lights, env, strategy, point, gnormal, compensated, owner, 
     return out
 
 
+def bsdf_rays(arrays, point, gnormal, error, frame, wo, material, owner, u):
+    """Material samples from the points ``owner[r]`` with the numbers u[r] (the materials' layout: the lobe's choice,
+    then the pair): (pdf (R,), weight f cos / pdf (R, 3), the rows that give something, their rays' origins, offset as
+    the core offsets them (``intersect.ray_offset``), and their unit world directions)."""
+    wi, pb, weight = np.zeros((owner.size, 3)), np.zeros(owner.size), np.zeros((owner.size, 3))
+    of_owner = material[owner]
+    for m in np.unique(of_owner):
+        rows = np.flatnonzero(of_owner == m)
+        wi[rows], pb[rows], weight[rows] = bsdf_sample_batch(
+            arrays.material_kind[m], arrays.material_params[m], np.ascontiguousarray(wo[owner[rows]]), u[rows]
+        )
+    live = np.flatnonzero((pb > 0.0) & np.any(weight != 0.0, axis=1))
+    at = owner[live]
+    dirs = np.einsum("ri,rij->rj", wi[live], frame[at].reshape(-1, 3, 3))  # frame rows s, t, n: world = local @ frame
+    dirs /= np.maximum(np.linalg.norm(dirs, axis=1, keepdims=True), 1e-300)
+    ng = gnormal[at]
+    side = np.where(np.einsum("ij,ij->i", dirs, ng) < 0.0, -1.0, 1.0)
+    origins = point[at] + (side * error[at])[:, None] * ng
+    return pb, weight, live, np.ascontiguousarray(origins), np.ascontiguousarray(dirs)
+
+
 # --- the estimator -------------------------------------------------------------------------------------------------
 def check_light_scene(scene) -> None:
     """What a selector's strategy renders: two lights or more (a choice to make), untextured materials."""
@@ -361,26 +389,15 @@ class LightShader:
         if self.n_bsdf == 0:
             return out
         compensated = np.zeros(n, np.bool_)
+        owner = np.arange(n, dtype=np.int64)
         for j in range(self.n_bsdf):
-            wi, pb, weight = np.zeros((n, 3)), np.zeros(n), np.zeros((n, 3))
             # the materials take their 2D pair from columns 1 and 2 (bsdfs/base.py); a sample's numbers have it in
             # 0 and 1, the lobe's choice in 2 (as the laboratory's MaterialSampling)
             uj = np.ascontiguousarray(u[j][:, [2, 0, 1]])
-            for m in np.unique(material):
-                rows = np.flatnonzero(material == m)
-                wi[rows], pb[rows], weight[rows] = bsdf_sample_batch(
-                    self.arrays.material_kind[m], self.arrays.material_params[m], wo[rows], uj[rows]
-                )
-            live = np.flatnonzero((pb > 0.0) & np.any(weight != 0.0, axis=1))
+            pb, weight, live, origins, dirs = bsdf_rays(self.arrays, point, gnormal, error, frame, wo, material, owner,
+                                                        uj)  # fmt: skip
             if live.size == 0:
                 continue
-            f3 = frame[live].reshape(-1, 3, 3)  # rows s, t, n: world = local @ frame
-            dirs = np.einsum("ri,rij->rj", wi[live], f3)
-            dirs /= np.maximum(np.linalg.norm(dirs, axis=1, keepdims=True), 1e-300)
-            ng = gnormal[live]
-            side = np.where(np.einsum("ij,ij->i", dirs, ng) < 0.0, -1.0, 1.0)
-            origins = np.ascontiguousarray(point[live] + (side * error[live])[:, None] * ng)  # intersect.ray_offset
-            dirs = np.ascontiguousarray(dirs)
             self.rays += live.size
             light, _, light_pdf, rgb = what_rays_see(
                 self.arrays, self.lights, self.env, self.strategy_code, point, gnormal, compensated, live, origins,
