@@ -15,9 +15,6 @@ DATA = data_dir()
 
 # the suite's workers are one per core already: no compile helpers beside their renders (integrators/precompile.py)
 os.environ["LIGHTPROBE_COMPILE_HELPERS"] = "0"
-# and a compiled loop per stage, shared by the ~34 kinds of scene the suite renders, instead of one per kind
-# (integrators/pipeline.py's loop_per_stage; test_pipeline.py renders with both and compares the bits)
-os.environ["LIGHTPROBE_STAGE_LOOPS"] = "stage"
 
 requires_data = pytest.mark.skipif(DATA is None, reason="../shared/data is absent (set LIGHTPROBE_DATA)")
 

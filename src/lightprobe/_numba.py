@@ -312,7 +312,8 @@ def jit_body(func):
     both threads make on the same counters; such a body ran 2x slower than the same code inlined into the parallel
     loop (decisions.md 73, 77).  A body allocates nothing and returns nothing.  Compiled as a plain function, not
     inside the parallel loop, it skips Numba's parfor passes: the area-light path compiled in 124 s instead of 225 s
-    (decisions.md 77)."""
+    (decisions.md 77).  The loop calls it through the address of its C entry (Numba's cfunc wrapper), so it has
+    that entry and no Python one (decisions.md 129)."""
     return njit(
         cache=True,
         nogil=True,
@@ -320,7 +321,6 @@ def jit_body(func):
         fastmath=FASTMATH,
         _nrt=False,
         no_cpython_wrapper=True,
-        no_cfunc_wrapper=True,
     )(func)
 
 

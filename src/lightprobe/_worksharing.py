@@ -23,11 +23,15 @@ from numba.extending import intrinsic
 
 from ._numba import jit_inline
 
-__all__ = ["CHUNK", "claim", "claim_range", "new_counter"]
+__all__ = ["CHUNK", "COUNTER_TYPE", "claim", "claim_range", "new_counter"]
 
 #: items per claimed chunk (camera samples, slots or lanes blocks): thousands of chunks per pass, each tens of
 #: microseconds, so the counter is touched rarely and the last chunk ends soon after the others
 CHUNK = 512
+
+
+#: the counter's Numba type
+COUNTER_TYPE = types.Array(types.int64, 1, "C")
 
 
 def new_counter() -> np.ndarray:
@@ -40,7 +44,7 @@ def claim(typingctx, counter):
     """Atomically add 1 to counter[0] and return the value before: the caller's chunk number.  (Relaxed ordering:
     the counter orders nothing but itself; the launcher's wait for every worker at the end of a stage publishes
     the work.)"""
-    if counter != types.Array(types.int64, 1, "C"):
+    if counter != COUNTER_TYPE:
         return None
 
     def codegen(context, builder, signature, args):

@@ -4,11 +4,9 @@ picks each concern's stage once, in the estimator's order."""
 import itertools
 from dataclasses import fields
 
-import numpy as np
 import pytest
 from numba import types
 
-from lightprobe.errors import ParameterError
 from lightprobe.integrators import pipeline
 
 NAMES = [stage.name for stage in pipeline.STAGES]
@@ -53,14 +51,17 @@ def test_a_body_whose_parameters_are_not_records_in_order_is_refused_by_name(sig
         pipeline.body_parameters(namespace["odd_stage"])
 
 
-def test_a_groups_loop_calls_each_body_with_the_records_it_names():
-    plan = next(p for p in _plans() if p.environment_alone and not p.environment_radiance_in_lanes)
-    names = plan.stages()
-    source = pipeline.group_loop_source(pipeline.group_id(tuple(pipeline.stage_id(n) for n in names)))
-    radiance, finish = names.index("environment_radiance"), names.index("finish")
-    assert f"body_{radiance}(env, slots, lo, hi)" in source
-    assert f"body_{finish}(s, lights, c, cams, slots, lo, hi)" in source
-    assert source.count("claim_range(counter, n)") == 2 * len(names)  # a first claim and the next, per stage
+def test_the_stage_loop_calls_each_body_with_the_records_it_names():
+    """One call site per parameter list, each passing the records the bodies of that list name, in their order;
+    every stage's list is one of them."""
+    source = pipeline.stage_loop_source()
+    assert "call_body(body, (env, slots, lo, hi))" in source  # environment_radiance
+    assert "call_body(body, (s, lights, c, cams, slots, lo, hi))" in source  # finish
+    for stage in pipeline.STAGES:
+        i = pipeline.PATTERNS.index(stage.parameters)
+        assert f"pattern == {i}:" in source and f"call_body(body, ({', '.join(stage.parameters)}))" in source
+    assert source.count("call_body(") == len(pipeline.PATTERNS) == len(set(pipeline.PATTERNS))
+    assert source.count("claim_range(counter, n)") == 2  # a first claim and the next
 
 
 def test_every_plan_runs_known_stages_in_the_estimators_order():
@@ -108,22 +109,10 @@ def test_a_vector_stage_falls_back_to_its_twin(vector, scalar_flag, scene_flags)
     assert vector not in without and twin in without
 
 
-def test_each_plan_has_its_own_group_of_stages():
-    """Every plan's stages are a group of the stage loop's table, as is each stage alone; a group's ids name back its
-    stages, and stages no plan runs together are refused in one line."""
-    for plan in _plans():
-        ids = tuple(pipeline.stage_id(name) for name in plan.stages())
-        assert pipeline.GROUPS[pipeline.group_id(ids)] == ids
-    for i in range(len(pipeline.STAGES)):
-        assert pipeline.GROUPS[pipeline.group_id((i,))] == (i,)
-    with pytest.raises(ValueError, match="no stage group"):
-        pipeline.group_id((pipeline.stage_id("accumulate"), pipeline.stage_id("camera")))
-
-
-def test_a_group_compiles_its_own_stages_and_no_others(tmp_path):
-    """In a fresh process with an empty kernel cache, running the accumulation stage compiles its body and its item
-    count and no other stage's (the loop over every stage compiled all 22 bodies at a first render: decisions.md
-    104)."""
+def test_a_stage_compiles_its_own_body_and_no_others(tmp_path):
+    """In a fresh process with an empty kernel cache, running the accumulation stage compiles its body and the
+    stage loop and no other stage's body (the loop over every stage compiled all 22 bodies at a first render:
+    decisions.md 104)."""
     import json
     import os
     import subprocess
@@ -137,20 +126,19 @@ from lightprobe.integrators import pipeline
 from tests.integrators.stages import records
 c = records.constants(1, n_bsdf=0, pixels=np.arange(4), spp_pass=1)
 records.run("accumulate", records.records(c, records.cameras(4), records.slots(4)), threads=1)
-print(json.dumps([stage.name for stage in pipeline.STAGES if stage.body.signatures or stage.items.signatures]))
+print(json.dumps([stage.name for stage in pipeline.STAGES if stage.body.signatures]
+                 + ["run_stage"] * len(pipeline.run_stage.signatures)))
 """
     root = Path(__file__).resolve().parents[2]
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True, cwd=root, env=env)
     compiled = json.loads(out.stdout.strip().splitlines()[-1])
-    items = {stage.name for stage in pipeline.STAGES if stage.items is pipeline.STAGES[-1].items}
-    assert set(compiled) <= items and "accumulate" in compiled, compiled
+    assert compiled == ["accumulate", "run_stage"], compiled
 
 
 def test_the_setup_stage_of_a_scene_without_textures_has_no_texture_code():
     """The setup stage's texture step is chosen at compile time: with a constant False it is empty (no texture
     lookup is typed or compiled), with True it applies the material's textures."""
-    from numba import types
 
     from lightprobe.integrators.stages import setup
 
@@ -161,31 +149,34 @@ def test_the_setup_stage_of_a_scene_without_textures_has_no_texture_code():
     assert "apply_textures" in with_textures.__code__.co_names
 
 
-@pytest.mark.parametrize("name", ["demo", "many"])
-def test_a_plans_loop_and_a_loop_per_stage_render_the_same_bits(name, monkeypatch):
-    """A render runs its plan's stages in one loop (the default, what a user's render does) or each stage in a loop
-    of its own (``LIGHTPROBE_STAGE_LOOPS=stage``, what the rest of the test suite does): the same bodies on the same
-    items, so the same image and variance, bit for bit; and the plan's loop is what a default render compiles."""
+def test_one_stage_loop_serves_every_plan():
+    """The loop reaches the bodies through their addresses: renders of two plans (the demo's, lit by a sky map and
+    a sun, and the many-light scene's) compile it once, for the one signature of the pass records, and each
+    render's bodies are then in the cache."""
     from lightprobe.demo import demo_scene
     from lightprobe.integrators import wavefront
     from lightprobe.reference_scenes import build
 
-    scene = demo_scene((16, 10)) if name == "demo" else build("many", resolution=(16, 10), lights=200)
     settings = wavefront.RenderSettings(spp=4, threads=2)
-    results = {}
-    for loops in ("stage", "plan"):
-        monkeypatch.setenv(pipeline.LOOPS_ENVIRONMENT, loops)
-        results[loops] = wavefront.render(scene, settings)
-        assert wavefront.kernels_cached(scene, settings)  # this mode's loops, now compiled
-    plan = wavefront.plan_for(scene, settings)
-    group = types.literal(pipeline.group_id(tuple(pipeline.stage_id(n) for n in plan.stages())))
-    assert any(signature[0] == group for signature in pipeline.run_stage.overloads)  # the plan's loop ran
-    np.testing.assert_array_equal(results["plan"].image, results["stage"].image)
-    np.testing.assert_array_equal(results["plan"].variance, results["stage"].variance)
-    assert results["plan"].image.max() > 0
+    plans = set()
+    for scene in (demo_scene((16, 10)), build("many", resolution=(16, 10), lights=200)):
+        result = wavefront.render(scene, settings)
+        assert result.image.max() > 0
+        assert wavefront.kernels_cached(scene, settings)
+        plans.add(wavefront.plan_for(scene, settings).stages())
+    assert len(plans) == 2
+    assert len(pipeline.run_stage.signatures) == 1
 
 
-def test_a_loop_mode_not_understood_is_refused_in_one_line(monkeypatch):
-    monkeypatch.setenv(pipeline.LOOPS_ENVIRONMENT, "stages")
-    with pytest.raises(ParameterError, match="LIGHTPROBE_STAGE_LOOPS='stages': expected 'plan' or 'stage'"):
-        pipeline.loop_per_stage()
+def test_a_function_without_a_c_entry_is_refused_by_name():
+    """The loop calls a body through its C entry; a function compiled without one is refused, naming it, rather
+    than called at address 0."""
+    from numba import njit
+
+    @njit(no_cfunc_wrapper=True)
+    def entryless(x):
+        return x + 1
+
+    entryless(1)
+    with pytest.raises(RuntimeError, match="entryless was compiled without a C entry"):
+        pipeline.entry_address(next(iter(entryless.overloads.values())))

@@ -20,7 +20,6 @@ def test_a_helper_compiles_the_stage_the_render_then_loads(tmp_path):
     script = """
 import json
 import numpy as np
-from numba import typeof
 from lightprobe.integrators import pipeline, precompile
 from lightprobe.integrators.accumulation import Accumulator
 from lightprobe.integrators.schedule import pass_pixels
@@ -36,7 +35,7 @@ helpers = precompile.start(("accumulate",), records)
 codes = [helper.wait(timeout=600) for helper in helpers]
 stage = pipeline.STAGES[pipeline.stage_id("accumulate")]
 body = stage.body
-body.compile(precompile.record_signature(tuple(typeof(x) for x in records), stage.parameters))
+body.compile(pipeline.body_signature(pipeline.record_types(records), stage.parameters))
 print(json.dumps({"helpers": len(helpers), "codes": codes, "hits": sum(body._cache_hits.values()),
                   "misses": sum(body._cache_misses.values())}))
 """

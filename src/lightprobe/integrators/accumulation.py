@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .._numba import jit, jit_body
+from .._numba import jit_body
 from ..errors import ParameterError
 from .pass_state import AccumulatorArrays
 from .techniques import VISIBLE
@@ -23,7 +23,6 @@ from .techniques import VISIBLE
 __all__ = ["Accumulator", "RenderResult", "accumulate", "pass_pixels_count", "result_from"]
 
 
-@jit
 def pass_pixels_count(c, cams, slots):
     """The stage's items: the pass's pixels."""
     return c.pixels.shape[0]

@@ -16,27 +16,23 @@ records it reads and writes (:data:`RECORDS`, ``pass_state.py``), so its signatu
 
 :func:`run_stage` is the loop over a stage's items, written once (pbrt-v4's ``ForAllQueued``): a worker claims chunks
 of the items from a shared counter (``_worksharing.py``) and calls the stage's body on each; :class:`Launcher` runs
-one worker per thread.  The loop is compiled per group of stages (:data:`GROUPS`: each plan's, and each stage
-alone), so a render compiles its plan's stages and no others; a body compiles once for every plan that runs it
-(decisions.md 77, 104).
+one worker per thread.  The loop reaches each body through the address of its compiled entry, so it is compiled
+once for every stage and every plan (the records' types are the same for every scene), and a render compiles the
+bodies its plan runs and no others; a body compiles once for every plan that runs it (decisions.md 77, 104, 129).
 """
 
 from __future__ import annotations
 
-import functools
 import inspect
-import itertools
-import os
 from concurrent.futures import ThreadPoolExecutor, wait
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
-from numba import literally, njit, typeof, types
-from numba.core.errors import TypingError
-from numba.extending import overload
+from llvmlite import ir
+from numba import njit, typeof, types
+from numba.extending import intrinsic
 
 from .._numba import FASTMATH
-from .._worksharing import claim_range, new_counter
-from ..errors import ParameterError
+from .._worksharing import COUNTER_TYPE, claim_range, new_counter
 from .accumulation import accumulate, pass_pixels_count
 from .stages.bsdf_rays import (
     environment_coords,
@@ -69,44 +65,24 @@ from .stages.shadows import (
 
 __all__ = [
     "CLAIM",
-    "GROUPS",
-    "LOOPS_ENVIRONMENT",
+    "PATTERNS",
     "RECORDS",
     "STAGES",
     "Launcher",
     "Plan",
     "Stage",
+    "body_address",
     "body_parameters",
-    "group_id",
-    "group_loop_source",
-    "loop_groups",
-    "loop_per_stage",
+    "body_signature",
+    "call_body",
+    "compiled",
+    "entry_address",
+    "loop_signature",
+    "record_types",
     "run_stage",
     "stage_id",
+    "stage_loop_source",
 ]
-
-# "plan" (the default): a render runs its plan's stages in one compiled loop; "stage": each stage in a loop of its own
-LOOPS_ENVIRONMENT = "LIGHTPROBE_STAGE_LOOPS"
-
-
-def loop_per_stage() -> bool:
-    """Whether renders run each stage in a loop of its own (``LIGHTPROBE_STAGE_LOOPS=stage``) rather than their
-    plan's stages in one loop (``plan``, the default).  The same bodies run in the same order on the same items, so
-    the image is the same bits (a test); what differs is the compiling.  A plan's loop is the cheaper to compile for
-    one kind of scene (10 s against 37 s for the demo's nine stages: each loop's wrapper unboxes the pass records),
-    the loops per stage are shared by every plan, so a process that renders many kinds of scene (the test suite,
-    about 34 plans) compiles each stage's loop once instead of every plan's (decisions.md 104)."""
-    given = os.environ.get(LOOPS_ENVIRONMENT, "plan").strip().lower()
-    if given not in ("plan", "stage"):
-        raise ParameterError(f"{LOOPS_ENVIRONMENT}={given!r}: expected 'plan' or 'stage'")
-    return given == "stage"
-
-
-def loop_groups(stages: tuple[int, ...]) -> tuple[tuple[int, ...], ...]:
-    """The groups whose compiled loops run a plan's ``stages`` (ids): the plan's one group, or with
-    ``LIGHTPROBE_STAGE_LOOPS=stage`` each stage alone."""
-    return tuple((i,) for i in stages) if loop_per_stage() else (tuple(stages),)
-
 
 # The records of a pass (pass_state.py) in the order the stage loop receives them, then the loop's own facts: the
 # worker (its scratch rows) and the claimed items [lo, hi).  A stage body's parameters are the ones it reads or
@@ -182,119 +158,151 @@ def stage_id(name: str) -> int:
     return _IDS[name]
 
 
-def _run_group(group, position, s, env, lights, sel, c, cams, slots, acc, counter, worker):
-    """The claim loop of :func:`run_stage` for one stage group (the overload below)."""
+#: the stage bodies' distinct parameter lists (:func:`body_parameters`), in the order of :data:`STAGES`: the stage
+#: loop has one call site per list, each calling a body through its address with those records
+PATTERNS: tuple[tuple[str, ...], ...] = tuple(dict.fromkeys(stage.parameters for stage in STAGES))
+_PATTERN_OF = tuple(PATTERNS.index(stage.parameters) for stage in STAGES)
 
 
-@overload(_run_group, prefer_literal=True)
-def _run_group_overload(group, position, s, env, lights, sel, c, cams, slots, acc, counter, worker):
-    """The loop for the group whose index ``group`` is a compile-time constant: its own stages only, each called with
-    the records it declares (:func:`group_loop_source`), so only they are typed and compiled (indexing a global
-    table of every group made Numba lower all of it, 4.8 s).  Called, not inlined: Numba compiles an overload's
-    implementation whole to type it, so an inlined loop was compiled twice, the second time inside
-    :func:`run_stage` (a plan's loop 7.3 -> 5.7 s; the call is one per stage and worker, decisions.md 113)."""
-    if not isinstance(group, types.IntegerLiteral):
-        raise TypingError("run_stage's group must be a compile-time constant")
-    return _group_loop(group.literal_value)
+@intrinsic
+def call_body(typingctx, address, arguments):
+    """Call the compiled stage body whose C entry (Numba's cfunc wrapper, :func:`body_address`) is at ``address``
+    with the values of the tuple ``arguments``, which are the body's arguments, in its order and of its types.  A
+    call through an address: the loop is compiled without the bodies and links none of their code (a body called
+    directly was compiled into the loop again, machine code and all: decisions.md 129)."""
+    if not isinstance(address, types.Integer) or not isinstance(arguments, types.BaseTuple):
+        return None
+
+    def codegen(context, builder, signature, args):
+        argument_types = signature.args[1].types
+        entry_type = ir.FunctionType(
+            context.get_value_type(types.none), [context.get_value_type(t) for t in argument_types]
+        )
+        entry = builder.inttoptr(args[0], entry_type.as_pointer())
+        builder.call(entry, [builder.extract_value(args[1], i) for i in range(len(argument_types))])
+        return context.get_dummy_value()
+
+    return types.none(address, arguments), codegen
 
 
-def group_loop_source(group: int) -> str:
-    """The Python source of group ``group``'s loop: for the stage at ``position``, claim chunks of its items from the
-    shared counter and call its body on each, with the records its signature names.  Written out per group (as
-    pbrt-v4's wavefront integrator instantiates a kernel per work queue) so that each body's call lists what it
-    reads: a reader finds a stage's data in its signature, not in 11 arguments every stage received."""
-    lines = ["def loop(group, position, s, env, lights, sel, c, cams, slots, acc, counter, worker):"]
-    for position, stage in enumerate(GROUPS[group]):
+def stage_loop_source() -> str:
+    """The Python source of :func:`run_stage`: claim chunks of the ``n`` items from the shared counter and call the
+    body at ``body`` on each, with the records its parameter list (``PATTERNS[pattern]``) names.  One call site per
+    parameter list, so that each call lists what the body reads: a reader finds a stage's data in its signature."""
+    lines = [
+        "def run_stage(pattern, body, n, s, env, lights, sel, c, cams, slots, acc, counter, worker):",
+        "    lo, hi = claim_range(counter, n)",
+        "    while lo < hi:",
+    ]
+    for i, parameters in enumerate(PATTERNS):
+        users = ", ".join(stage.name for stage in STAGES if stage.parameters == parameters)
         lines += [
-            f"    {'if' if position == 0 else 'elif'} position == {position}:  # {STAGES[stage].name}",
-            f"        n = items_{position}(c, cams, slots)",
-            "        lo, hi = claim_range(counter, n)",
-            "        while lo < hi:",
-            f"            body_{position}({', '.join(STAGES[stage].parameters)})",
-            "            lo, hi = claim_range(counter, n)",
+            f"        {'if' if i == 0 else 'elif'} pattern == {i}:  # {users}",
+            f"            call_body(body, ({', '.join(parameters)}))",
         ]
+    lines.append("        lo, hi = claim_range(counter, n)")
     return "\n".join(lines) + "\n"
 
 
-@functools.cache
-def _group_loop(group: int):
-    """Group ``group``'s loop, compiled from :func:`group_loop_source` (one function object per group, so that
-    Numba types it once)."""
-    namespace = {"claim_range": claim_range}
-    for position, stage in enumerate(GROUPS[group]):
-        namespace[f"items_{position}"] = STAGES[stage].items
-        namespace[f"body_{position}"] = STAGES[stage].body
-    exec(compile(group_loop_source(group), f"<stage loop of group {group}>", "exec"), namespace)
-    return namespace["loop"]
+def _compile_stage_loop():
+    """:func:`run_stage`, from :func:`stage_loop_source`, compiled and cached as a function of this module (its
+    code carries this file's name, so that Numba's cache finds the source it stamps)."""
+    namespace = {"__name__": __name__, "claim_range": claim_range, "call_body": call_body}
+    exec(compile(stage_loop_source(), __file__, "exec"), namespace)
+    loop = namespace["run_stage"]
+    loop.__doc__ = """Worker ``worker``'s share of a stage: chunks of its ``n`` items claimed from ``counter`` until
+    none is left, each given to the stage's body at address ``body`` (:func:`body_address`), whose parameter list is
+    ``PATTERNS[pattern]``.  One compiled loop for every stage and every plan: the pass records have the same types
+    whatever the scene (``pass_state.py``), and the bodies are reached through their addresses, so the loop is
+    compiled once per machine and a render compiles only the bodies its plan runs (decisions.md 104, 129)."""
+    return jit_stage_loop(loop)
 
 
-@jit_stage_loop
-def run_stage(group, position, s, env, lights, sel, c, cams, slots, acc, counter, worker):
-    """Worker ``worker``'s share of the stage at ``position`` of stage group ``group`` (an index into
-    :data:`GROUPS`): chunks of the stage's items claimed from ``counter`` until none is left.  ``group`` is a
-    compile-time constant (``literally``): each group, a plan's stages, compiles one loop written for its own stages
-    (:func:`group_loop_source`: each body called with the records it names), so a render compiles the stages its
-    plan runs and no others (decisions.md 104)."""
-    literally(group)
-    _run_group(group, position, s, env, lights, sel, c, cams, slots, acc, counter, worker)
+run_stage = _compile_stage_loop()
+ADDRESS = types.int64  # a body's address, as the loop receives it
+
+
+def loop_signature(record_types: tuple) -> tuple:
+    """The argument types of :func:`run_stage` for pass records of types ``record_types``."""
+    return (types.int64, ADDRESS, types.int64, *record_types, COUNTER_TYPE, types.int64)
+
+
+def compiled(function, signature: tuple):
+    """``function``'s compiled version for ``signature``: loaded from the kernel cache, or compiled."""
+    result = function.overloads.get(signature)
+    if result is None:
+        function.compile(signature)
+        result = function.overloads[signature]
+    return result
+
+
+def body_signature(record_types: tuple, parameters: tuple[str, ...]) -> tuple:
+    """The argument types of a stage body whose parameters are ``parameters`` (:func:`body_parameters`: some of the
+    pass records, then worker, lo, hi), from the types of the pass's records (s, env, lights, sel, c, cams, slots,
+    acc)."""
+    by_name = dict(zip(RECORDS, record_types, strict=True)) | dict.fromkeys(CLAIM, types.int64)
+    return tuple(by_name[name] for name in parameters)
+
+
+def body_address(stage: int, record_types: tuple) -> int:
+    """The address of stage ``stage``'s body's C entry, compiled (or loaded from the cache) for pass records of
+    types ``record_types``; the body's compiled code stays alive with its dispatcher."""
+    body = STAGES[stage]
+    return entry_address(compiled(body.body, body_signature(record_types, body.parameters)))
+
+
+def entry_address(result) -> int:
+    """The address of a compiled function's C entry (``result``: one of its dispatcher's ``overloads``); a
+    RuntimeError naming it where it was compiled without one, rather than a call through address 0."""
+    address = result.library.get_pointer_to_function(result.fndesc.llvm_cfunc_wrapper_name)
+    if not address:
+        raise RuntimeError(f"{result.fndesc.qualname} was compiled without a C entry (Numba's no_cfunc_wrapper)")
+    return address
+
+
+def record_types(records: tuple) -> tuple:
+    """The Numba types of a pass's records (the same for every scene and pass: ``pass_state.py``)."""
+    return tuple(typeof(x) for x in records)
 
 
 class Launcher:
-    """Runs the stages ``stages`` (ids: one compiled loop for them all, :func:`run_stage`; None, or
-    ``LIGHTPROBE_STAGE_LOOPS=stage``: each stage in its own, as :func:`loop_groups` says) with ``threads`` workers:
-    the calling thread is worker 0, a shared pool's threads the others.  Each worker runs
-    :func:`run_stage`, which releases the GIL, so the workers run in parallel; which worker takes which chunk changes
-    nothing in the image (every item of a stage is independent, and a worker's scratch rows are its own).  Measured
-    against Numba's parallel loops, decisions.md 77."""
+    """Runs the stages of a pass with ``threads`` workers: the calling thread is worker 0, a shared pool's threads
+    the others.  Each worker runs :func:`run_stage`, which releases the GIL, so the workers run in parallel; which
+    worker takes which chunk changes nothing in the image (every item of a stage is independent, and a worker's
+    scratch rows are its own).  Measured against Numba's parallel loops, decisions.md 77."""
 
     _pool: ThreadPoolExecutor | None = None
     _pool_size = 0
 
-    def __init__(self, threads: int, stages: tuple[int, ...] | None = None):
+    def __init__(self, threads: int):
         self.threads = threads
-        self.stages = None if stages is None or loop_per_stage() else tuple(stages)
         if threads > 1 and Launcher._pool_size < threads - 1:
             Launcher._pool = ThreadPoolExecutor(max_workers=threads - 1, thread_name_prefix="lightprobe-stage")
             Launcher._pool_size = threads - 1
         self.counter = new_counter()  # the chunk claims' shared counter (_worksharing.py)
-        self._entries: dict[int, object] = {}
-
-    def _place(self, stage: int) -> tuple[int, int]:
-        """(group, position) of ``stage`` in :data:`GROUPS`."""
-        if self.stages is None:
-            return group_id((stage,)), 0
-        return group_id(self.stages), self.stages.index(stage)
+        self._loop = None  # run_stage's compiled entry (later calls skip the dispatcher's typing of ~150 arrays)
+        self._bodies: dict[int, int] = {}  # stage id -> its body's address
 
     def run(self, stage: int, records: tuple) -> None:
         """Stage ``stage`` (an id) over the pass whose ``records`` are (s, env, lights, sel, c, cams, slots, acc)."""
-        group, position = self._place(stage)
+        body = self._bodies.get(stage)
+        if body is None:
+            types_of = record_types(records)
+            body = self._bodies[stage] = body_address(stage, types_of)
+            if self._loop is None:
+                self._loop = compiled(run_stage, loop_signature(types_of)).entry_point
+        n = STAGES[stage].items(*records[4:7])
         self.counter[0] = 0
-        call = self._entries.get(group)
-        if call is None:  # later calls skip the dispatcher's typing of ~150 arrays (a millisecond)
-            call = self._entries[group] = _loop_for(group, (position, *records, self.counter, 0))
+        call, pattern = self._loop, _PATTERN_OF[stage]
         futures = [
-            Launcher._pool.submit(call, group, position, *records, self.counter, w) for w in range(1, self.threads)
+            Launcher._pool.submit(call, pattern, body, n, *records, self.counter, w) for w in range(1, self.threads)
         ]
         try:
-            call(group, position, *records, self.counter, 0)
+            call(pattern, body, n, *records, self.counter, 0)
         finally:
             wait(futures)  # never leave a worker writing into the pass after a Ctrl-C or an error
         for f in futures:
             f.result()
-
-
-def _loop_for(group: int, args: tuple):
-    """The compiled :func:`run_stage` of ``group`` for arguments like ``args`` (after the group): compiled, or loaded
-    from the cache, for the group as a literal type.  Called with a plain int, the dispatcher would first raise and
-    catch Numba's ForceLiteralArg, whose traceback holds the calling frames, the pass's records among them, in a
-    reference cycle: every render's pass buffers (GBs) then stayed in memory until Python's cyclic collector next
-    ran, and a test process grew past 20 GB."""
-    signature = (types.literal(group), *(typeof(x) for x in args))
-    compiled = run_stage.overloads.get(signature)
-    if compiled is None:
-        run_stage.compile(signature)
-        compiled = run_stage.overloads[signature]
-    return compiled.entry_point
 
 
 @dataclass(frozen=True)
@@ -342,25 +350,3 @@ class Plan:
             names.append("mesh_shadows" if self.packets else "mesh_shadows_single")
         names.append("accumulate")
         return tuple(names)
-
-
-def _groups() -> tuple[tuple[int, ...], ...]:
-    """Every plan's stages (:meth:`Plan.stages` over all values of its fields), then each stage alone (the tests run
-    stages one at a time): the stage groups :func:`run_stage` compiles a loop for, one group at a time."""
-    plans = {
-        tuple(_IDS[name] for name in Plan(*values).stages())
-        for values in itertools.product((False, True), repeat=len(fields(Plan)))
-    }
-    return tuple(sorted(plans)) + tuple((i,) for i in range(len(STAGES)))
-
-
-GROUPS = _groups()
-_GROUP_IDS = {group: i for i, group in enumerate(GROUPS)}
-
-
-def group_id(stages: tuple[int, ...]) -> int:
-    """The index in :data:`GROUPS` of the stage ids ``stages`` (a plan's, or one stage)."""
-    try:
-        return _GROUP_IDS[tuple(stages)]
-    except KeyError:
-        raise ValueError(f"no stage group runs the stages {stages}: a plan's stages or one stage") from None

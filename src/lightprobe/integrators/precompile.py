@@ -23,7 +23,7 @@ import os
 import subprocess
 import sys
 
-__all__ = ["helpers_wanted", "record_signature", "start", "stop"]
+__all__ = ["helpers_wanted", "start", "stop"]
 
 ENVIRONMENT = "LIGHTPROBE_COMPILE_HELPERS"
 
@@ -50,7 +50,7 @@ def start(stages: tuple[str, ...], records: tuple) -> list[subprocess.Popen]:
 
     from numba import typeof
 
-    signatures = pickle.dumps((tuple(typeof(x) for x in records), tuple(typeof(x) for x in records[4:7])))
+    signatures = pickle.dumps(tuple(typeof(x) for x in records))
     backwards = list(reversed(stages))
     helpers = []
     for i in range(count):
@@ -82,29 +82,16 @@ def stop(helpers: list[subprocess.Popen]) -> None:
             pass
 
 
-def record_signature(record_types: tuple, parameters: tuple[str, ...]) -> tuple:
-    """The argument types of a stage body whose parameters are ``parameters`` (``pipeline.body_parameters``: some
-    of the pass records, then worker, lo, hi), from the types of the pass's records (s, env, lights, sel, c, cams,
-    slots, acc)."""
-    from numba import types
-
-    from .pipeline import CLAIM, RECORDS
-
-    by_name = dict(zip(RECORDS, record_types, strict=True)) | dict.fromkeys(CLAIM, types.int64)
-    return tuple(by_name[name] for name in parameters)
-
-
 def main(names: list[str]) -> None:
-    """Compile the stage bodies and item counts ``names``, in order, for the signatures pickled on standard input."""
+    """Compile the stage bodies ``names``, in order, for the pass records' types pickled on standard input."""
     import pickle
 
     from . import pipeline
 
-    record_types, items_signature = pickle.loads(sys.stdin.buffer.read())
+    record_types = pickle.loads(sys.stdin.buffer.read())
     for name in names:
         stage = pipeline.STAGES[pipeline.stage_id(name)]
-        stage.items.compile(items_signature)
-        stage.body.compile(record_signature(record_types, stage.parameters))
+        pipeline.compiled(stage.body, pipeline.body_signature(record_types, stage.parameters))
 
 
 if __name__ == "__main__":

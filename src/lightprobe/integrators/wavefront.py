@@ -296,7 +296,7 @@ def _warm_up(work: _Pass, n_pixels: int, helpers: list) -> None:
     """Every stage of ``work`` run on one pixel: loads their cached machine code, or compiles it (a first render of
     this kind, with helper processes compiling some of the stages beside it: precompile.py)."""
     plan = work.plan
-    if not _group_cached(plan):
+    if not _stages_cached(plan):
         helpers += precompile.start(plan.stages(), work.records(Accumulator(n_pixels), pass_pixels(0, 1), 1, 0))
     work.run(Accumulator(n_pixels), pass_pixels(0, 1), 1, 0)
     precompile.stop(helpers)
@@ -389,7 +389,7 @@ class _Pass:
         self.lights = lights
         self.sel = render_plan.selector
         self.ray_counts = np.zeros((threads_max, 8), np.int64)  # per worker (a row = a cache line)
-        self.launcher = pipeline.Launcher(threads, self.stages)
+        self.launcher = pipeline.Launcher(threads)
         compensated = render_plan.compensated
         self.compensated = compensated
         self.constants = PassConstants(
@@ -698,24 +698,22 @@ def _render_planned(scene, render_plan, helpers, progress, tracer, resume, threa
 
 
 def kernels_cached(scene: Scene | None = None, settings: RenderSettings | None = None) -> bool:
-    """Whether the stage loop of a render of ``scene`` with ``settings`` (the demo's, by default) is in the on-disk
-    cache; else that render compiles it first.  Each plan compiles its own loop and the stages it runs
-    (:func:`pipeline.run_stage`); the pass records have the same types whatever they hold (``pass_state.py``)."""
+    """Whether the stage loop and the stage bodies of a render of ``scene`` with ``settings`` (the demo's, by
+    default) are in the on-disk cache; else that render compiles them first.  The loop is one for every plan, each
+    plan runs its own bodies (:func:`pipeline.run_stage`); the pass records have the same types whatever they hold
+    (``pass_state.py``)."""
     if scene is None:
         from ..demo import demo_scene
 
         scene = demo_scene((8, 5))
-    return _group_cached(plan_for(scene, settings or RenderSettings()))
+    return _stages_cached(plan_for(scene, settings or RenderSettings()))
 
 
-def _group_cached(plan: pipeline.Plan) -> bool:
-    """Whether the stage loop of ``plan``'s group (with ``LIGHTPROBE_STAGE_LOOPS=stage``, each of its stages'
-    loops) is in the on-disk cache."""
-    from .._numba import cached_signatures
+def _stages_cached(plan: pipeline.Plan) -> bool:
+    """Whether the stage loop and the bodies of ``plan``'s stages are in the on-disk cache."""
+    from .._numba import is_cached
 
-    groups = pipeline.loop_groups(tuple(pipeline.stage_id(name) for name in plan.stages()))
-    cached = {signature[0] for signature in cached_signatures(pipeline.run_stage)}
-    return all(numba.types.literal(pipeline.group_id(group)) in cached for group in groups)
+    return is_cached(pipeline.run_stage, *(pipeline.STAGES[pipeline.stage_id(n)].body for n in plan.stages()))
 
 
 class _Stop(Exception):

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..._numba import jit, jit_body, jit_inline
+from ..._numba import jit_body, jit_inline
 from ...emitters.envmap import env_coords, env_pdf_at
 from ...emitters.lights import area_pdf_at, emitted, infinite_radiance, light_pdf_of
 from ...emitters.selection import selector_pmf
@@ -47,7 +47,6 @@ __all__ = [
 ]
 
 
-@jit
 def non_light_blocks(c, cams, slots):
     """Items of ``environment_coords_lanes``: blocks of 8 of the slots that are not light samples -- under MIS a
     camera sample's first n_bsdf, under ``env`` none, else all m --, numbered over the pass's camera samples, so

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..._numba import jit, jit_body, jit_inline
+from ..._numba import jit_body, jit_inline
 from ...geometry.camera import camera_ray
 from ...geometry.embree import FAR as MESH_FAR
 from ...geometry.embree import closest_mesh_hit
@@ -24,13 +24,11 @@ from .sobol_lanes import camera_numbers_block
 __all__ = ["camera_blocks", "camera_lanes", "camera_lanes_tree", "camera_samples", "camera_scalar"]
 
 
-@jit
 def camera_samples(c, cams, slots):
     """The scalar stage's items: camera samples."""
     return cams.t.shape[0]
 
 
-@jit
 def camera_blocks(c, cams, slots):
     """The lanes stage's items: blocks of 8 camera samples."""
     return (cams.t.shape[0] + LANES - 1) // LANES

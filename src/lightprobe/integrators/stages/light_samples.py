@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import math
 
-from ..._numba import jit, jit_body
+from ..._numba import jit_body
 from ...bsdfs.dispatch import bsdf_eval
 from ...emitters.envmap import env_lookup, env_sample_coords, env_sample_full
 from ...emitters.lights import light_sample_of
@@ -47,7 +47,6 @@ __all__ = [
 ]
 
 
-@jit
 def slots_of_pass(c, cams, slots):
     """Items of the stages that go slot by slot: every slot of the pass."""
     return slots.state.shape[0]
@@ -104,7 +103,6 @@ def light_samples(env, lights, sel, c, cams, slots, lo, hi):
             slots.seg[r] = ls.distance
 
 
-@jit
 def environment_blocks(c, cams, slots):
     """Items of ``environment_lanes``: blocks of 8 light slots, numbered over the pass's camera samples (under MIS
     a camera sample's light slots are its last m - n_bsdf, under ``env`` all m, and the other strategies have

@@ -11,7 +11,7 @@ their cache misses, where inside a large loop body it stalls on each (a bilinear
 
 from __future__ import annotations
 
-from ..._numba import jit, jit_body
+from ..._numba import jit_body
 from ...emitters.envmap import env_lookup
 from ...simd import LANES
 from ..techniques import SLOT_NONE
@@ -20,7 +20,6 @@ from .environment_lanes import radiance_block
 __all__ = ["environment_radiance", "environment_radiance_lanes", "slot_blocks"]
 
 
-@jit
 def slot_blocks(c, cams, slots):
     """Items of the stages that take 8 consecutive slots at a time."""
     return (slots.state.shape[0] + LANES - 1) // LANES

@@ -14,7 +14,7 @@ from __future__ import annotations
 from numba import types
 from numba.extending import overload
 
-from ..._numba import jit, jit_body, jit_inline
+from ..._numba import jit_body, jit_inline
 from ...emitters.lights import emitted, escaped_radiance
 from ...geometry.frame import to_world
 from ...geometry.intersect import MESH, MISS, RECT, SPHERE
@@ -66,12 +66,6 @@ def _add_outlines(c, cams, k, dx, dy, dz):
     cams.direct[k, 0] += r
     cams.direct[k, 1] += g
     cams.direct[k, 2] += b
-
-
-@jit
-def camera_samples(c, cams, slots):
-    """The stage's items: camera samples."""
-    return cams.t.shape[0]
 
 
 def _textures_if(textured, s, cams, k, dx, dy, dz):
