@@ -31,18 +31,51 @@ arrays = scene.compile()
 work = _Pass(scene, resolve(scene, RenderSettings(spp=1, adaptive=False)), arrays, RayTracer(arrays), 40, 1)
 work.make_buffers()
 records = work.records(Accumulator(40), pass_pixels(0, 1), 1, 0)
-helpers = precompile.start(("accumulate",), records)
+helpers, claims = precompile.start(("accumulate",), records)
 codes = [helper.wait(timeout=600) for helper in helpers]
+claims.wait_for("accumulate")  # the helper claimed it: wait until it has said it saved it
+saved = sorted(claims.saved)
+precompile.stop(helpers, claims)
 stage = pipeline.STAGES[pipeline.stage_id("accumulate")]
 body = stage.body
 body.compile(pipeline.body_signature(pipeline.record_types(records), stage.parameters))
 print(json.dumps({"helpers": len(helpers), "codes": codes, "hits": sum(body._cache_hits.values()),
-                  "misses": sum(body._cache_misses.values())}))
+                  "misses": sum(body._cache_misses.values()), "saved": saved}))
 """
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path), precompile.ENVIRONMENT: "1"}
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True, cwd=ROOT, env=env)
     found = json.loads(out.stdout.strip().splitlines()[-1])
-    assert found == {"helpers": 1, "codes": [0], "hits": 1, "misses": 0}
+    assert found == {"helpers": 1, "codes": [0], "hits": 1, "misses": 0, "saved": ["accumulate"]}
+
+
+def test_each_body_is_claimed_by_one_process_and_a_claim_is_waited_for(tmp_path):
+    """Whichever process claims a body first compiles it; the other's claim fails.  The render waits for a body a
+    helper claimed until the helper reports it saved, or until no helper is left (then it compiles it itself)."""
+    import threading
+    import time
+
+    first, second = precompile.Claims(str(tmp_path)), precompile.Claims(str(tmp_path))
+    assert first.claim("setup") and not second.claim("setup") and not first.claim("setup")
+    assert second.claim("finish")
+
+    second.running = 1  # a helper that claimed "camera" and saves it a little later
+    assert first.claim("camera")
+
+    def saves():
+        time.sleep(0.3)
+        with second.changed:
+            second.saved.add("camera")
+            second.changed.notify_all()
+
+    threading.Thread(target=saves).start()
+    start = time.perf_counter()
+    second.wait_for("camera")
+    assert "camera" in second.saved and time.perf_counter() - start >= 0.25
+
+    gone = precompile.Claims(str(tmp_path))  # no helper left: no wait, whoever claimed it
+    start = time.perf_counter()
+    gone.wait_for("setup")
+    assert time.perf_counter() - start < 0.1
 
 
 def test_how_many_helpers(monkeypatch):

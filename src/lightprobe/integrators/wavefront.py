@@ -295,11 +295,17 @@ def _probed(scene, render_plan: RenderPlan, arrays, tracer, threads, helpers) ->
 def _warm_up(work: _Pass, n_pixels: int, helpers: list) -> None:
     """Every stage of ``work`` run on one pixel: loads their cached machine code, or compiles it (a first render of
     this kind, with helper processes compiling some of the stages beside it: precompile.py)."""
-    plan = work.plan
+    plan, claims = work.plan, None
     if not _stages_cached(plan):
-        helpers += precompile.start(plan.stages(), work.records(Accumulator(n_pixels), pass_pixels(0, 1), 1, 0))
-    work.run(Accumulator(n_pixels), pass_pixels(0, 1), 1, 0)
-    precompile.stop(helpers)
+        records = work.records(Accumulator(n_pixels), pass_pixels(0, 1), 1, 0)
+        started, claims = precompile.start(plan.stages(), records)
+        helpers += started
+    try:
+        work.launcher.before_compile = claims.wait_for if claims is not None else None
+        work.run(Accumulator(n_pixels), pass_pixels(0, 1), 1, 0)
+    finally:
+        work.launcher.before_compile = None
+        precompile.stop(helpers, claims)
 
 
 def learns_light_selection(scene: Scene, settings: RenderSettings | None = None) -> bool:
