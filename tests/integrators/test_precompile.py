@@ -31,15 +31,16 @@ arrays = scene.compile()
 work = _Pass(scene, resolve(scene, RenderSettings(spp=1, adaptive=False)), arrays, RayTracer(arrays), 40, 1)
 work.make_buffers()
 records = work.records(Accumulator(40), pass_pixels(0, 1), 1, 0)
-helpers, claims = precompile.start(("accumulate",), records)
-codes = [helper.wait(timeout=600) for helper in helpers]
-claims.wait_for("accumulate")  # the helper claimed it: wait until it has said it saved it
-saved = sorted(claims.saved)
-precompile.stop(helpers, claims)
+helpers = precompile.Helpers()
+helpers.start(("accumulate",), precompile.record_types_pickled(records))
+codes = [helper.wait(timeout=600) for helper in helpers.processes]
+helpers.wait_for("accumulate")  # the helper claimed it: wait until it has said it saved it
+saved, started = sorted(helpers.claims.saved), len(helpers.processes)
+helpers.stop()
 stage = pipeline.STAGES[pipeline.stage_id("accumulate")]
 body = stage.body
 body.compile(pipeline.body_signature(pipeline.record_types(records), stage.parameters))
-print(json.dumps({"helpers": len(helpers), "codes": codes, "hits": sum(body._cache_hits.values()),
+print(json.dumps({"helpers": started, "codes": codes, "hits": sum(body._cache_hits.values()),
                   "misses": sum(body._cache_misses.values()), "saved": saved}))
 """
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path), precompile.ENVIRONMENT: "1"}
@@ -91,3 +92,37 @@ def test_how_many_helpers(monkeypatch):
     assert precompile.helpers_wanted(9) == 4 and precompile.helpers_wanted(20) == 7
     monkeypatch.setattr(os, "cpu_count", lambda: 1)
     assert precompile.helpers_wanted(9) == 0
+
+
+def test_a_render_keeps_the_record_types_for_the_next_renders_early_helpers(tmp_path, monkeypatch):
+    """The pass records' pickled types, kept in the kernel cache by a render's warm-up, let the next render of a
+    kind not yet compiled start its helpers before it builds its lights: for the stages of its plan, with those
+    types; without the file, or with helpers off, or with every stage cached, none start early."""
+    import pickle
+
+    from lightprobe.demo import demo_scene
+    from lightprobe.integrators import wavefront
+
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    monkeypatch.setenv(precompile.ENVIRONMENT, "1")
+    started = []
+    monkeypatch.setattr(
+        precompile.Helpers, "start", lambda self, stages, signatures: started.append((stages, signatures))
+    )
+    scene, settings = demo_scene((8, 5)), wavefront.RenderSettings(spp=1)
+    assert precompile.known_record_types() is None
+    wavefront._start_helpers_early(scene, settings, precompile.Helpers())
+    assert started == []  # nothing kept yet
+
+    precompile.save_record_types(pickle.dumps(("types",)))
+    assert pickle.loads(precompile.known_record_types()) == ("types",)
+    monkeypatch.setattr(wavefront, "_stages_cached", lambda plan: False)
+    wavefront._start_helpers_early(scene, settings, precompile.Helpers())
+    assert started == [(wavefront.plan_for(scene, settings).stages(), pickle.dumps(("types",)))]
+
+    monkeypatch.setattr(wavefront, "_stages_cached", lambda plan: True)
+    wavefront._start_helpers_early(scene, settings, precompile.Helpers())
+    monkeypatch.setattr(wavefront, "_stages_cached", lambda plan: False)
+    monkeypatch.setenv(precompile.ENVIRONMENT, "0")
+    wavefront._start_helpers_early(scene, settings, precompile.Helpers())
+    assert len(started) == 1

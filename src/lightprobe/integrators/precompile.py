@@ -26,8 +26,16 @@ import shutil
 import subprocess
 import sys
 import threading
+from pathlib import Path
 
-__all__ = ["Claims", "helpers_wanted", "start", "stop"]
+__all__ = [
+    "Claims",
+    "Helpers",
+    "helpers_wanted",
+    "known_record_types",
+    "record_types_pickled",
+    "save_record_types",
+]
 
 ENVIRONMENT = "LIGHTPROBE_COMPILE_HELPERS"
 
@@ -86,53 +94,113 @@ class Claims:
             self.changed.wait_for(lambda: name in self.saved or self.running == 0, timeout)
 
 
-def start(stages: tuple[str, ...], records: tuple) -> tuple[list[subprocess.Popen], Claims | None]:
-    """Helpers that compile ``stages`` (a plan's stage names, in its order) from the last, each body claimed by one
-    process (:class:`Claims`), for bodies called with the pass ``records`` (their types are sent, pickled: Numba's
-    types are its cache's keys); and the claims, which the render consults before compiling a body."""
-    count = helpers_wanted(len(stages))
-    if count == 0:
-        return [], None
+class Helpers:
+    """The helper processes of one render and their :class:`Claims`: started once, at the render's start where an
+    earlier render left the pass records' types (:func:`known_record_types`), else at its warm-up; stopped when the
+    warm-up has compiled (or loaded) every stage, or when the render ends."""
+
+    def __init__(self):
+        self.processes: list[subprocess.Popen] = []
+        self.claims: Claims | None = None
+
+    @property
+    def started(self) -> bool:
+        return self.claims is not None
+
+    def start(self, stages: tuple[str, ...], signatures: bytes) -> None:
+        """Helpers that compile ``stages`` (a plan's stage names, in its order) from the last, each body claimed by
+        one process, for bodies called with pass records of the types pickled in ``signatures``
+        (:func:`record_types_pickled`: Numba's types are its cache's keys).  Nothing if already started."""
+        count = helpers_wanted(len(stages))
+        if count == 0 or self.started:
+            return
+        import tempfile
+
+        self.claims = claims = Claims(tempfile.mkdtemp(prefix="lightprobe-claims-"))
+        for _ in range(count):
+            try:
+                helper = subprocess.Popen(
+                    [sys.executable, "-m", "lightprobe.integrators.precompile", claims.folder, *reversed(stages)],
+                    stdin=subprocess.PIPE,
+                    stdout=subprocess.PIPE,
+                    stderr=subprocess.DEVNULL,
+                    env={**os.environ, ENVIRONMENT: "0"},
+                )
+                helper.stdin.write(signatures)
+                helper.stdin.close()
+            except OSError:  # no room for another process: the render compiles alone
+                break
+            self.processes.append(helper)
+            with claims.changed:
+                claims.running += 1
+            threading.Thread(target=claims.listen, args=(helper,), daemon=True).start()
+
+    def wait_for(self, name: str) -> None:
+        """Before the render compiles stage body ``name``: :meth:`Claims.wait_for` (nothing without helpers)."""
+        if self.claims is not None:
+            self.claims.wait_for(name)
+
+    def stop(self) -> None:
+        """End the helpers, done or not (what they saved stays in the cache), and remove the claims' folder."""
+        for helper in self.processes:
+            if helper.poll() is None:
+                helper.kill()
+        for helper in self.processes:
+            try:
+                helper.wait(timeout=10)
+            except subprocess.TimeoutExpired:  # pragma: no cover - a killed process that does not end
+                pass
+        if self.claims is not None:
+            shutil.rmtree(self.claims.folder, ignore_errors=True)
+        self.processes, self.claims = [], None
+
+
+def record_types_pickled(records: tuple) -> bytes:
+    """The Numba types of a pass's records, pickled (what a helper is sent)."""
     import pickle
-    import tempfile
 
     from numba import typeof
 
-    signatures = pickle.dumps(tuple(typeof(x) for x in records))
-    claims = Claims(tempfile.mkdtemp(prefix="lightprobe-claims-"))
-    helpers = []
-    for _ in range(count):
-        try:
-            helper = subprocess.Popen(
-                [sys.executable, "-m", "lightprobe.integrators.precompile", claims.folder, *reversed(stages)],
-                stdin=subprocess.PIPE,
-                stdout=subprocess.PIPE,
-                stderr=subprocess.DEVNULL,
-                env={**os.environ, ENVIRONMENT: "0"},
-            )
-            helper.stdin.write(signatures)
-            helper.stdin.close()
-        except OSError:  # no room for another process: the render compiles alone
-            break
-        helpers.append(helper)
-        with claims.changed:
-            claims.running += 1
-        threading.Thread(target=claims.listen, args=(helper,), daemon=True).start()
-    return helpers, claims
+    return pickle.dumps(tuple(typeof(x) for x in records))
 
 
-def stop(helpers: list[subprocess.Popen], claims: Claims | None = None) -> None:
-    """End the helpers, done or not (what they saved stays in the cache), and remove the claims' folder."""
-    for helper in helpers:
-        if helper.poll() is None:
-            helper.kill()
-    for helper in helpers:
-        try:
-            helper.wait(timeout=10)
-        except subprocess.TimeoutExpired:  # pragma: no cover - a killed process that does not end
-            pass
-    if claims is not None:
-        shutil.rmtree(claims.folder, ignore_errors=True)
+def _record_types_file() -> Path | None:
+    """Where renders keep the pass records' pickled types for the next render's early helpers: in the kernel
+    cache, named by the stamp of the render driver's import closure (which builds every record), so an edit that
+    could change a record's type names another file; None where kernels are not stamped by their imports."""
+    from .. import _numba
+
+    if not _numba.STAMPED_BY_IMPORTS:
+        return None
+    stamp = _numba._closure_stamps().get(str((Path(__file__).parent / "wavefront.py").resolve()))
+    if stamp is None:
+        return None
+    return Path(os.environ["NUMBA_CACHE_DIR"]) / f"record-types-{stamp[:20]}.pickle"
+
+
+def save_record_types(signatures: bytes) -> None:
+    """Keep ``signatures`` (:func:`record_types_pickled`) for later renders (written once, atomically; a cache that
+    cannot be written is no error: the next render starts its helpers at its warm-up)."""
+    path = _record_types_file()
+    if path is None or path.is_file():
+        return
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        temporary = path.with_name(f"{path.name}.{os.getpid()}")
+        temporary.write_bytes(signatures)
+        os.replace(temporary, path)
+    except OSError:
+        pass
+
+
+def known_record_types() -> bytes | None:
+    """The pass records' pickled types an earlier render of these sources kept (:func:`save_record_types`), or
+    None."""
+    path = _record_types_file()
+    try:
+        return path.read_bytes() if path is not None else None
+    except OSError:
+        return None
 
 
 def main(folder: str, names: list[str]) -> None:

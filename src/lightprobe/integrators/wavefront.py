@@ -292,20 +292,39 @@ def _probed(scene, render_plan: RenderPlan, arrays, tracer, threads, helpers) ->
     return plan, {**found, "seconds": _clock() - start}, fields
 
 
-def _warm_up(work: _Pass, n_pixels: int, helpers: list) -> None:
+def _warm_up(work: _Pass, n_pixels: int, helpers: precompile.Helpers) -> None:
     """Every stage of ``work`` run on one pixel: loads their cached machine code, or compiles it (a first render of
-    this kind, with helper processes compiling some of the stages beside it: precompile.py)."""
-    plan, claims = work.plan, None
+    this kind, with helper processes compiling some of the stages beside it: precompile.py, started here unless
+    :func:`_start_helpers_early` did); then the helpers are stopped."""
+    plan = work.plan
     if not _stages_cached(plan):
-        records = work.records(Accumulator(n_pixels), pass_pixels(0, 1), 1, 0)
-        started, claims = precompile.start(plan.stages(), records)
-        helpers += started
+        signatures = precompile.record_types_pickled(work.records(Accumulator(n_pixels), pass_pixels(0, 1), 1, 0))
+        precompile.save_record_types(signatures)  # for the next render's early helpers
+        helpers.start(plan.stages(), signatures)
     try:
-        work.launcher.before_compile = claims.wait_for if claims is not None else None
+        work.launcher.before_compile = helpers.wait_for if helpers.started else None
         work.run(Accumulator(n_pixels), pass_pixels(0, 1), 1, 0)
     finally:
         work.launcher.before_compile = None
-        precompile.stop(helpers, claims)
+        helpers.stop()
+
+
+def _start_helpers_early(scene: Scene, settings: RenderSettings | None, helpers: precompile.Helpers) -> None:
+    """Start a first render's compile helpers before the scene's light table, selector and outlines are built
+    (their kernels compile in this process meanwhile), where an earlier render of these sources kept the pass
+    records' types: the many-light demo after the demo compiled for about 20 s before its warm-up (decisions.md
+    129).  The stages are those of :func:`plan_for` with the settings as given; where :func:`resolve` then changes
+    the plan, the render compiles what the helpers did not."""
+    if precompile.helpers_wanted(2) == 0:
+        return
+    signatures = precompile.known_record_types()
+    if signatures is None:
+        return
+    settings = settings or RenderSettings()
+    settings.validate()  # resolve's first check: a user's error is reported as it would be without helpers
+    plan = plan_for(scene, settings)
+    if not _stages_cached(plan):
+        helpers.start(plan.stages(), signatures)
 
 
 def learns_light_selection(scene: Scene, settings: RenderSettings | None = None) -> bool:
@@ -503,21 +522,22 @@ def render(
     ``settings.first_sample`` learned (its ``accumulator.learned``), for a sample range rendered apart from them
     (``analysis/distributed.py``): it picks as the whole render would (``resume``'s, if it carries one, wins)."""
     t_setup = time.perf_counter()
-    render_plan = resolve(scene, settings, resumed=resume is not None)
-    if render_plan.settings.threads is not None:
-        numba.set_num_threads(min(render_plan.settings.threads, numba.config.NUMBA_NUM_THREADS))
-    threads = numba.get_num_threads()
-    _warn_of_unreached_delta_lights(render_plan)
-    helpers = []  # processes compiling some of the stages of a first render of this kind (precompile.py)
+    helpers = precompile.Helpers()  # processes compiling some of the stages of a first render of this kind
     try:
+        _start_helpers_early(scene, settings, helpers)
+        render_plan = resolve(scene, settings, resumed=resume is not None)
+        if render_plan.settings.threads is not None:
+            numba.set_num_threads(min(render_plan.settings.threads, numba.config.NUMBA_NUM_THREADS))
+        threads = numba.get_num_threads()
+        _warn_of_unreached_delta_lights(render_plan)
         return _render_planned(scene, render_plan, helpers, progress, tracer, resume, threads, t_setup, learned)
     finally:
-        precompile.stop(helpers)
+        helpers.stop()
 
 
 def _render_planned(scene, render_plan, helpers, progress, tracer, resume, threads, t_setup, learned) -> RenderResult:
-    """:func:`render` of its :class:`RenderPlan`; ``helpers`` (empty): where it puts the processes it starts to
-    compile some of its stages, which it stops once its own warm-up has compiled (or loaded) them all."""
+    """:func:`render` of its :class:`RenderPlan`; ``helpers``: the processes compiling some of its stages (started
+    early, or by its warm-up), which it stops once its own warm-up has compiled (or loaded) them all."""
     arrays = scene.compile()
     own_tracer = tracer is None
     tracer = tracer or RayTracer(arrays, threads=threads)
