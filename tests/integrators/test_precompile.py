@@ -60,7 +60,7 @@ def test_each_body_is_claimed_by_one_process_and_a_claim_is_waited_for(tmp_path)
     assert second.claim("finish")
 
     second.running = 1  # a helper that claimed "camera" and saves it a little later
-    assert first.claim("camera")
+    assert first.claim("camera") and not second.claim("camera")
 
     def saves():
         time.sleep(0.3)
@@ -126,3 +126,16 @@ def test_a_render_keeps_the_record_types_for_the_next_renders_early_helpers(tmp_
     monkeypatch.setenv(precompile.ENVIRONMENT, "0")
     wavefront._start_helpers_early(scene, settings, precompile.Helpers())
     assert len(started) == 1
+
+
+def test_a_helper_takes_the_longest_compile_first():
+    """The setup stage (the longest compile of the demo's plan) first, the rest from the last; ties keep that order."""
+    stages = ("camera", "setup", "environment_samples_lanes", "finish", "analytic_shadows_lanes", "accumulate")
+    assert precompile.largest_first(stages) == [
+        "setup",
+        "finish",
+        "camera",
+        "accumulate",
+        "analytic_shadows_lanes",
+        "environment_samples_lanes",
+    ]

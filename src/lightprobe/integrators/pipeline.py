@@ -24,7 +24,6 @@ bodies its plan runs and no others; a body compiles once for every plan that run
 from __future__ import annotations
 
 import inspect
-from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor, wait
 from dataclasses import dataclass
 
@@ -283,16 +282,31 @@ class Launcher:
         self.counter = new_counter()  # the chunk claims' shared counter (_worksharing.py)
         self._loop = None  # run_stage's compiled entry (later calls skip the dispatcher's typing of ~150 arrays)
         self._bodies: dict[int, int] = {}  # stage id -> its body's address
-        # called with a stage's name before its body is first looked up (compiled or loaded): a first render's
-        # helper processes may be compiling it (precompile.Claims.wait_for)
-        self.before_compile: Callable[[str], None] | None = None
+
+    def prepare(self, stages: tuple[int, ...], records: tuple, helpers=None) -> None:
+        """Compile (or load) the loop and the bodies of ``stages`` (ids) for pass records like ``records`` before
+        the first pass runs them.  With ``helpers`` (``precompile.Helpers``: processes compiling bodies into the
+        cache beside this one), this process compiles, in the plan's order, the bodies it claims first, then loads
+        the others once their helper has saved them."""
+        types_of = record_types(records)
+        if self._loop is None:
+            self._loop = compiled(run_stage, loop_signature(types_of)).entry_point
+        theirs = []
+        for stage in stages:
+            if stage in self._bodies:
+                continue
+            if helpers is None or helpers.claim(STAGES[stage].name):
+                self._bodies[stage] = body_address(stage, types_of)
+            else:
+                theirs.append(stage)
+        for stage in theirs:
+            helpers.wait_for(STAGES[stage].name)
+            self._bodies[stage] = body_address(stage, types_of)
 
     def run(self, stage: int, records: tuple) -> None:
         """Stage ``stage`` (an id) over the pass whose ``records`` are (s, env, lights, sel, c, cams, slots, acc)."""
         body = self._bodies.get(stage)
         if body is None:
-            if self.before_compile is not None:
-                self.before_compile(STAGES[stage].name)
             types_of = record_types(records)
             body = self._bodies[stage] = body_address(stage, types_of)
             if self._loop is None:

@@ -7,11 +7,11 @@ them into the shared cache while the render compiles the others: the render's ow
 loads them in milliseconds.  Numba writes a function's cache index under a lock (``_numba.py``), so processes can save
 into one cache at once.
 
-A helper takes the plan's stages from the last (the render compiles them from the first); with more cores, more
-helpers share them.  Each body is compiled by one process only, whichever claims it first (:class:`Claims`): the
-render waits for a body a helper claimed, then loads it.  Helpers are stopped when the render's warm-up is done,
-whatever they were compiling: what they saved stays in the cache, a half-written file never does (Numba writes a
-temporary file and renames it).
+A helper takes the plan's stages the longest to compile first (the render compiles them from the first); with more
+cores, more helpers share them.  Each body is compiled by one process only, whichever claims it first
+(:class:`Claims`): the render compiles the bodies it claims, then waits for those a helper claimed and loads them.
+Helpers are stopped when the render's warm-up is done, whatever they were compiling: what they saved stays in the
+cache, a half-written file never does (Numba writes a temporary file and renames it).
 
 ``LIGHTPROBE_COMPILE_HELPERS`` says how many: ``auto`` (one per spare core, what the ``lightprobe`` command sets
 unless told otherwise), a number, or unset / ``0``: none, the default of the Python API, whose callers may already be
@@ -33,6 +33,7 @@ __all__ = [
     "Helpers",
     "helpers_wanted",
     "known_record_types",
+    "largest_first",
     "record_types_pickled",
     "save_record_types",
 ]
@@ -86,12 +87,30 @@ class Claims:
             self.changed.notify_all()
 
     def wait_for(self, name: str, timeout: float = 600.0) -> None:
-        """Before the render compiles body ``name``: claim it, or wait until the helper that claimed it has saved
-        it (or no helper is left: then the render compiles it itself)."""
-        if self.claim(name):
-            return
+        """Wait until the helper that claimed body ``name`` has saved it (or no helper is left: then the render
+        compiles it itself)."""
         with self.changed:
             self.changed.wait_for(lambda: name in self.saved or self.running == 0, timeout)
+
+
+#: seconds each stage body took to compile from an empty cache on the 2-core machine (its own compile and its
+#: callees', alone), the bodies not listed about a second: only the order of a helper's work depends on them
+COMPILE_SECONDS = {
+    "setup": 10.8,
+    "setup_textured": 14.0,
+    "what_bsdf_rays_see": 12.5,
+    "light_samples": 11.8,
+    "finish": 3.6,
+    "camera": 2.2,
+    "camera_tree": 2.2,
+}
+
+
+def largest_first(stages: tuple[str, ...]) -> list[str]:
+    """``stages`` in the order a helper takes them: the longest to compile first (the render takes them in the
+    plan's order, so the two meet in the fewest seconds: a helper that took them from the last was done 7 s before
+    the render had compiled the demo's setup stage, decisions.md 129), ties from the last."""
+    return sorted(reversed(stages), key=lambda name: -COMPILE_SECONDS.get(name, 1.0))
 
 
 class Helpers:
@@ -108,9 +127,10 @@ class Helpers:
         return self.claims is not None
 
     def start(self, stages: tuple[str, ...], signatures: bytes) -> None:
-        """Helpers that compile ``stages`` (a plan's stage names, in its order) from the last, each body claimed by
-        one process, for bodies called with pass records of the types pickled in ``signatures``
-        (:func:`record_types_pickled`: Numba's types are its cache's keys).  Nothing if already started."""
+        """Helpers that compile ``stages`` (a plan's stage names), the longest to compile first
+        (:func:`largest_first`), each body claimed by one process, for bodies called with pass records of the types
+        pickled in ``signatures`` (:func:`record_types_pickled`: Numba's types are its cache's keys).  Nothing if
+        already started."""
         count = helpers_wanted(len(stages))
         if count == 0 or self.started:
             return
@@ -120,7 +140,7 @@ class Helpers:
         for _ in range(count):
             try:
                 helper = subprocess.Popen(
-                    [sys.executable, "-m", "lightprobe.integrators.precompile", claims.folder, *reversed(stages)],
+                    [sys.executable, "-m", "lightprobe.integrators.precompile", claims.folder, *largest_first(stages)],
                     stdin=subprocess.PIPE,
                     stdout=subprocess.PIPE,
                     stderr=subprocess.DEVNULL,
@@ -135,8 +155,12 @@ class Helpers:
                 claims.running += 1
             threading.Thread(target=claims.listen, args=(helper,), daemon=True).start()
 
+    def claim(self, name: str) -> bool:
+        """Whether the render may compile stage body ``name`` now (:meth:`Claims.claim`; always, without helpers)."""
+        return self.claims is None or self.claims.claim(name)
+
     def wait_for(self, name: str) -> None:
-        """Before the render compiles stage body ``name``: :meth:`Claims.wait_for` (nothing without helpers)."""
+        """Before the render loads stage body ``name``, which a helper claimed: :meth:`Claims.wait_for`."""
         if self.claims is not None:
             self.claims.wait_for(name)
 

@@ -297,15 +297,15 @@ def _warm_up(work: _Pass, n_pixels: int, helpers: precompile.Helpers) -> None:
     this kind, with helper processes compiling some of the stages beside it: precompile.py, started here unless
     :func:`_start_helpers_early` did); then the helpers are stopped."""
     plan = work.plan
-    if not _stages_cached(plan):
-        signatures = precompile.record_types_pickled(work.records(Accumulator(n_pixels), pass_pixels(0, 1), 1, 0))
-        precompile.save_record_types(signatures)  # for the next render's early helpers
-        helpers.start(plan.stages(), signatures)
     try:
-        work.launcher.before_compile = helpers.wait_for if helpers.started else None
+        if not _stages_cached(plan):
+            records = work.records(Accumulator(n_pixels), pass_pixels(0, 1), 1, 0)
+            signatures = precompile.record_types_pickled(records)
+            precompile.save_record_types(signatures)  # for the next render's early helpers
+            helpers.start(plan.stages(), signatures)
+            work.launcher.prepare(work.stages, records, helpers if helpers.started else None)
         work.run(Accumulator(n_pixels), pass_pixels(0, 1), 1, 0)
     finally:
-        work.launcher.before_compile = None
         helpers.stop()
 
 
