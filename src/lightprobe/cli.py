@@ -291,6 +291,10 @@ def render_command(
     check_output(output, variance=variance, png=png)
     if object_ids is not None and object_ids.suffix.lower() != ".exr":
         raise LightprobeError(f"{object_ids}: the object-id pass is written as .exr")
+    if techniques is None:  # a first render on this machine: its compile helpers start while the scene is built
+        from .integrators import precompile
+
+        precompile.prestart()
     if demo:
         from .demo import DEMOS
 

@@ -139,3 +139,67 @@ def test_a_helper_takes_the_longest_compile_first():
         "analytic_shadows_lanes",
         "environment_samples_lanes",
     ]
+
+
+def test_an_empty_scene_has_the_pass_record_types_of_any_scene():
+    """A prestarted helper compiles for an empty scene's record types before the render has its own: they must be
+    the demo's and the many-light scene's, or its work would be for nothing."""
+    import pickle
+
+    from lightprobe.demo import demo_scene, many_lights_scene
+    from lightprobe.geometry.raytracer import RayTracer
+    from lightprobe.integrators import wavefront
+    from lightprobe.integrators.accumulation import Accumulator
+    from lightprobe.integrators.schedule import pass_pixels
+
+    def types_of(scene):
+        arrays = scene.compile()
+        plan = wavefront.resolve(scene, wavefront.RenderSettings(spp=1, adaptive=False))
+        work = wavefront._Pass(scene, plan, arrays, RayTracer(arrays), 40, 1)
+        work.make_buffers()
+        return pickle.loads(precompile.record_types_pickled(work.records(Accumulator(40), pass_pixels(0, 1), 1, 0)))
+
+    empty = pickle.loads(precompile.empty_record_types())
+    assert empty == types_of(demo_scene((8, 5))) == types_of(many_lights_scene(50, (8, 5)))
+
+
+def test_a_prestarted_helper_compiles_its_first_stages_then_the_plan_it_is_sent(tmp_path):
+    """In a fresh process with an empty kernel cache: a helper started before any scene compiles its speculative
+    stage for an empty scene's record types, then waits; sent a plan (without types) it compiles the stages of it
+    that nobody claimed, and reports each saved."""
+    script = """
+import json
+from lightprobe.integrators import precompile
+helpers = precompile.Helpers()
+helpers.prestart(("accumulate",))
+assert helpers.waiting and helpers.started
+helpers.wait_for("accumulate")
+first = sorted(helpers.claims.saved)
+assert helpers.claim("environment_radiance_lanes")  # the render's: the helper skips it
+helpers.start(("accumulate", "environment_radiance", "environment_radiance_lanes"), None)
+codes = [helper.wait(timeout=600) for helper in helpers.processes]
+helpers.wait_for("environment_radiance")
+print(json.dumps({"first": first, "saved": sorted(helpers.claims.saved), "codes": codes}))
+helpers.stop()
+"""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path), precompile.ENVIRONMENT: "1"}
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True, cwd=ROOT, env=env)
+    found = json.loads(out.stdout.strip().splitlines()[-1])
+    assert found == {"first": ["accumulate"], "saved": ["accumulate", "environment_radiance"], "codes": [0]}
+
+
+def test_prestart_only_where_the_stage_loop_is_not_compiled(monkeypatch):
+    """Nothing is prestarted with helpers off, or where the stage loop is in the cache (the machine has rendered);
+    the render then takes new helpers, not yet started."""
+    from lightprobe import _numba
+
+    spawned = []
+    monkeypatch.setattr(precompile.Helpers, "prestart", lambda self: spawned.append(self))
+    monkeypatch.setenv(precompile.ENVIRONMENT, "0")
+    precompile.prestart()
+    monkeypatch.setenv(precompile.ENVIRONMENT, "1")
+    monkeypatch.setattr(_numba, "is_cached", lambda *kernels: True)
+    precompile.prestart()
+    assert spawned == []
+    taken = precompile.take_prestarted()
+    assert not taken.started and not taken.waiting

@@ -31,11 +31,14 @@ from pathlib import Path
 __all__ = [
     "Claims",
     "Helpers",
+    "empty_record_types",
     "helpers_wanted",
     "known_record_types",
     "largest_first",
+    "prestart",
     "record_types_pickled",
     "save_record_types",
+    "take_prestarted",
 ]
 
 ENVIRONMENT = "LIGHTPROBE_COMPILE_HELPERS"
@@ -113,6 +116,11 @@ def largest_first(stages: tuple[str, ...]) -> list[str]:
     return sorted(reversed(stages), key=lambda name: -COMPILE_SECONDS.get(name, 1.0))
 
 
+#: the stage bodies a prestarted helper compiles before it knows the plan: the setup stage, which every plan but a
+#: textured scene's runs, the longest compile of most plans
+SPECULATIVE = ("setup",)
+
+
 class Helpers:
     """The helper processes of one render and their :class:`Claims`: started once, at the render's start where an
     earlier render left the pass records' types (:func:`known_record_types`), else at its warm-up; stopped when the
@@ -121,18 +129,44 @@ class Helpers:
     def __init__(self):
         self.processes: list[subprocess.Popen] = []
         self.claims: Claims | None = None
+        self.waiting = False  # prestarted: the helpers wait for the plan
 
     @property
     def started(self) -> bool:
         return self.claims is not None
 
-    def start(self, stages: tuple[str, ...], signatures: bytes) -> None:
+    def prestart(self, speculative: tuple[str, ...] = SPECULATIVE) -> None:
+        """Start the helpers before the command builds its scene: each compiles the stage bodies ``speculative``
+        (which nearly every plan runs) for the pass records' types of an empty scene (:func:`empty_record_types`),
+        then waits for the render's plan (:meth:`start` sends it).  For a first render on this machine: the demo's
+        setup stage, the longest compile of its plan, then starts about 2 s sooner (decisions.md 129)."""
+        if not self.started:
+            self._spawn(helpers_wanted(2), ["--first", *speculative])
+            self.waiting = bool(self.processes)
+
+    def start(self, stages: tuple[str, ...], signatures: bytes | None) -> None:
         """Helpers that compile ``stages`` (a plan's stage names), the longest to compile first
         (:func:`largest_first`), each body claimed by one process, for bodies called with pass records of the types
-        pickled in ``signatures`` (:func:`record_types_pickled`: Numba's types are its cache's keys).  Nothing if
-        already started."""
-        count = helpers_wanted(len(stages))
-        if count == 0 or self.started:
+        pickled in ``signatures`` (:func:`record_types_pickled`: Numba's types are its cache's keys; None: an empty
+        scene's, :func:`empty_record_types`).  Prestarted helpers are sent the plan; started ones, nothing."""
+        import pickle
+
+        message = pickle.dumps((largest_first(stages), signatures))
+        if self.waiting:
+            for helper in self.processes:
+                try:
+                    helper.stdin.write(message)
+                    helper.stdin.close()
+                except OSError:  # it has ended: the render compiles what it did not
+                    pass
+            self.waiting = False
+            return
+        if not self.started:
+            self._spawn(helpers_wanted(len(stages)), [], message)
+
+    def _spawn(self, count: int, arguments: list[str], message: bytes | None = None) -> None:
+        """``count`` helper processes, run with ``arguments`` and sent ``message`` (or later, by :meth:`start`)."""
+        if count == 0:
             return
         import tempfile
 
@@ -140,14 +174,15 @@ class Helpers:
         for _ in range(count):
             try:
                 helper = subprocess.Popen(
-                    [sys.executable, "-m", "lightprobe.integrators.precompile", claims.folder, *largest_first(stages)],
+                    [sys.executable, "-m", "lightprobe.integrators.precompile", claims.folder, *arguments],
                     stdin=subprocess.PIPE,
                     stdout=subprocess.PIPE,
                     stderr=subprocess.DEVNULL,
                     env={**os.environ, ENVIRONMENT: "0"},
                 )
-                helper.stdin.write(signatures)
-                helper.stdin.close()
+                if message is not None:
+                    helper.stdin.write(message)
+                    helper.stdin.close()
             except OSError:  # no room for another process: the render compiles alone
                 break
             self.processes.append(helper)
@@ -176,7 +211,53 @@ class Helpers:
                 pass
         if self.claims is not None:
             shutil.rmtree(self.claims.folder, ignore_errors=True)
-        self.processes, self.claims = [], None
+        self.processes, self.claims, self.waiting = [], None, False
+
+
+_PRESTARTED: list[Helpers] = []
+
+
+def prestart() -> None:
+    """Where helpers are wanted and this machine's kernel cache lacks the stage loop (a first render after an install
+    or an upgrade), start them now (:meth:`Helpers.prestart`), before the command builds its scene; the render takes
+    them (:func:`take_prestarted`), else they are stopped when the process exits."""
+    if _PRESTARTED or helpers_wanted(2) == 0:
+        return
+    from .._numba import is_cached
+    from .pipeline import run_stage
+
+    if is_cached(run_stage):
+        return
+    helpers = Helpers()
+    helpers.prestart()
+    if helpers.processes:
+        import atexit
+
+        _PRESTARTED.append(helpers)
+        atexit.register(helpers.stop)
+
+
+def take_prestarted() -> Helpers:
+    """The helpers :func:`prestart` started, for the render that now begins (once); else new, not yet started."""
+    return _PRESTARTED.pop() if _PRESTARTED else Helpers()
+
+
+def empty_record_types() -> bytes:
+    """The pass records' pickled types for an empty scene (:func:`record_types_pickled`): the same as any scene's
+    (``pass_state.py``; a test compares them with the demo's), worked out in about a second without the scene."""
+    from ..geometry.camera import Camera
+    from ..geometry.raytracer import RayTracer
+    from ..scene import Scene
+    from . import wavefront
+    from .accumulation import Accumulator
+    from .schedule import pass_pixels
+
+    scene = Scene(Camera((0, 0, 5), (0, 0, 0), fov=40, resolution=(2, 2)))
+    arrays = scene.compile()
+    plan = wavefront.resolve(scene, wavefront.RenderSettings(spp=1, adaptive=False))
+    work = wavefront._Pass(scene, plan, arrays, RayTracer(arrays), 4, 1)
+    work.make_buffers()
+    return record_types_pickled(work.records(Accumulator(4), pass_pixels(0, 1), 1, 0))
 
 
 def record_types_pickled(records: tuple) -> bytes:
@@ -227,21 +308,36 @@ def known_record_types() -> bytes | None:
         return None
 
 
-def main(folder: str, names: list[str]) -> None:
-    """Compile the stage bodies ``names``, in order, that no other process has claimed in ``folder``, for the pass
-    records' types pickled on standard input; report each one saved (``saved NAME``) on standard output."""
+def main(folder: str, arguments: list[str]) -> None:
+    """Compile stage bodies that no other process has claimed in ``folder``, reporting each one saved (``saved
+    NAME``) on standard output: those the pickled (names, record types) on standard input lists, in its order; with
+    ``--first NAME ...`` (a prestarted helper), first those, for an empty scene's record types, then the list."""
     import pickle
 
     from . import pipeline
 
-    record_types = pickle.loads(sys.stdin.buffer.read())
     claims = Claims(folder)
-    for name in names:
-        if not claims.claim(name):
-            continue
-        stage = pipeline.STAGES[pipeline.stage_id(name)]
-        pipeline.compiled(stage.body, pipeline.body_signature(record_types, stage.parameters))
-        print("saved", name, flush=True)
+
+    def compile_bodies(names, record_types):
+        for name in names:
+            if not claims.claim(name):
+                continue
+            stage = pipeline.STAGES[pipeline.stage_id(name)]
+            pipeline.compiled(stage.body, pipeline.body_signature(record_types, stage.parameters))
+            print("saved", name, flush=True)
+
+    empty = None
+    if arguments[:1] == ["--first"]:
+        empty = pickle.loads(empty_record_types())
+        compile_bodies(arguments[1:], empty)
+    message = sys.stdin.buffer.read()
+    if not message:  # the render ended, or needed nothing more
+        return
+    names, signatures = pickle.loads(message)
+    if signatures is not None:
+        compile_bodies(names, pickle.loads(signatures))
+    else:  # the render did not have its records' types yet: an empty scene's are the same
+        compile_bodies(names, empty if empty is not None else pickle.loads(empty_record_types()))
 
 
 if __name__ == "__main__":

@@ -318,7 +318,7 @@ def _start_helpers_early(scene: Scene, settings: RenderSettings | None, helpers:
     if precompile.helpers_wanted(2) == 0:
         return
     signatures = precompile.known_record_types()
-    if signatures is None:
+    if signatures is None and not helpers.waiting:  # a prestarted helper works the types out itself
         return
     settings = settings or RenderSettings()
     settings.validate()  # resolve's first check: a user's error is reported as it would be without helpers
@@ -522,7 +522,7 @@ def render(
     ``settings.first_sample`` learned (its ``accumulator.learned``), for a sample range rendered apart from them
     (``analysis/distributed.py``): it picks as the whole render would (``resume``'s, if it carries one, wins)."""
     t_setup = time.perf_counter()
-    helpers = precompile.Helpers()  # processes compiling some of the stages of a first render of this kind
+    helpers = precompile.take_prestarted()  # processes compiling some of the stages of a first render of this kind
     try:
         _start_helpers_early(scene, settings, helpers)
         render_plan = resolve(scene, settings, resumed=resume is not None)
