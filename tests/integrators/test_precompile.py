@@ -8,7 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from lightprobe.integrators import precompile
+from lightprobe.integrators import compile_helper, precompile
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -159,7 +159,7 @@ def test_an_empty_scene_has_the_pass_record_types_of_any_scene():
         work.make_buffers()
         return pickle.loads(precompile.record_types_pickled(work.records(Accumulator(40), pass_pixels(0, 1), 1, 0)))
 
-    empty = pickle.loads(precompile.empty_record_types())
+    empty = pickle.loads(compile_helper.empty_record_types())
     assert empty == types_of(demo_scene((8, 5))) == types_of(many_lights_scene(50, (8, 5)))
 
 

@@ -16,7 +16,9 @@ cache, a half-written file never does (Numba writes a temporary file and renames
 ``LIGHTPROBE_COMPILE_HELPERS`` says how many: ``auto`` (one per spare core, what the ``lightprobe`` command sets
 unless told otherwise), a number, or unset / ``0``: none, the default of the Python API, whose callers may already be
 one of several processes (Dask's workers, the test suite's).  Measured on the 2-core machine, the demo's first
-render from an empty cache: 46.7 and 50.6 s with a helper, 59.4 and 54.7 s without, alternating (decisions.md 104).
+render from an empty cache: 46.7 and 50.6 s with a helper, 59.4 and 54.7 s without, alternating (decisions.md 104);
+with the claims, the longest compile first and the prestart, 18.7-19.6 s (decisions.md 129).  A helper's process
+is ``compile_helper.py``.
 """
 
 from __future__ import annotations
@@ -31,7 +33,6 @@ from pathlib import Path
 __all__ = [
     "Claims",
     "Helpers",
-    "empty_record_types",
     "helpers_wanted",
     "known_record_types",
     "largest_first",
@@ -137,9 +138,10 @@ class Helpers:
 
     def prestart(self, speculative: tuple[str, ...] = SPECULATIVE) -> None:
         """Start the helpers before the command builds its scene: each compiles the stage bodies ``speculative``
-        (which nearly every plan runs) for the pass records' types of an empty scene (:func:`empty_record_types`),
-        then waits for the render's plan (:meth:`start` sends it).  For a first render on this machine: the demo's
-        setup stage, the longest compile of its plan, then starts about 2 s sooner (decisions.md 129)."""
+        (which nearly every plan runs) for the pass records' types of an empty scene
+        (``compile_helper.empty_record_types``), then waits for the render's plan (:meth:`start` sends it).  For
+        a first render on this machine: the demo's setup stage, the longest compile of its plan, then starts about
+        2 s sooner (decisions.md 129)."""
         if not self.started:
             self._spawn(helpers_wanted(2), ["--first", *speculative])
             self.waiting = bool(self.processes)
@@ -148,17 +150,14 @@ class Helpers:
         """Helpers that compile ``stages`` (a plan's stage names), the longest to compile first
         (:func:`largest_first`), each body claimed by one process, for bodies called with pass records of the types
         pickled in ``signatures`` (:func:`record_types_pickled`: Numba's types are its cache's keys; None: an empty
-        scene's, :func:`empty_record_types`).  Prestarted helpers are sent the plan; started ones, nothing."""
+        scene's, ``compile_helper.empty_record_types``).  Prestarted helpers are sent the plan; started ones,
+        nothing."""
         import pickle
 
         message = pickle.dumps((largest_first(stages), signatures))
-        if self.waiting:
+        if self.waiting:  # sent from a thread: a helper reads it only after its first stages
             for helper in self.processes:
-                try:
-                    helper.stdin.write(message)
-                    helper.stdin.close()
-                except OSError:  # it has ended: the render compiles what it did not
-                    pass
+                threading.Thread(target=_send, args=(helper, message), daemon=True).start()
             self.waiting = False
             return
         if not self.started:
@@ -174,7 +173,7 @@ class Helpers:
         for _ in range(count):
             try:
                 helper = subprocess.Popen(
-                    [sys.executable, "-m", "lightprobe.integrators.precompile", claims.folder, *arguments],
+                    [sys.executable, "-m", "lightprobe.integrators.compile_helper", claims.folder, *arguments],
                     stdin=subprocess.PIPE,
                     stdout=subprocess.PIPE,
                     stderr=subprocess.DEVNULL,
@@ -209,9 +208,23 @@ class Helpers:
                 helper.wait(timeout=10)
             except subprocess.TimeoutExpired:  # pragma: no cover - a killed process that does not end
                 pass
+            try:  # a prestarted helper's, if it was never sent a plan (its output ends with it: the listener's)
+                helper.stdin.close()
+            except (OSError, ValueError):
+                pass
         if self.claims is not None:
             shutil.rmtree(self.claims.folder, ignore_errors=True)
         self.processes, self.claims, self.waiting = [], None, False
+
+
+def _send(helper: subprocess.Popen, message: bytes) -> None:
+    """Write ``message`` to ``helper``'s standard input and close it (nothing if it has ended: the render compiles
+    what it did not)."""
+    try:
+        helper.stdin.write(message)
+        helper.stdin.close()
+    except (OSError, ValueError):
+        pass
 
 
 _PRESTARTED: list[Helpers] = []
@@ -240,24 +253,6 @@ def prestart() -> None:
 def take_prestarted() -> Helpers:
     """The helpers :func:`prestart` started, for the render that now begins (once); else new, not yet started."""
     return _PRESTARTED.pop() if _PRESTARTED else Helpers()
-
-
-def empty_record_types() -> bytes:
-    """The pass records' pickled types for an empty scene (:func:`record_types_pickled`): the same as any scene's
-    (``pass_state.py``; a test compares them with the demo's), worked out in about a second without the scene."""
-    from ..geometry.camera import Camera
-    from ..geometry.raytracer import RayTracer
-    from ..scene import Scene
-    from . import wavefront
-    from .accumulation import Accumulator
-    from .schedule import pass_pixels
-
-    scene = Scene(Camera((0, 0, 5), (0, 0, 0), fov=40, resolution=(2, 2)))
-    arrays = scene.compile()
-    plan = wavefront.resolve(scene, wavefront.RenderSettings(spp=1, adaptive=False))
-    work = wavefront._Pass(scene, plan, arrays, RayTracer(arrays), 4, 1)
-    work.make_buffers()
-    return record_types_pickled(work.records(Accumulator(4), pass_pixels(0, 1), 1, 0))
 
 
 def record_types_pickled(records: tuple) -> bytes:
@@ -306,39 +301,3 @@ def known_record_types() -> bytes | None:
         return path.read_bytes() if path is not None else None
     except OSError:
         return None
-
-
-def main(folder: str, arguments: list[str]) -> None:
-    """Compile stage bodies that no other process has claimed in ``folder``, reporting each one saved (``saved
-    NAME``) on standard output: those the pickled (names, record types) on standard input lists, in its order; with
-    ``--first NAME ...`` (a prestarted helper), first those, for an empty scene's record types, then the list."""
-    import pickle
-
-    from . import pipeline
-
-    claims = Claims(folder)
-
-    def compile_bodies(names, record_types):
-        for name in names:
-            if not claims.claim(name):
-                continue
-            stage = pipeline.STAGES[pipeline.stage_id(name)]
-            pipeline.compiled(stage.body, pipeline.body_signature(record_types, stage.parameters))
-            print("saved", name, flush=True)
-
-    empty = None
-    if arguments[:1] == ["--first"]:
-        empty = pickle.loads(empty_record_types())
-        compile_bodies(arguments[1:], empty)
-    message = sys.stdin.buffer.read()
-    if not message:  # the render ended, or needed nothing more
-        return
-    names, signatures = pickle.loads(message)
-    if signatures is not None:
-        compile_bodies(names, pickle.loads(signatures))
-    else:  # the render did not have its records' types yet: an empty scene's are the same
-        compile_bodies(names, empty if empty is not None else pickle.loads(empty_record_types()))
-
-
-if __name__ == "__main__":
-    main(sys.argv[1], sys.argv[2:])
