@@ -42,7 +42,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._numba import jit_alloc, jit_parallel, prange
+from .._numba import jit, jit_alloc
+from .._worksharing import in_threads
 from .selection import TRAIL_BITS, WIDTH, LightSelector, _child_weights, _path_pmf, leaf_of
 
 __all__ = [
@@ -166,18 +167,22 @@ def _pruned(axis: np.ndarray, nxt: np.ndarray) -> np.ndarray:
     return axis
 
 
-@jit_parallel
 def _learned_probabilities(sel, cell, points, normals, light):
     """Each record's light's probability under the learned selector (a bounded pick) in the record's cell."""
-    n = points.shape[0]
-    q = np.zeros(n)
-    for i in prange(n):
+    q = np.zeros(points.shape[0])
+    in_threads(_learned_probabilities_range, points.shape[0], sel, cell, points, normals, light, q)
+    return q
+
+
+@jit
+def _learned_probabilities_range(sel, cell, points, normals, light, q, lo, hi):
+    """Records lo .. hi - 1 of :func:`_learned_probabilities` (serial, run in threads: decisions.md 129)."""
+    for i in range(lo, hi):
         if cell[i] >= 0:
             q[i] = _path_pmf(
                 sel, cell[i], 1.0, np.float64(points[i, 0]), np.float64(points[i, 1]), np.float64(points[i, 2]),
                 np.float64(normals[i, 0]), np.float64(normals[i, 1]), np.float64(normals[i, 2]), light[i],
             )  # fmt: skip
-    return q
 
 
 @jit_alloc
@@ -310,10 +315,9 @@ def _kd_build(points, leaf, most):
     return axis, split, nxt, count
 
 
-@jit_parallel
 def _record_terms(sel, axis, split, nxt, points, normals, light, value):
     """Each record's cell, and at each level above the cut the entry of the child its light's path takes, v there
-    and the child's importance (entry -1: no level)."""
+    and the child's importance (entry -1: no level), and the light's probability under the BVH."""
     n = points.shape[0]
     levels = max(1, sel.cut_levels)
     cell = np.empty(n, np.int64)
@@ -321,7 +325,19 @@ def _record_terms(sel, axis, split, nxt, points, normals, light, value):
     v_out = np.zeros((n, levels))
     weight_out = np.zeros((n, levels))
     p_out = np.zeros(n)
-    for i in prange(n):
+    in_threads(
+        _record_terms_range, n, sel, axis, split, nxt, points, normals, light, value, cell, entry, v_out,
+        weight_out, p_out,
+    )  # fmt: skip
+    return cell, entry, v_out, weight_out, p_out
+
+
+@jit
+def _record_terms_range(sel, axis, split, nxt, points, normals, light, value, cell, entry, v_out, weight_out, p_out,
+                        lo, hi):  # fmt: skip
+    """Records lo .. hi - 1 of :func:`_record_terms` (serial, run in threads: as a ``prange`` loop it compiled for
+    2.8 s, decisions.md 129)."""
+    for i in range(lo, hi):
         px, py, pz = np.float64(points[i, 0]), np.float64(points[i, 1]), np.float64(points[i, 2])
         nx, ny, nz = np.float64(normals[i, 0]), np.float64(normals[i, 1]), np.float64(normals[i, 2])
         cell[i] = leaf_of(axis, split, nxt, px, py, pz)
@@ -350,7 +366,6 @@ def _record_terms(sel, axis, split, nxt, points, normals, light, value):
             v_out[i, d] = v / below if v > 0.0 and below > 0.0 else 0.0
             below *= share
         p_out[i] = below  # the whole path's: the light's probability under the BVH
-    return cell, entry, v_out, weight_out, p_out
 
 
 @jit_alloc

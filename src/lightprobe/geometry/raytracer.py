@@ -9,13 +9,10 @@ Closest-hit queries take a per-ray ``tfar`` (the nearest analytic hit), so Embre
 
 from __future__ import annotations
 
-import itertools
-from concurrent.futures import ThreadPoolExecutor
-
-import numba
 import numpy as np
 
 from .._numba import jit
+from .._worksharing import in_threads
 from ..errors import LightprobeError
 from .embree import FAR, EmbreeScene, intersect_batch, new_scratch, occluded_batch
 from .intersect import MESH, MISS, closest_analytic, may_hit_mesh, occluded_analytic
@@ -42,32 +39,13 @@ def _occluded_analytic_range(s, o, d, tmax, blocked, needs_mesh, lo, hi):
         )
 
 
-_POOL: list[ThreadPoolExecutor] = []
-
-
-def _in_parallel(kernel, n: int, *args) -> None:
-    """``kernel(*args, lo, hi)`` over the rays [0, n), split among Numba's threads (the kernels release the GIL).
-    Serial kernels called from threads, not a ``prange`` loop: Numba's parallel-loop passes compiled each batch for
-    5.3-5.4 s, now 1.8-1.9 s for its range kernel, at the same speed (decisions.md 129); each ray is its own, so any
-    split gives the same bits."""
-    threads = max(1, min(numba.get_num_threads(), n // 1024))
-    if threads == 1:
-        kernel(*args, 0, n)
-        return
-    if not _POOL or _POOL[0]._max_workers < threads:
-        _POOL[:] = [ThreadPoolExecutor(max_workers=threads, thread_name_prefix="lightprobe-rays")]
-    bounds = [n * k // threads for k in range(threads + 1)]
-    futures = [_POOL[0].submit(kernel, *args, lo, hi) for lo, hi in itertools.pairwise(bounds)]
-    for future in futures:
-        future.result()
-
-
 def _closest_analytic_batch(s, o, d):
-    """(t, kind, index, needs_mesh) of rays (o, d) (float64 (N, 3)) against the analytic shapes of ``s``."""
+    """(t, kind, index, needs_mesh) of rays (o, d) (float64 (N, 3)) against the analytic shapes of ``s`` (a range
+    kernel in threads, not a ``prange`` loop: ``_worksharing.in_threads``)."""
     n = d.shape[0]
     t, kind, index = np.empty(n), np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
     needs_mesh = np.empty(n, dtype=np.bool_)
-    _in_parallel(_closest_analytic_range, n, s, o, d, t, kind, index, needs_mesh)
+    in_threads(_closest_analytic_range, n, s, o, d, t, kind, index, needs_mesh)
     return t, kind, index, needs_mesh
 
 
@@ -75,7 +53,7 @@ def _occluded_analytic_batch(s, o, d, tmax):
     """(blocked, needs_mesh) of the segments (o, o + tmax d) against the analytic shapes of ``s``."""
     n = d.shape[0]
     blocked, needs_mesh = np.empty(n, dtype=np.bool_), np.empty(n, dtype=np.bool_)
-    _in_parallel(_occluded_analytic_range, n, s, o, d, tmax, blocked, needs_mesh)
+    in_threads(_occluded_analytic_range, n, s, o, d, tmax, blocked, needs_mesh)
     return blocked, needs_mesh
 
 

@@ -15,7 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._numba import jit_parallel, prange
+from .._numba import jit
+from .._worksharing import in_threads
 from ..emitters.selection import LightSelector
 from ..emitters.selection_learning import Records, learned, with_cut
 from ..errors import ParameterError
@@ -117,7 +118,10 @@ class Learning:
         if not self.recording or c.sample_start >= self.records.samples:
             return
         r = self.records
-        _record(sel, c, cams, slots, self.first, self.slots, r.samples, r.stride, r.point, r.normal, r.light, r.value)
+        in_threads(
+            _record, cams.t.shape[0], sel, c, cams, slots, self.first, self.slots, r.samples, r.stride, r.point,
+            r.normal, r.light, r.value,
+        )  # fmt: skip
 
     def learn(self) -> LightSelector:
         """The selector learned from the records (kept no longer)."""
@@ -127,13 +131,14 @@ class Learning:
         return self.selector
 
 
-@jit_parallel
-def _record(sel, c, cams, slots, first, n_light, samples, stride, point, normal, light, value):
-    """Each light slot of the pass's first ``samples`` samples of every ``stride``-th pixel: its shading point and
-    normal, its light, and lum(f L cos V) / the density of the light's point (minus what it would have given if the
-    shadow ray was blocked)."""
+@jit
+def _record(sel, c, cams, slots, first, n_light, samples, stride, point, normal, light, value, lo, hi):
+    """Camera samples lo .. hi - 1: each light slot of the pass's first ``samples`` samples of every ``stride``-th
+    pixel: its shading point and normal, its light, and lum(f L cos V) / the density of the light's point (minus
+    what it would have given if the shadow ray was blocked).  Serial, run in threads (``_worksharing.in_threads``:
+    as a ``prange`` loop it compiled for 4.1 s, decisions.md 129)."""
     m = c.m
-    for k in prange(cams.t.shape[0]):
+    for k in range(lo, hi):
         sample = c.sample_start + k % c.spp_pass
         pixel = c.pixels[k // c.spp_pass]
         if sample >= samples or pixel % stride != 0:
