@@ -121,7 +121,7 @@ def settings_for(scene: Scene, settings: RenderSettings, resumed: bool = False) 
     arrays = scene.compile()
     tracer = RayTracer(arrays, threads=numba.get_num_threads())
     try:
-        return _probed(scene, plan, arrays, tracer, numba.get_num_threads(), [])[0].settings
+        return _probed(scene, plan, arrays, tracer, numba.get_num_threads(), precompile.Helpers())[0].settings
     finally:
         tracer.close()
 
@@ -231,14 +231,16 @@ def resolve(scene: Scene, settings: RenderSettings | None = None, *, resumed: bo
     )
 
 
-def _probed(scene, render_plan: RenderPlan, arrays, tracer, threads, helpers) -> tuple[RenderPlan, dict, dict]:
+def _probed(
+    scene, render_plan: RenderPlan, arrays, tracer, threads, helpers: precompile.Helpers
+) -> tuple[RenderPlan, dict, dict]:
     """(``render_plan`` with its light picks chosen by the probe of integrators/picks.py, what the probe found, the
     outline fields it worked out for the render's own pass):
     a learned selection learned once, from ``light_learning.UNIFORM_PILOT`` samples of the probe's pixels with the
     largest K; then, for each candidate K, the probe's pixels at ``picks.PROBE_SPP`` samples with each of
     ``picks.PROBE_SEEDS`` (uniform counts, picking with what was learned), the relMSE between the two images, and
-    the K of highest efficiency.  The first render compiles the stages here (``helpers``: where it puts the
-    processes it starts for that, as :func:`_render_planned`); the seconds are the probe's alone."""
+    the K of highest efficiency.  The first render compiles the stages here (``helpers``: its compile helpers, as
+    :func:`_render_planned`'s); the seconds are the probe's alone."""
     settings = render_plan.settings
     width, height = scene.camera.resolution
     n_pixels = width * height
