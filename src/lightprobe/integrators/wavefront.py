@@ -323,7 +323,8 @@ def _start_helpers_early(scene: Scene, settings: RenderSettings | None, helpers:
     if signatures is None and not helpers.waiting:  # a prestarted helper works the types out itself
         return
     settings = settings or RenderSettings()
-    settings.validate()  # resolve's first check: a user's error is reported as it would be without helpers
+    settings.validate()  # resolve's first checks: a user's error is reported as it would be without helpers
+    _check(scene, settings, _environment_alone(scene, settings))
     plan = plan_for(scene, settings)
     if not _stages_cached(plan):
         helpers.start(plan.stages(), signatures)
