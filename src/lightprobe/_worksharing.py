@@ -15,8 +15,7 @@ an (8,) int64 array (one cache line) that holds 0 when the loop starts.  The ren
 
 from __future__ import annotations
 
-import itertools
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, wait
 
 import numba
 import numpy as np
@@ -27,7 +26,7 @@ from numba.extending import intrinsic
 
 from ._numba import jit_inline
 
-__all__ = ["CHUNK", "COUNTER_TYPE", "claim", "claim_range", "in_threads", "new_counter"]
+__all__ = ["CHUNK", "COUNTER_TYPE", "claim", "claim_range", "in_threads", "new_counter", "on_workers"]
 
 #: items per claimed chunk (camera samples, slots or lanes blocks): thousands of chunks per pass, each tens of
 #: microseconds, so the counter is touched rarely and the last chunk ends soon after the others
@@ -66,22 +65,33 @@ def claim_range(counter, n):
     return lo, min(n, lo + CHUNK)
 
 
-_POOL: list[ThreadPoolExecutor] = []
+_POOL: list[ThreadPoolExecutor] = []  # the worker threads beside the calling one, made on first use
+
+
+def on_workers(task, workers: int) -> None:
+    """``task(w)`` for each worker ``w`` of ``workers``: worker 0 is the calling thread, the others a shared pool's
+    threads (grown when more are asked for), so tasks that release the GIL run in parallel.  Every worker is waited
+    for, even after an error or a Ctrl-C in the calling thread (none is left writing into its arrays), and the first
+    error is raised then."""
+    futures = []
+    if workers > 1:
+        if not _POOL or _POOL[0]._max_workers < workers - 1:
+            _POOL[:] = [ThreadPoolExecutor(max_workers=workers - 1, thread_name_prefix="lightprobe-worker")]
+        futures = [_POOL[0].submit(task, w) for w in range(1, workers)]
+    try:
+        task(0)
+    finally:
+        wait(futures)
+    for future in futures:
+        future.result()
 
 
 def in_threads(kernel, n: int, *args) -> None:
-    """``kernel(*args, lo, hi)`` over the items [0, n), split among Numba's threads: a serial kernel (it releases
-    the GIL) over independent items, called from threads instead of compiled as a ``prange`` loop.  Numba's
-    parallel-loop passes made such loops slow to compile: the ray tracer's batches 5.3-5.4 s each, their range
-    kernels 1.7-1.8 s, at the same speed (decisions.md 129).  Items are independent, so any split gives the same
-    bits; below 1,024 items a split is not worth a thread."""
+    """``kernel(*args, lo, hi)`` over the items [0, n), split among Numba's threads (:func:`on_workers`): a serial
+    kernel (it releases the GIL) over independent items, called from threads instead of compiled as a ``prange``
+    loop.  Numba's parallel-loop passes made such loops slow to compile: the ray tracer's batches 5.3-5.4 s each,
+    their range kernels 1.7-1.8 s, at the same speed (decisions.md 129).  Items are independent, so any split gives
+    the same bits; below 1,024 items a split is not worth a thread."""
     threads = max(1, min(numba.get_num_threads(), n // 1024))
-    if threads == 1:
-        kernel(*args, 0, n)
-        return
-    if not _POOL or _POOL[0]._max_workers < threads:
-        _POOL[:] = [ThreadPoolExecutor(max_workers=threads, thread_name_prefix="lightprobe-batch")]
     bounds = [n * k // threads for k in range(threads + 1)]
-    futures = [_POOL[0].submit(kernel, *args, lo, hi) for lo, hi in itertools.pairwise(bounds)]
-    for future in futures:
-        future.result()
+    on_workers(lambda w: kernel(*args, bounds[w], bounds[w + 1]), threads)

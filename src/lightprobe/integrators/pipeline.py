@@ -24,7 +24,6 @@ bodies its plan runs and no others; a body compiles once for every plan that run
 from __future__ import annotations
 
 import inspect
-from concurrent.futures import ThreadPoolExecutor, wait
 from dataclasses import dataclass
 
 from llvmlite import ir
@@ -32,7 +31,7 @@ from numba import njit, typeof, types
 from numba.extending import intrinsic
 
 from .._numba import FASTMATH
-from .._worksharing import COUNTER_TYPE, claim_range, new_counter
+from .._worksharing import COUNTER_TYPE, claim_range, new_counter, on_workers
 from .accumulation import accumulate, pass_pixels_count
 from .stages.bsdf_rays import (
     environment_coords,
@@ -267,18 +266,13 @@ def record_types(records: tuple) -> tuple:
 
 class Launcher:
     """Runs the stages of a pass with ``threads`` workers: the calling thread is worker 0, a shared pool's threads
-    the others.  Each worker runs :func:`run_stage`, which releases the GIL, so the workers run in parallel; which
-    worker takes which chunk changes nothing in the image (every item of a stage is independent, and a worker's
-    scratch rows are its own).  Measured against Numba's parallel loops, decisions.md 77."""
-
-    _pool: ThreadPoolExecutor | None = None
-    _pool_size = 0
+    the others (``_worksharing.on_workers``, which waits for every worker after an error or a Ctrl-C).  Each worker
+    runs :func:`run_stage`, which releases the GIL, so the workers run in parallel; which worker takes which chunk
+    changes nothing in the image (every item of a stage is independent, and a worker's scratch rows are its own).
+    Measured against Numba's parallel loops, decisions.md 77."""
 
     def __init__(self, threads: int):
         self.threads = threads
-        if threads > 1 and Launcher._pool_size < threads - 1:
-            Launcher._pool = ThreadPoolExecutor(max_workers=threads - 1, thread_name_prefix="lightprobe-stage")
-            Launcher._pool_size = threads - 1
         self.counter = new_counter()  # the chunk claims' shared counter (_worksharing.py)
         self._loop = None  # run_stage's compiled entry (later calls skip the dispatcher's typing of ~150 arrays)
         self._bodies: dict[int, int] = {}  # stage id -> its body's address
@@ -305,24 +299,12 @@ class Launcher:
 
     def run(self, stage: int, records: tuple) -> None:
         """Stage ``stage`` (an id) over the pass whose ``records`` are (s, env, lights, sel, c, cams, slots, acc)."""
-        body = self._bodies.get(stage)
-        if body is None:
-            types_of = record_types(records)
-            body = self._bodies[stage] = body_address(stage, types_of)
-            if self._loop is None:
-                self._loop = compiled(run_stage, loop_signature(types_of)).entry_point
+        if stage not in self._bodies:
+            self.prepare((stage,), records)
         n = STAGES[stage].items(*records[4:7])
         self.counter[0] = 0
-        call, pattern = self._loop, _PATTERN_OF[stage]
-        futures = [
-            Launcher._pool.submit(call, pattern, body, n, *records, self.counter, w) for w in range(1, self.threads)
-        ]
-        try:
-            call(pattern, body, n, *records, self.counter, 0)
-        finally:
-            wait(futures)  # never leave a worker writing into the pass after a Ctrl-C or an error
-        for f in futures:
-            f.result()
+        call, pattern, body, counter = self._loop, _PATTERN_OF[stage], self._bodies[stage], self.counter
+        on_workers(lambda w: call(pattern, body, n, *records, counter, w), self.threads)
 
 
 @dataclass(frozen=True)

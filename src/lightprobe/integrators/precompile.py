@@ -259,9 +259,9 @@ def record_types_pickled(records: tuple) -> bytes:
     """The Numba types of a pass's records, pickled (what a helper is sent)."""
     import pickle
 
-    from numba import typeof
+    from .pipeline import record_types
 
-    return pickle.dumps(tuple(typeof(x) for x in records))
+    return pickle.dumps(record_types(records))
 
 
 def _record_types_file() -> Path | None:
