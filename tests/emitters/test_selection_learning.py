@@ -12,6 +12,7 @@ from lightprobe.emitters.selection_learning import (
     DEFENSIVE,
     Records,
     _kd_tree,
+    _kth_smallest,
     _record_terms,
     learned,
     with_cut,
@@ -142,6 +143,17 @@ def test_the_cells_tree_splits_a_floor_and_its_walls():
             node = nxt[node, 0 if x[axis[node]] < split[node] else 1]
         found[i] = nxt[node, 0]
     assert np.bincount(found).max() <= 500
+
+
+def test_the_kth_smallest_is_numpys_partition_value():
+    # the k-d tree's median (its own selection, not np.partition): every k of arrays with and without ties
+    rng = np.random.default_rng(7)
+    for n in (1, 2, 3, 8, 33, 200):
+        for values in (rng.uniform(-1, 1, n), rng.integers(0, 4, n).astype(np.float64), np.zeros(n)):
+            for k in range(n):
+                work = values.copy()
+                assert _kth_smallest(work, k) == np.partition(values, k)[k], (n, k)
+                assert np.array_equal(np.sort(work), np.sort(values))  # reordered, nothing lost
 
 
 def test_a_records_value_is_divided_by_its_lights_probability_below_each_learned_child():

@@ -99,6 +99,7 @@ __all__ = [
     "LightSelector",
     "build_selector",
     "infinite_probability",
+    "no_receiver_terms",
     "power_of_lights",
     "receiver_terms",
     "select_light",
@@ -629,6 +630,13 @@ def receiver_terms(sel, px, py, pz, nx, ny, nz, compensated):
 
 
 @jit_inline
+def no_receiver_terms():
+    """:func:`receiver_terms`' types with no receiver's values: what a loop holds before its first receiver (a copy
+    of receiver_terms inlined only to type that variable cost a second of compiling)."""
+    return 0.0, 0.0, -1, (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0), 0.0
+
+
+@jit_inline
 def select_light(sel, px, py, pz, nx, ny, nz, u, compensated):
     """(light index, probability, u rescaled) for a receiver at p with normal n (``compensated``: its material
     samples the MIS-compensated environment, ``infinite_probability``); (-1, 0, u) when no light can be picked.
@@ -786,9 +794,11 @@ def _path_pmf(sel, cell, pmf, px, py, pz, nx, ny, nz, light):
         depth += 1
 
 
-@jit_inline
+@jit
 def selector_pmf(sel, px, py, pz, nx, ny, nz, light, compensated):
-    """Probability that :func:`select_light` picks ``light`` for this receiver (``compensated`` as there)."""
+    """Probability that :func:`select_light` picks ``light`` for this receiver (``compensated`` as there).  Called,
+    not inlined: the BSDF-ray stage needs it in two places, and each inlined copy of the descent was compiled again
+    (decisions.md 130)."""
     if light < 0 or light >= sel.n_lights:
         return 0.0
     if sel.mode == UNIFORM:

@@ -235,6 +235,33 @@ def _kd_tree(points: np.ndarray, leaf: int):
     return axis[:count].copy(), split[:count].copy(), nxt[:count].copy()
 
 
+@jit
+def _kth_smallest(values, k):
+    """The k-th smallest of ``values`` (0-based), the array reordered in place: Hoare's selection with the middle
+    element as pivot.  The value ``np.partition(values, k)[k]`` gives, without its implementation, which took 1.3 s
+    of a first learned render's compile (decisions.md 130)."""
+    lo, hi = 0, values.shape[0] - 1
+    while lo < hi:
+        pivot = values[(lo + hi) // 2]
+        i, j = lo, hi
+        while i <= j:
+            while values[i] < pivot:
+                i += 1
+            while values[j] > pivot:
+                j -= 1
+            if i <= j:
+                values[i], values[j] = values[j], values[i]
+                i += 1
+                j -= 1
+        if k <= j:
+            hi = j
+        elif k >= i:
+            lo = i
+        else:
+            return values[k]
+    return values[k]
+
+
 @jit_alloc
 def _kd_build(points, leaf, most):
     """:func:`_kd_tree`'s tree, splitting a node's points at the median of its widest axis; where more than half
@@ -275,7 +302,7 @@ def _kd_build(points, leaf, most):
                 for i in range(lo, hi):
                     scratch[i - lo] = points[order[i], a]
                 values = scratch[:size]
-                median = np.partition(values, size // 2)[size // 2]
+                median = _kth_smallest(values, size // 2)
                 below = 0
                 above_min = np.inf
                 for i in range(size):

@@ -84,9 +84,11 @@ def _inside(row, dx, dy, dz):
     return True
 
 
-@jit_inline
+@jit
 def outline_offset(start, shape, cover, geom, radiance, pixel, dx, dy, dz):
-    """G_p - g(d): what a camera sample of ``pixel`` along unit direction d adds to what it sees directly."""
+    """G_p - g(d): what a camera sample of ``pixel`` along unit direction d adds to what it sees directly.  Called,
+    not inlined: the shading-setup stage calls it in two places, and each inlined copy was compiled again
+    (decisions.md 130)."""
     r = 0.0
     g = 0.0
     b = 0.0

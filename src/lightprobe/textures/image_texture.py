@@ -250,9 +250,10 @@ def _srgb_decode(x):
     return x / 12.92 if x <= 0.04045 else ((x + 0.055) / 1.055) ** 2.4
 
 
-@jit_inline
+@jit
 def _texel(table, texel_bytes, texel_floats, t, i, j, srgb):
-    """Texel (i, j) of texture t (indices already wrapped) as linear RGBA."""
+    """Texel (i, j) of texture t (indices already wrapped) as linear RGBA.  Called, not inlined: a lookup reads
+    up to four, and each inlined copy was compiled again (decisions.md 130)."""
     row = table[t, _OFFSET] + _tiled_row(table[t, _WIDTH], i, j)
     if table[t, _FLOAT] == 1:
         x = texel_floats[row]

@@ -29,7 +29,7 @@ from ..._numba import jit_body
 from ...bsdfs.dispatch import bsdf_eval
 from ...emitters.envmap import env_lookup, env_sample_coords, env_sample_full
 from ...emitters.lights import light_sample_of
-from ...emitters.selection import receiver_terms, select_light_at
+from ...emitters.selection import no_receiver_terms, receiver_terms, select_light_at
 from ...geometry.frame import to_local
 from ...sampling.rng import sample_state, uniform, uniform_2d
 from ...simd import LANES
@@ -61,7 +61,7 @@ def light_samples(env, lights, sel, c, cams, slots, lo, hi):
     learning = slots.learn.shape[0] > 0
     # what the K picks of one camera sample share (the root's importances, the learned cell), once per sample
     last = -1
-    terms = receiver_terms(sel, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, False)
+    terms = no_receiver_terms()
     for r in range(lo, hi):
         if learning:
             slots.learn[r] = -1.0  # not a light sample, unless a light is picked below
