@@ -19,6 +19,7 @@ from lightprobe.geometry.shape_bvh import (
     build_shape_tree,
     empty_shape_tree,
     shape_boxes,
+    sort_along_widest_axis,
 )
 from lightprobe.geometry.shape_tree_lanes import boxes_entered, nearest_boxes
 from lightprobe.geometry.wide_tree import collapse
@@ -271,3 +272,20 @@ def test_a_clustered_scene_keeps_the_wide_tree_within_its_depth():
     for a, b in zip(flat, walked, strict=True):
         np.testing.assert_array_equal(a, b)
     assert np.isfinite(flat[0]).sum() > 2500
+
+
+def test_the_widest_axis_sort_is_numpys_stable_sort():
+    # its own merge sort (not np.argsort's, a second of compiling): the same order, ties in their former order,
+    # only items[start:end] touched
+    rng = np.random.default_rng(3)
+    for n in (1, 2, 3, 5, 8, 17, 100, 1000):
+        for ties in (False, True):
+            centroid = rng.integers(0, 4, (n, 3)).astype(np.float64) if ties else rng.uniform(-1, 1, (n, 3))
+            items = rng.permutation(n).astype(np.int64)
+            padded = np.concatenate([[-1, -2], items, [-3]]).astype(np.int64)
+            spread = centroid[items].max(axis=0) - centroid[items].min(axis=0)
+            axis = int(np.argmax(spread))  # the first of equal spreads, as the kernel's strict comparison
+            expected = padded.copy()
+            expected[2 : 2 + n] = items[np.argsort(centroid[items, axis], kind="stable")]
+            sort_along_widest_axis(centroid, padded, 2, 2 + n)
+            assert np.array_equal(padded, expected), (n, ties)

@@ -142,7 +142,31 @@ def sort_along_widest_axis(centroid, items, start, end):
     keys = np.empty(end - start)
     for j in range(start, end):
         keys[j - start] = centroid[items[j], axis]
-    items[start:end] = items[start:end][np.argsort(keys, kind="mergesort")].copy()
+    # a merge sort of its own, bottom-up, the left run first among equal keys: np.argsort's stable sort, whose
+    # implementation took a second to compile (decisions.md 130); written back element by element, not by a slice
+    # assignment, which compiles Numba's shape-mismatch message (1.7 s)
+    n = end - start
+    src = items[start:end].copy()
+    dst = np.empty_like(src)
+    src_keys = keys
+    dst_keys = np.empty(n)
+    width = 1
+    while width < n:
+        for lo in range(0, n, 2 * width):
+            mid, hi = min(lo + width, n), min(lo + 2 * width, n)
+            i, j = lo, mid
+            for k in range(lo, hi):
+                if i < mid and (j >= hi or src_keys[i] <= src_keys[j]):
+                    dst[k], dst_keys[k] = src[i], src_keys[i]
+                    i += 1
+                else:
+                    dst[k], dst_keys[k] = src[j], src_keys[j]
+                    j += 1
+        src, dst = dst, src
+        src_keys, dst_keys = dst_keys, src_keys
+        width *= 2
+    for j in range(n):
+        items[start + j] = src[j]
 
 
 @jit_inline
@@ -296,6 +320,7 @@ def _build_sah(lo, hi, max_depth, bins):
                 if _bin(centroid[p, a], c_lo[a], extent, bins) > best_plane:
                     scratch[right] = p
                     right += 1
-            prims[start:end] = scratch[start:end]
+            for j in range(start, end):  # not a slice assignment: see sort_along_widest_axis
+                prims[j] = scratch[j]
         top = push_halves(stack, top, node, start, end, half, depth)
     return node_lo, node_hi, skip, first, count, prims

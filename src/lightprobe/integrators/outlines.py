@@ -217,8 +217,9 @@ def _polygon_entries(fx, fy, width, height):
     oy = np.empty(n + 8)
     px = np.empty(n + 8)
     py = np.empty(n + 8)
-    px[:n] = fx
-    py[:n] = fy
+    for k in range(n):  # not a slice assignment: see _overlap
+        px[k] = fx[k]
+        py[k] = fy[k]
     m = 0
     for j in range(j0, j1):
         for i in range(i0, i1):
@@ -294,7 +295,10 @@ def _overlap(a, b, x0, y0, poly_x, poly_y, poly_n, boxes):
         return True
     nb = poly_n[b]
     planes = np.empty((4 + nb, 3))
-    planes[:4] = _square_planes(x0, y0)
+    square = _square_planes(x0, y0)
+    for i in range(4):  # not a slice assignment, which compiles Numba's shape-mismatch message (1.3 s, once)
+        for k in range(3):
+            planes[i, k] = square[i, k]
     for i in range(nb):  # b counter-clockwise: its inside is left of each edge
         j = (i + 1) % nb
         ex, ey = poly_x[b, j] - poly_x[b, i], poly_y[b, j] - poly_y[b, i]
@@ -463,11 +467,11 @@ def _entries(poly_x, poly_y, poly_n, ellipses, width, height, limit):
             while m + k > size:
                 size *= 2
             grown_p, grown_c, grown_s = np.empty(size, np.int64), np.empty(size), np.empty(size, np.int64)
-            grown_p[:m], grown_c[:m], grown_s[:m] = pixels[:m], covers[:m], shapes[:m]
+            for i in range(m):  # element by element, not slice assignments: see _overlap
+                grown_p[i], grown_c[i], grown_s[i] = pixels[i], covers[i], shapes[i]
             pixels, covers, shapes = grown_p, grown_c, grown_s
-        pixels[m : m + k] = pix
-        covers[m : m + k] = cov
-        shapes[m : m + k] = s
+        for i in range(k):
+            pixels[m + i], covers[m + i], shapes[m + i] = pix[i], cov[i], s
         m += k
     return pixels[:m], covers[:m], shapes[:m]
 
