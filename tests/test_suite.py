@@ -392,3 +392,18 @@ def test_reference_agreement_finds_a_two_percent_difference_and_passes_an_equal_
     assert same["relmse"] == pytest.approx(same["noise_relmse"], rel=0.2) and same["lambertian"]["pixels"] == 40 * 64
     off = suite.reference_agreement({"mean": a["mean"] * 1.02, "variance": var}, b, mask)
     assert abs(off["z_image"]) > 10 and off["mean_ratio"][0] == pytest.approx(1.02, abs=1e-3)
+
+
+@pytest.mark.parametrize("name", ["area", "many"])
+def test_rectangle_lights_as_a_mesh_keep_their_corners_and_radiance(name):
+    # the area scene gives its vectors as lists (whose + concatenates): the mesh must still have each rectangle's
+    # four corners and its radiance on both of its triangles, so the mesh's lights emit the rectangles' power
+    rects = [o for o in build(name).objects if isinstance(o.shape, Rectangle) and o.emission is not None]
+    (mesh,) = [o for o in build(name, lights_as_mesh=True).objects if o.name == "lights"]
+    corners = np.array([[r.shape.origin, r.shape.origin + r.shape.edge_u] for r in rects], np.float64)
+    vertices = np.asarray(mesh.shape.vertices, np.float64).reshape(len(rects), 4, 3)
+    assert np.allclose(vertices[:, :2], corners)
+    power = sum(np.linalg.norm(np.cross(r.shape.edge_u, r.shape.edge_v)) * np.mean(r.emission) for r in rects)
+    v = np.asarray(mesh.shape.vertices, np.float64)[np.asarray(mesh.shape.faces)]
+    areas = 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
+    assert np.isclose(np.sum(areas * np.asarray(mesh.emission, np.float64).mean(axis=1)), power)

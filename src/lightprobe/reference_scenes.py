@@ -739,7 +739,8 @@ def build(
             )
             scene.add(mesh, material, name=label, two_sided=two_sided, **extra)
     if quads:
-        corners = [(q["origin"], q["edge_u"], q["edge_v"]) for q in quads]
+        # as arrays: a scene's description may give its vectors as lists, whose + would concatenate
+        corners = [tuple(np.asarray(q[key], np.float64) for key in ("origin", "edge_u", "edge_v")) for q in quads]
         vertices = np.concatenate([[o, o + u, o + u + v, o + v] for o, u, v in corners])
         base = 4 * np.arange(len(quads))[:, None]
         faces = (base + np.array([0, 1, 2, 0, 2, 3])).reshape(-1, 3)
