@@ -118,10 +118,10 @@ def dispatch_source(function: str, name: str) -> str:
 
 
 def _compiled_dispatcher(function: str, name: str, doc: str):
-    """The dispatcher written by :func:`dispatch_source`, a function that Numba inlines into its callers (at the IR
-    level. As an ``overload(inline="always")``, as they were, each was also compiled on its own and typed again at
-    every call site: the light-sample, BSDF-ray and escaping-ray stages compiled in 26.4 s, now 21.9. As called
-    kernels the area scene rendered 10-20 % slower, the light table and the environment passed by value:
+    """The dispatcher written by :func:`dispatch_source`, a function that Numba inlines into its callers at the IR
+    level.  As an ``overload(inline="always")``, as they were, each was also compiled on its own and typed again at
+    every call site: the light-sample, BSDF-ray and escaping-ray stages compiled in 26.4 s, now 21.9.  As called
+    kernels the area scene rendered 10-21 % slower (the light table and the environment passed by value;
     decisions.md 23, 130)."""
     modules = {kind.module for kind in KINDS.values()}
     namespace = {"__name__": __name__}

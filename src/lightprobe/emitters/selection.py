@@ -633,7 +633,7 @@ def receiver_terms(sel, px, py, pz, nx, ny, nz, compensated):
 @jit_inline
 def no_receiver_terms():
     """:func:`receiver_terms`' types with no receiver's values: what a loop holds before its first receiver (a copy
-    of receiver_terms inlined only to type that variable cost a second of compiling)."""
+    of receiver_terms inlined only to type that variable cost 1.8 s of compiling; decisions.md 130)."""
     return 0.0, 0.0, -1, (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0), 0.0
 
 
