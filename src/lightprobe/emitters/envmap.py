@@ -58,7 +58,8 @@ from typing import NamedTuple
 import numpy as np
 
 from .._memory import fresh_array
-from .._numba import jit, jit_inline, jit_parallel, prange
+from .._numba import jit, jit_inline
+from .._worksharing import in_threads
 from ..errors import ImageError, ParameterError, warn_once
 from ..sampling.distributions import invert_2d, pdf_2d, sample_2d
 from ..sampling.kernels import TWO_PI
@@ -302,36 +303,54 @@ def env_to_square(k, compensated, x, y, z):
     return invert_2d(mc, cc, u, v)
 
 
-@jit_parallel
+# The batches (the Python methods' and the tests'): serial range kernels that ``_worksharing.in_threads`` runs in
+# threads, not ``prange`` loops, whose parallel passes compiled for longer (decisions.md 129, 130); any split of the
+# rows gives the same values.
+@jit
+def _eval_range(k, dirs, out, lo, hi):
+    for i in range(lo, hi):
+        out[i, 0], out[i, 1], out[i, 2] = env_eval(k, dirs[i, 0], dirs[i, 1], dirs[i, 2])
+
+
 def _eval_batch(k, dirs):
     out = np.empty((dirs.shape[0], 3))
-    for i in prange(dirs.shape[0]):
-        out[i, 0], out[i, 1], out[i, 2] = env_eval(k, dirs[i, 0], dirs[i, 1], dirs[i, 2])
+    in_threads(_eval_range, dirs.shape[0], k, dirs, out)
     return out
 
 
-@jit_parallel
-def _sample_batch(k, compensated, u):
-    dirs = np.empty((u.shape[0], 3))
-    pdf = np.empty(u.shape[0])
-    for i in prange(u.shape[0]):
+@jit
+def _sample_range(k, compensated, u, dirs, pdf, lo, hi):
+    for i in range(lo, hi):
         dirs[i, 0], dirs[i, 1], dirs[i, 2], pdf[i] = env_sample(k, compensated, u[i, 0], u[i, 1])
+
+
+def _sample_batch(k, compensated, u):
+    dirs, pdf = np.empty((u.shape[0], 3)), np.empty(u.shape[0])
+    in_threads(_sample_range, u.shape[0], k, compensated, u, dirs, pdf)
     return dirs, pdf
 
 
-@jit_parallel
+@jit
+def _pdf_range(k, compensated, dirs, out, lo, hi):
+    for i in range(lo, hi):
+        out[i] = env_pdf(k, compensated, dirs[i, 0], dirs[i, 1], dirs[i, 2])
+
+
 def _pdf_batch(k, compensated, dirs):
     out = np.empty(dirs.shape[0])
-    for i in prange(dirs.shape[0]):
-        out[i] = env_pdf(k, compensated, dirs[i, 0], dirs[i, 1], dirs[i, 2])
+    in_threads(_pdf_range, dirs.shape[0], k, compensated, dirs, out)
     return out
 
 
-@jit_parallel
+@jit
+def _to_square_range(k, compensated, dirs, out, lo, hi):
+    for i in range(lo, hi):
+        out[i, 0], out[i, 1] = env_to_square(k, compensated, dirs[i, 0], dirs[i, 1], dirs[i, 2])
+
+
 def _to_square_batch(k, compensated, dirs):
     out = np.empty((dirs.shape[0], 2))
-    for i in prange(dirs.shape[0]):
-        out[i, 0], out[i, 1] = env_to_square(k, compensated, dirs[i, 0], dirs[i, 1], dirs[i, 2])
+    in_threads(_to_square_range, dirs.shape[0], k, compensated, dirs, out)
     return out
 
 

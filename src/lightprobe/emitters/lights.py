@@ -26,7 +26,8 @@ import importlib
 
 import numpy as np
 
-from .._numba import jit_inline, jit_parallel, prange
+from .._numba import jit, jit_inline
+from .._worksharing import in_threads
 from .area import light_normal, light_radiance
 from .area import light_pdf_at as area_pdf_at
 from .kinds import (
@@ -171,61 +172,51 @@ def emitted(lights, l, x, y, z, wx, wy, wz):
 
 
 # --- batches for Python and the tests -------------------------------------------------------------------------------
-@jit_parallel
-def _sample_batch(lights, env, l, strategy, compensated, points, normals, u):
-    n = u.shape[0]
-    out = np.empty((n, 9))
-    for i in prange(n):
+# The batches for Python and the tests: serial range kernels that ``_worksharing.in_threads`` runs in threads, not
+# ``prange`` loops, whose parallel passes compiled for longer (decisions.md 129, 130); any split of the rows gives
+# the same values.
+@jit
+def _sample_range(lights, env, l, strategy, compensated, points, normals, u, out, lo, hi):
+    for i in range(lo, hi):
         s = light_sample_of(
-            lights,
-            env,
-            l,
-            strategy,
-            compensated,
-            points[i, 0],
-            points[i, 1],
-            points[i, 2],
-            normals[i, 0],
-            normals[i, 1],
-            normals[i, 2],
-            u[i, 0],
-            u[i, 1],
-        )
+            lights, env, l, strategy, compensated, points[i, 0], points[i, 1], points[i, 2], normals[i, 0],
+            normals[i, 1], normals[i, 2], u[i, 0], u[i, 1],
+        )  # fmt: skip
         out[i, 0], out[i, 1], out[i, 2], out[i, 3] = s.wx, s.wy, s.wz, s.distance
         out[i, 4], out[i, 5], out[i, 6], out[i, 7] = s.r, s.g, s.b, s.pdf
         out[i, 8] = 1.0 if s.delta else 0.0
+
+
+def _sample_batch(lights, env, l, strategy, compensated, points, normals, u):
+    out = np.empty((u.shape[0], 9))
+    in_threads(_sample_range, u.shape[0], lights, env, l, strategy, compensated, points, normals, u, out)
     return out
 
 
-@jit_parallel
-def _pdf_batch(lights, env, l, strategy, compensated, points, normals, dirs):
-    n = dirs.shape[0]
-    out = np.empty(n)
-    for i in prange(n):
+@jit
+def _pdf_range(lights, env, l, strategy, compensated, points, normals, dirs, out, lo, hi):
+    for i in range(lo, hi):
         out[i] = light_pdf_of(
-            lights,
-            env,
-            l,
-            strategy,
-            compensated,
-            points[i, 0],
-            points[i, 1],
-            points[i, 2],
-            normals[i, 0],
-            normals[i, 1],
-            normals[i, 2],
-            dirs[i, 0],
-            dirs[i, 1],
-            dirs[i, 2],
-        )
+            lights, env, l, strategy, compensated, points[i, 0], points[i, 1], points[i, 2], normals[i, 0],
+            normals[i, 1], normals[i, 2], dirs[i, 0], dirs[i, 1], dirs[i, 2],
+        )  # fmt: skip
+
+
+def _pdf_batch(lights, env, l, strategy, compensated, points, normals, dirs):
+    out = np.empty(dirs.shape[0])
+    in_threads(_pdf_range, dirs.shape[0], lights, env, l, strategy, compensated, points, normals, dirs, out)
     return out
 
 
-@jit_parallel
+@jit
+def _escaped_range(lights, env, dirs, out, lo, hi):
+    for i in range(lo, hi):
+        out[i, 0], out[i, 1], out[i, 2] = escaped_radiance(lights, env, dirs[i, 0], dirs[i, 1], dirs[i, 2])
+
+
 def _escaped_batch(lights, env, dirs):
     out = np.empty((dirs.shape[0], 3))
-    for i in prange(dirs.shape[0]):
-        out[i, 0], out[i, 1], out[i, 2] = escaped_radiance(lights, env, dirs[i, 0], dirs[i, 1], dirs[i, 2])
+    in_threads(_escaped_range, dirs.shape[0], lights, env, dirs, out)
     return out
 
 
