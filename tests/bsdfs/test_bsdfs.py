@@ -291,6 +291,18 @@ def test_plastic_diffuse_factor_matches_mitsuba():
     np.testing.assert_allclose(plastic.diffuse_factor(table[:, 0]), table[:, 1], rtol=5e-4)
 
 
+def test_a_coatings_tables_are_made_once_and_each_plastic_has_its_own_copy():
+    from lightprobe.bsdfs import plastic
+
+    plastic._coating_tables.cache_clear()
+    first, second = RoughPlastic(0.5, 0.3), RoughPlastic([0.1, 0.2, 0.3], 0.3)
+    assert plastic._coating_tables.cache_info().hits == 1
+    assert first.internal_reflectance == second.internal_reflectance
+    np.testing.assert_array_equal(first.transmittance, second.transmittance)
+    first.transmittance[:] = 0.0  # one material's table written over leaves the other's and the next one's
+    assert np.all(second.transmittance > 0) and np.all(RoughPlastic(0.5, 0.3).transmittance > 0)
+
+
 def test_plastic_energy():
     """Never more than the incident energy; the coat alone reflects about the 4 % Fresnel of eta 1.49.
 

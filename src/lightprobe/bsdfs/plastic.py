@@ -28,6 +28,7 @@ choice is made by the direction's second number, rescaled into the chosen lobe's
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -155,8 +156,16 @@ def coating_tables(alpha: float, eta: float) -> tuple[np.ndarray, float]:
 
     T(mu) is the masked transmittance into the substrate (32 x 32 Gauss-Legendre nodes over visible normals);
     F_dr = 2 * mean over the same 64 mu of mu R_int(mu), R_int the reflectance from inside (index 1/eta,
-    128 x 128 nodes, for total internal reflection).
+    128 x 128 nodes, for total internal reflection).  A coating's tables are made once per process (1.1 million
+    quadrature nodes, 11 ms): a session that loads scenes again and again (the suite's 500 scene-file checks)
+    looks them up.
     """
+    transmittance, f_dr = _coating_tables(float(alpha), float(eta))
+    return transmittance.copy(), f_dr
+
+
+@functools.lru_cache(maxsize=256)
+def _coating_tables(alpha: float, eta: float) -> tuple[np.ndarray, float]:
     mus = np.linspace(0.0, 1.0, TABLE_SIZE)
     transmittance = _interface_albedo(alpha, eta, mus, *_gauss_legendre_unit(32), True)
     internal = _interface_albedo(alpha, 1.0 / eta, mus, *_gauss_legendre_unit(128), False)
