@@ -60,3 +60,29 @@ def test_adaptive_quadrature_resolves_a_narrow_spike():
 def test_non_unit_directions_fail():
     res = chi2.spherical_test(np.array([[0.0, 0.0, 2.0]] * 10), lambda v: np.full(len(v), 1 / (4 * np.pi)))
     assert not res.passed and "unit" in res.message
+
+
+def test_cell_integrals_match_their_closed_forms_in_a_turned_frame():
+    """pdf = (1 + x + z^2) / (4 pi + 4 pi / 3) in a random frame's local axes, over uneven cells: each cell's
+    integral of pdf sin(theta) in closed form (the x term: sin(theta) cos(phi) against sin(theta), the z^2 term:
+    cos^2 against sin)."""
+    frame = np.linalg.qr(np.random.default_rng(3).normal(size=(3, 3)))[0]
+    norm = 4 * np.pi + 4 * np.pi / 3
+
+    def pdf(v):
+        local = v @ frame.T
+        return (1.0 + local[:, 0] + local[:, 2] ** 2) / norm
+
+    theta = np.array([0.0, 0.05, 0.4, 1.3, 2.0, 3.0, np.pi])
+    phi = np.array([0.0, 0.7, 2.5, 2.6, 5.0, 2 * np.pi])
+    t0, t1 = theta[:-1, None], theta[1:, None]
+    p0, p1 = phi[None, :-1], phi[None, 1:]
+    constant = (np.cos(t0) - np.cos(t1)) * (p1 - p0)
+    x_term = (0.5 * (t1 - t0) - 0.25 * (np.sin(2 * t1) - np.sin(2 * t0))) * (np.sin(p1) - np.sin(p0))
+    z2_term = (np.cos(t0) ** 3 - np.cos(t1) ** 3) / 3 * (p1 - p0)
+    expected = (constant + x_term + z2_term) / norm
+    got = chi2.spherical_expected(pdf, theta, phi, frame=frame, subdivisions=4, max_depth=0)
+    np.testing.assert_allclose(got, expected, rtol=1e-9, atol=1e-15)
+    assert got.sum() == pytest.approx(1.0, abs=1e-10)
+    with pytest.raises(ValueError, match="returned 1 values for"):
+        chi2.spherical_expected(lambda v: np.ones(1), theta, phi, max_depth=0)

@@ -25,11 +25,14 @@ True
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 from scipy import stats
+
+from .._numba import jit
 
 __all__ = [
     "ChiSquareResult",
@@ -163,31 +166,64 @@ def spherical_counts(dirs, theta_edges, phi_edges, *, frame=None) -> np.ndarray:
     return counts
 
 
+@jit
+def _quadrature_directions(t0, t1, p0, p1, s, phi_trig, frame, out):
+    """The order x order Gauss nodes of each part [t0, t1] x [p0, p1] (``s`` the rule's nodes on [0, 1]), theta
+    major, as unit vectors (sin t cos p, sin t sin p, cos t) turned into the frame: ``out`` (parts x order^2, 3).
+    ``phi_trig`` (order, 2) is scratch for a part's sines and cosines of phi."""
+    q = s.shape[0]
+    for m in range(t0.shape[0]):
+        for j in range(q):
+            phi = p0[m] + (p1[m] - p0[m]) * s[j]
+            phi_trig[j, 0] = math.sin(phi)
+            phi_trig[j, 1] = math.cos(phi)
+        for i in range(q):
+            theta = t0[m] + (t1[m] - t0[m]) * s[i]
+            st, ct = math.sin(theta), math.cos(theta)
+            for j in range(q):
+                x, y = st * phi_trig[j, 1], st * phi_trig[j, 0]
+                row = (m * q + i) * q + j
+                for k in range(3):
+                    out[row, k] = x * frame[0, k] + y * frame[1, k] + ct * frame[2, k]
+
+
+@jit
+def _weighted_sums(values, t0, t1, p0, p1, s, w, out):
+    """Each part's Gauss sum of ``values`` (its order^2 nodes' pdf, theta major) x sin(theta), times its area in
+    (theta, phi)."""
+    q = s.shape[0]
+    for m in range(t0.shape[0]):
+        dt, dp = t1[m] - t0[m], p1[m] - p0[m]
+        total = 0.0
+        for i in range(q):
+            ring = 0.0
+            for j in range(q):
+                ring += values[(m * q + i) * q + j] * w[j]
+            total += ring * w[i] * math.sin(t0[m] + dt * s[i])
+        out[m] = total * dt * dp
+
+
 def _cell_integrals(pdf: PdfFunc, t0, t1, p0, p1, frame: np.ndarray, order: int, chunk: int) -> np.ndarray:
-    """Gauss-Legendre (order x order) integral of pdf(w) sin(theta) over each (theta, phi) rectangle."""
+    """Gauss-Legendre (order x order) integral of pdf(w) sin(theta) over each (theta, phi) rectangle.
+
+    The nodes and the sums are compiled loops: in NumPy (every node's angles as arrays, then a product with the
+    frame, then ``einsum``) a test that integrates 90 million nodes took 4.9 s, 2.0 s with these loops."""
     x, w = np.polynomial.legendre.leggauss(order)
     s = 0.5 * (x + 1.0)
     w = 0.5 * w
+    frame = np.ascontiguousarray(frame, dtype=np.float64)
+    t0, t1, p0, p1 = (np.ascontiguousarray(a, dtype=np.float64) for a in (t0, t1, p0, p1))
+    phi_trig = np.empty((order, 2))
     out = np.empty(t0.size)
     per = max(1, chunk // (order * order))
     for a in range(0, t0.size, per):
         b = min(t0.size, a + per)
-        dt = (t1[a:b] - t0[a:b])[:, None]
-        dp = (p1[a:b] - p0[a:b])[:, None]
-        th = t0[a:b, None] + dt * s[None, :]  # (m, q)
-        ph = p0[a:b, None] + dp * s[None, :]
-        st, ct, sp, cp = np.sin(th), np.cos(th), np.sin(ph), np.cos(ph)
-        tw = dt * w[None, :] * st
-        pw = dp * w[None, :]
-        # the q x q nodes of each part, theta major, as unit vectors (sin t cos p, sin t sin p, cos t) in the
-        # frame: the sines and cosines are taken of the q thetas and the q phis, then multiplied out
-        local = np.empty((b - a, order, order, 3))
-        local[..., 0] = st[:, :, None] * cp[:, None, :]
-        local[..., 1] = st[:, :, None] * sp[:, None, :]
-        local[..., 2] = ct[:, :, None]
-        dirs = local.reshape(-1, 3) @ frame
-        vals = np.asarray(pdf(dirs), dtype=np.float64).reshape(b - a, order, order)
-        out[a:b] = np.einsum("mij,mi,mj->m", vals, tw, pw)
+        dirs = np.empty(((b - a) * order * order, 3))
+        _quadrature_directions(t0[a:b], t1[a:b], p0[a:b], p1[a:b], s, phi_trig, frame, dirs)
+        values = np.ascontiguousarray(pdf(dirs), dtype=np.float64).reshape(-1)
+        if values.size != dirs.shape[0]:
+            raise ValueError(f"pdf returned {values.size} values for {dirs.shape[0]} directions")
+        _weighted_sums(values, t0[a:b], t1[a:b], p0[a:b], p1[a:b], s, w, out[a:b])
     return out
 
 
