@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._numba import jit_inline
+from .._numba import jit, jit_inline
 from ..errors import SceneError
 
 __all__ = ["Camera", "camera_ray"]
@@ -94,9 +94,12 @@ class Camera:
     def rays(self, pixels, offsets) -> tuple[np.ndarray, np.ndarray]:
         """Origins and unit directions (N, 3) for flat pixel indices (N,) and offsets (N, 2) (testing aid)."""
         cam = self.kernel_array()
-        pix = np.asarray(pixels, dtype=np.int64).reshape(-1)
-        off = np.asarray(offsets, dtype=np.float64).reshape(-1, 2)
-        d = np.array([camera_ray(cam, p, a, b) for p, (a, b) in zip(pix, off, strict=True)])
+        pix = np.ascontiguousarray(pixels, dtype=np.int64).reshape(-1)
+        off = np.ascontiguousarray(offsets, dtype=np.float64).reshape(-1, 2)
+        if off.shape[0] != pix.shape[0]:
+            raise ValueError(f"{pix.shape[0]} pixels but {off.shape[0]} offsets")
+        d = np.empty((pix.shape[0], 3))
+        _camera_rays(cam, pix, off, d)  # a compiled loop: one Python call per ray took 6-7 us (an image's mask 0.5 s)
         return np.broadcast_to(self.origin, d.shape).copy(), d
 
 
@@ -114,3 +117,9 @@ def camera_ray(cam, pixel, xi1, xi2):
     dz = cam[5] + sx * cam[8] + sy * cam[11]
     inv = 1.0 / math.sqrt(dx * dx + dy * dy + dz * dz)
     return dx * inv, dy * inv, dz * inv
+
+
+@jit
+def _camera_rays(cam, pixels, offsets, out):
+    for k in range(pixels.shape[0]):
+        out[k, 0], out[k, 1], out[k, 2] = camera_ray(cam, pixels[k], offsets[k, 0], offsets[k, 1])
