@@ -7,7 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._numba import jit_parallel, prange
+from .._numba import jit
+from .._worksharing import in_threads
 from ..geometry.camera import camera_ray
 from ..geometry.intersect import MISS
 from ..integrators.techniques import store_shading_frame
@@ -17,15 +18,31 @@ from .technique_errors import TechniqueError
 __all__ = ["camera_batch", "require_untextured", "shading_batch", "technique_numbers"]
 
 
-@jit_parallel
-def camera_batch(cam, pixels, jitter):
-    out = np.empty((pixels.shape[0], 3))
-    for i in prange(pixels.shape[0]):
+# Range kernels run by threads (``_worksharing.in_threads``), not ``prange`` loops: the same values (each item is its
+# own), and Numba's parallel-loop passes made them slow to compile (``shading_batch`` alone 7.8 s; decisions.md 129).
+@jit
+def _camera_range(cam, pixels, jitter, out, lo, hi):
+    for i in range(lo, hi):
         out[i, 0], out[i, 1], out[i, 2] = camera_ray(cam, pixels[i], jitter[i, 0], jitter[i, 1])
+
+
+def camera_batch(cam, pixels, jitter):
+    """Unit directions (N, 3) of the camera rays through flat pixel indices at offsets ``jitter`` (N, 2)."""
+    out = np.empty((pixels.shape[0], 3))
+    in_threads(_camera_range, pixels.shape[0], cam, pixels, jitter, out)
     return out
 
 
-@jit_parallel
+@jit
+def _numbers_range(sampler, seed, pixels, sample, first, count, dims, out, lo, hi):
+    for k in range(lo, hi):
+        state = sample_state(sampler, seed, pixels[k], sample)
+        for i in range(count):
+            member, slot = group_slot(state, first, count, i)
+            for d in range(dims):
+                out[i, k, d] = uniform(member, 2 + 3 * slot + d)
+
+
 def technique_numbers(sampler, seed, pixels, sample, first, count, dims):
     """(count, N, dims) numbers of a technique's ``count`` samples per camera sample, laid out as the core lays out
     a group of shading slots (``integrators.techniques.technique_slot``): under ``sobol`` the group shares the first
@@ -33,16 +50,23 @@ def technique_numbers(sampler, seed, pixels, sample, first, count, dims):
     are one stratified Sobol' set; under ``independent`` member i takes slot ``first + i``."""
     n = pixels.shape[0]
     out = np.empty((count, n, dims))
-    for k in prange(n):
-        state = sample_state(sampler, seed, pixels[k], sample)
-        for i in range(count):
-            member, slot = group_slot(state, first, count, i)
-            for d in range(dims):
-                out[i, k, d] = uniform(member, 2 + 3 * slot + d)
+    in_threads(_numbers_range, n, sampler, seed, pixels, sample, first, count, dims, out)
     return out
 
 
-@jit_parallel
+@jit
+def _shading_range(s, kind, index, prim, b1, b2, t, cam_origin, dirs, point, gnormal, error, frame, wo_local, material,
+                   lo, hi):  # fmt: skip
+    ox, oy, oz = cam_origin[0], cam_origin[1], cam_origin[2]
+    for k in range(lo, hi):
+        if kind[k] == MISS:
+            continue
+        hit = (kind[k], index[k], prim[k], b1[k], b2[k], t[k])
+        store_shading_frame(
+            s, k, hit, ox, oy, oz, dirs[k, 0], dirs[k, 1], dirs[k, 2], point, gnormal, error, frame, wo_local, material
+        )
+
+
 def shading_batch(s, kind, index, prim, b1, b2, t, cam_origin, dirs):
     """Point, geometric normal, error bound, shading frame (N, 9), local wo and material (-1: nothing to shade)."""
     n = dirs.shape[0]
@@ -52,15 +76,9 @@ def shading_batch(s, kind, index, prim, b1, b2, t, cam_origin, dirs):
     frame = np.zeros((n, 9))
     wo_local = np.zeros((n, 3))
     material = np.full(n, -1, np.int64)
-    ox, oy, oz = cam_origin[0], cam_origin[1], cam_origin[2]
-    for k in prange(n):
-        if kind[k] == MISS:
-            continue
-        hit = (kind[k], index[k], prim[k], b1[k], b2[k], t[k])
-        store_shading_frame(
-            s, k, hit, ox, oy, oz, dirs[k, 0], dirs[k, 1], dirs[k, 2], point, gnormal, error, frame, wo_local, material
-        )
-    return point, gnormal, error, frame, wo_local, material
+    outputs = (point, gnormal, error, frame, wo_local, material)
+    in_threads(_shading_range, n, s, kind, index, prim, b1, b2, t, cam_origin, dirs, *outputs)
+    return outputs
 
 
 def require_untextured(scene, who: str) -> None:
