@@ -55,7 +55,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._numba import jit, jit_inline, jit_parallel, prange
+from .._numba import jit, jit_inline
+from .._worksharing import in_threads
 from ..errors import ParameterError
 from ..geometry.frame import coordinate_system, normalize, to_world
 from ..geometry.intersect import (
@@ -608,11 +609,11 @@ def light_pdf_at(lights, l, strategy, px, py, pz, nx, ny, nz, x, y, z):
 
 
 # --- batch kernels and the Python interface -----------------------------------------------------------------------
-@jit_parallel
-def _sample_batch(lights, l, strategy, points, normals, u):
-    n = u.shape[0]
-    out = np.empty((n, 8))
-    for i in prange(n):
+# Range kernels run by threads (``_worksharing.in_threads``), not ``prange`` loops: the same values (each row is its
+# own), and Numba's parallel-loop passes made them slow to compile (decisions.md 129).
+@jit
+def _sample_range(lights, l, strategy, points, normals, u, out, lo, hi):
+    for i in range(lo, hi):
         rec = light_sample(
             lights,
             l,
@@ -628,14 +629,17 @@ def _sample_batch(lights, l, strategy, points, normals, u):
         )
         for j in range(8):
             out[i, j] = rec[j]
+
+
+def _sample_batch(lights, l, strategy, points, normals, u):
+    out = np.empty((u.shape[0], 8))
+    in_threads(_sample_range, u.shape[0], lights, l, strategy, points, normals, u, out)
     return out
 
 
-@jit_parallel
-def _pdf_batch(lights, l, strategy, points, normals, dirs):
-    n = dirs.shape[0]
-    out = np.empty(n)
-    for i in prange(n):
+@jit
+def _pdf_range(lights, l, strategy, points, normals, dirs, out, lo, hi):
+    for i in range(lo, hi):
         out[i] = light_pdf(
             lights,
             l,
@@ -650,17 +654,25 @@ def _pdf_batch(lights, l, strategy, points, normals, dirs):
             dirs[i, 1],
             dirs[i, 2],
         )
+
+
+def _pdf_batch(lights, l, strategy, points, normals, dirs):
+    out = np.empty(dirs.shape[0])
+    in_threads(_pdf_range, dirs.shape[0], lights, l, strategy, points, normals, dirs, out)
     return out
 
 
-@jit_parallel
-def _eval_batch(lights, l, points, dirs):
-    n = dirs.shape[0]
-    out = np.zeros((n, 3))
-    for i in prange(n):
+@jit
+def _eval_range(lights, l, points, dirs, out, lo, hi):
+    for i in range(lo, hi):
         t, c = light_intersect(lights, l, points[i, 0], points[i, 1], points[i, 2], dirs[i, 0], dirs[i, 1], dirs[i, 2])
         if t < math.inf:
             out[i, 0], out[i, 1], out[i, 2] = light_radiance(lights, l, c)
+
+
+def _eval_batch(lights, l, points, dirs):
+    out = np.zeros((dirs.shape[0], 3))
+    in_threads(_eval_range, dirs.shape[0], lights, l, points, dirs, out)
     return out
 
 
