@@ -70,3 +70,27 @@ def test_the_launcher_runs_every_item_of_a_stage_once(workers):
     recs[-1] = acc.arrays()
     pipeline.Launcher(workers).run(pipeline.stage_id("accumulate"), tuple(recs))
     assert np.all(acc.count == 3)
+
+
+@njit(nogil=True)
+def _mark(row, visits, owner, lo, hi):
+    row[0] += 1  # this worker's own row: no other thread writes it
+    for i in range(lo, hi):
+        visits[i] += 1
+        owner[i] = row[1]
+
+
+def test_in_threads_covers_every_item_once_and_gives_each_worker_its_own_scratch_row():
+    import numba
+
+    from lightprobe._worksharing import in_threads
+
+    threads = numba.get_num_threads()
+    n = 1024 * threads + 7  # enough items for every thread
+    scratch = np.zeros((numba.config.NUMBA_NUM_THREADS, 2), np.int64)
+    scratch[:, 1] = np.arange(scratch.shape[0])
+    visits, owner = np.zeros(n, np.int64), np.full(n, -1, np.int64)
+    in_threads(_mark, n, visits, owner, scratch=scratch)
+    assert np.all(visits == 1)
+    assert scratch[:threads, 0].tolist() == [1] * threads and not scratch[threads:, 0].any()
+    assert sorted(set(owner.tolist())) == list(range(threads))  # each worker's items carry its own row's mark

@@ -86,12 +86,16 @@ def on_workers(task, workers: int) -> None:
         future.result()
 
 
-def in_threads(kernel, n: int, *args) -> None:
+def in_threads(kernel, n: int, *args, scratch=None) -> None:
     """``kernel(*args, lo, hi)`` over the items [0, n), split among Numba's threads (:func:`on_workers`): a serial
     kernel (it releases the GIL) over independent items, called from threads instead of compiled as a ``prange``
     loop.  Numba's parallel-loop passes made such loops slow to compile: the ray tracer's batches 5.3-5.4 s each,
     their range kernels 1.7-1.8 s, at the same speed (decisions.md 129).  Items are independent, so any split gives
-    the same bits; below 1,024 items a split is not worth a thread."""
+    the same bits; below 1,024 items a split is not worth a thread.  ``scratch`` (one row per thread, at least
+    ``numba.get_num_threads()`` rows): worker w's row is passed first, ``kernel(scratch[w], *args, lo, hi)``."""
     threads = max(1, min(numba.get_num_threads(), n // 1024))
     bounds = [n * k // threads for k in range(threads + 1)]
-    on_workers(lambda w: kernel(*args, bounds[w], bounds[w + 1]), threads)
+    if scratch is None:
+        on_workers(lambda w: kernel(*args, bounds[w], bounds[w + 1]), threads)
+    else:
+        on_workers(lambda w: kernel(scratch[w], *args, bounds[w], bounds[w + 1]), threads)

@@ -34,7 +34,8 @@ import numba
 import numpy as np
 from numba import types
 
-from .._numba import jit_inline, jit_parallel, prange
+from .._numba import jit, jit_inline
+from .._worksharing import in_threads
 from ..errors import LightprobeError
 
 __all__ = [
@@ -270,35 +271,31 @@ def closest_mesh_hit(scene, words, ox, oy, oz, dx, dy, dz, tfar):
     return floats[8], np.int64(words[18]), np.int64(words[17]), floats[15], floats[16]
 
 
-@jit_parallel
-def occluded_batch(scene, scratch, origins, dirs, tfar):
-    n = dirs.shape[0]
-    blocked = np.empty(n, np.bool_)
-    for i in prange(n):
+# The batches are range kernels run by threads, each with its own scratch row (``_worksharing.in_threads``), not
+# ``prange`` loops: the same answers, and Numba's parallel-loop passes made them slow to compile (decisions.md 129).
+@jit
+def _occluded_range(words, scene, origins, dirs, tfar, blocked, lo, hi):
+    for i in range(lo, hi):
         blocked[i] = mesh_occluded(
-            scene,
-            scratch[numba.get_thread_id()],
-            origins[i, 0],
-            origins[i, 1],
-            origins[i, 2],
-            dirs[i, 0],
-            dirs[i, 1],
-            dirs[i, 2],
-            tfar[i],
+            scene, words, origins[i, 0], origins[i, 1], origins[i, 2], dirs[i, 0], dirs[i, 1], dirs[i, 2], tfar[i]
         )
+
+
+def occluded_batch(scene, scratch, origins, dirs, tfar):
+    """Boolean (N,): does a mesh of ``scene`` block each segment (0, tfar)?  ``scratch``: :func:`new_scratch`."""
+    blocked = np.empty(dirs.shape[0], np.bool_)
+    in_threads(_occluded_range, dirs.shape[0], scene, origins, dirs, tfar, blocked, scratch=scratch)
     return blocked
 
 
-@jit_parallel
-def occluded_packets_batch(scene, scratch, origins, dirs, tfar):
-    """:func:`occluded_batch` through :func:`occluded_packet`, 8 rays a call (the last packet partly empty)."""
+@jit
+def _occluded_packets_range(words, scene, origins, dirs, tfar, blocked, lo, hi):
     n = dirs.shape[0]
-    blocked = np.empty(n, np.bool_)
-    for p in prange((n + PACKET - 1) // PACKET):
+    packet = packet_words(words)
+    floats = packet.view(np.float32)
+    for p in range(lo, hi):
         first = p * PACKET
         count = min(PACKET, n - first)
-        packet = packet_words(scratch[numba.get_thread_id()])
-        floats = packet.view(np.float32)
         for i in range(count):
             q = first + i
             packet_ray(packet, floats, i, origins[q, 0], origins[q, 1], origins[q, 2], dirs[q, 0], dirs[q, 1],
@@ -306,27 +303,32 @@ def occluded_packets_batch(scene, scratch, origins, dirs, tfar):
         bits = occluded_packet(scene, packet, floats, count)
         for i in range(count):
             blocked[first + i] = bits >> i & 1 == 1
+
+
+def occluded_packets_batch(scene, scratch, origins, dirs, tfar):
+    """:func:`occluded_batch` through :func:`occluded_packet`, 8 rays a call (the last packet partly empty)."""
+    n = dirs.shape[0]
+    blocked = np.empty(n, np.bool_)
+    in_threads(_occluded_packets_range, (n + PACKET - 1) // PACKET, scene, origins, dirs, tfar, blocked,
+               scratch=scratch)  # fmt: skip
     return blocked
 
 
-@jit_parallel
+@jit
+def _intersect_range(words, scene, origins, dirs, tfar, t, geom, prim, u, v, lo, hi):
+    for i in range(lo, hi):
+        t[i], geom[i], prim[i], u[i], v[i] = closest_mesh_hit(
+            scene, words, origins[i, 0], origins[i, 1], origins[i, 2], dirs[i, 0], dirs[i, 1], dirs[i, 2], tfar[i]
+        )
+
+
 def intersect_batch(scene, scratch, origins, dirs, tfar):
+    """The nearest mesh hit of each ray closer than tfar: (t, mesh, face, b1, b2), mesh -1 where there is none."""
     n = dirs.shape[0]
     t = np.empty(n, np.float32)
     geom = np.empty(n, np.int64)
     prim = np.empty(n, np.int64)
     u = np.empty(n, np.float32)
     v = np.empty(n, np.float32)
-    for i in prange(n):
-        t[i], geom[i], prim[i], u[i], v[i] = closest_mesh_hit(
-            scene,
-            scratch[numba.get_thread_id()],
-            origins[i, 0],
-            origins[i, 1],
-            origins[i, 2],
-            dirs[i, 0],
-            dirs[i, 1],
-            dirs[i, 2],
-            tfar[i],
-        )
+    in_threads(_intersect_range, n, scene, origins, dirs, tfar, t, geom, prim, u, v, scratch=scratch)
     return t, geom, prim, u, v
