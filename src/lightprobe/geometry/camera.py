@@ -19,9 +19,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._numba import jit, jit_inline
+from .._worksharing import in_threads
 from ..errors import SceneError
 
-__all__ = ["Camera", "camera_ray"]
+__all__ = ["Camera", "camera_batch", "camera_ray"]
 
 
 @dataclass(frozen=True)
@@ -98,8 +99,7 @@ class Camera:
         off = np.ascontiguousarray(offsets, dtype=np.float64).reshape(-1, 2)
         if off.shape[0] != pix.shape[0]:
             raise ValueError(f"{pix.shape[0]} pixels but {off.shape[0]} offsets")
-        d = np.empty((pix.shape[0], 3))
-        _camera_rays(cam, pix, off, d)  # one compiled loop: a Python call per ray took 6-10 us
+        d = camera_batch(cam, pix, off)  # compiled loops: a Python call per ray took 6-10 us
         return np.broadcast_to(self.origin, d.shape).copy(), d
 
 
@@ -119,7 +119,17 @@ def camera_ray(cam, pixel, xi1, xi2):
     return dx * inv, dy * inv, dz * inv
 
 
+# a range kernel run by threads (``_worksharing.in_threads``), not a ``prange`` loop: the same values, and Numba's
+# parallel-loop passes made such loops slow to compile (decisions.md 129)
 @jit
-def _camera_rays(cam, pixels, offsets, out):
-    for k in range(pixels.shape[0]):
-        out[k, 0], out[k, 1], out[k, 2] = camera_ray(cam, pixels[k], offsets[k, 0], offsets[k, 1])
+def _camera_range(cam, pixels, jitter, out, lo, hi):
+    for i in range(lo, hi):
+        out[i, 0], out[i, 1], out[i, 2] = camera_ray(cam, pixels[i], jitter[i, 0], jitter[i, 1])
+
+
+def camera_batch(cam, pixels, jitter) -> np.ndarray:
+    """Unit directions (N, 3) of the rays of the camera's kernel array ``cam`` through flat pixel indices (N,) at
+    offsets ``jitter`` (N, 2) (C-contiguous int64 and float64)."""
+    out = np.empty((pixels.shape[0], 3))
+    in_threads(_camera_range, pixels.shape[0], cam, pixels, jitter, out)
+    return out

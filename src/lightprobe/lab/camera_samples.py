@@ -9,7 +9,7 @@ import numpy as np
 
 from .._numba import jit
 from .._worksharing import in_threads
-from ..geometry.camera import camera_ray
+from ..geometry.camera import camera_batch
 from ..geometry.intersect import MISS
 from ..integrators.techniques import store_shading_frame
 from ..sampling.rng import group_slot, sample_state, uniform
@@ -20,19 +20,6 @@ __all__ = ["camera_batch", "require_untextured", "shading_batch", "technique_num
 
 # Range kernels run by threads (``_worksharing.in_threads``), not ``prange`` loops: the same values (each item is its
 # own), and Numba's parallel-loop passes made them slow to compile (``shading_batch`` alone 7.8 s; decisions.md 129).
-@jit
-def _camera_range(cam, pixels, jitter, out, lo, hi):
-    for i in range(lo, hi):
-        out[i, 0], out[i, 1], out[i, 2] = camera_ray(cam, pixels[i], jitter[i, 0], jitter[i, 1])
-
-
-def camera_batch(cam, pixels, jitter):
-    """Unit directions (N, 3) of the camera rays through flat pixel indices at offsets ``jitter`` (N, 2)."""
-    out = np.empty((pixels.shape[0], 3))
-    in_threads(_camera_range, pixels.shape[0], cam, pixels, jitter, out)
-    return out
-
-
 @jit
 def _numbers_range(sampler, seed, pixels, sample, first, count, dims, out, lo, hi):
     for k in range(lo, hi):
