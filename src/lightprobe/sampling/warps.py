@@ -25,7 +25,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._numba import jit_parallel, prange
+from .._numba import jit
+from .._worksharing import in_threads
 from . import kernels as k
 
 __all__ = [
@@ -53,10 +54,11 @@ __all__ = [
 UNIFORM_SPHERE, UNIFORM_HEMISPHERE, COSINE_HEMISPHERE, PHONG_LOBE, UNIFORM_CONE, UNIFORM_TRIANGLE = range(6)
 
 
-@jit_parallel
-def _sample_batch(warp, param, u):
-    out = np.empty((u.shape[0], 3))
-    for i in prange(u.shape[0]):
+# Range kernels run by threads (``_worksharing.in_threads``), not ``prange`` loops: the same values (each row is its
+# own), and Numba's parallel-loop passes made them slow to compile (decisions.md 129, 131).
+@jit
+def _sample_range(warp, param, u, out, lo, hi):
+    for i in range(lo, hi):
         a, b = u[i, 0], u[i, 1]
         if warp == UNIFORM_SPHERE:
             v = k.square_to_uniform_sphere(a, b)
@@ -71,13 +73,17 @@ def _sample_batch(warp, param, u):
         else:
             v = k.square_to_uniform_triangle(a, b)
         out[i, 0], out[i, 1], out[i, 2] = v
+
+
+def _sample_batch(warp, param, u):
+    out = np.empty((u.shape[0], 3))
+    in_threads(_sample_range, u.shape[0], warp, param, u, out)
     return out
 
 
-@jit_parallel
-def _pdf_batch(warp, param, v):
-    out = np.empty(v.shape[0])
-    for i in prange(v.shape[0]):
+@jit
+def _pdf_range(warp, param, v, out, lo, hi):
+    for i in range(lo, hi):
         x, y, z = v[i, 0], v[i, 1], v[i, 2]
         if warp == UNIFORM_SPHERE:
             p = k.uniform_sphere_pdf(x, y, z)
@@ -92,13 +98,17 @@ def _pdf_batch(warp, param, v):
         else:
             p = k.uniform_triangle_pdf(x, y, z)
         out[i] = p
+
+
+def _pdf_batch(warp, param, v):
+    out = np.empty(v.shape[0])
+    in_threads(_pdf_range, v.shape[0], warp, param, v, out)
     return out
 
 
-@jit_parallel
-def _invert_batch(warp, param, v):
-    out = np.empty((v.shape[0], 2))
-    for i in prange(v.shape[0]):
+@jit
+def _invert_range(warp, param, v, out, lo, hi):
+    for i in range(lo, hi):
         x, y, z = v[i, 0], v[i, 1], v[i, 2]
         if warp == UNIFORM_SPHERE:
             s = k.uniform_sphere_to_square(x, y, z)
@@ -113,6 +123,11 @@ def _invert_batch(warp, param, v):
         else:
             s = k.uniform_triangle_to_square(x, y, z)
         out[i, 0], out[i, 1] = s
+
+
+def _invert_batch(warp, param, v):
+    out = np.empty((v.shape[0], 2))
+    in_threads(_invert_range, v.shape[0], warp, param, v, out)
     return out
 
 
