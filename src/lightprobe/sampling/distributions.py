@@ -25,7 +25,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._numba import jit, jit_inline, jit_parallel, prange
+from .._numba import jit, jit_inline
+from .._worksharing import in_threads
 
 __all__ = ["PiecewiseConstant1D", "PiecewiseConstant2D"]
 
@@ -148,57 +149,83 @@ def invert_2d(marginal_cdf, conditional_cdf, x, y):
 
 
 # --- batch kernels ----------------------------------------------------------------------------------------------
-@jit_parallel
+# Range kernels run by threads (``_worksharing.in_threads``), not ``prange`` loops: the same values (each item is its
+# own), and Numba's parallel-loop passes made them slow to compile (decisions.md 129, 131).
+@jit
+def _sample_1d_range(cdf, u, x, pdf, index, lo, hi):
+    for i in range(lo, hi):
+        x[i], pdf[i], index[i] = sample_1d(cdf, u[i])
+
+
 def _sample_1d_batch(cdf, u):
     x = np.empty(u.shape[0])
     pdf = np.empty(u.shape[0])
     index = np.empty(u.shape[0], dtype=np.int64)
-    for i in prange(u.shape[0]):
-        x[i], pdf[i], index[i] = sample_1d(cdf, u[i])
+    in_threads(_sample_1d_range, u.shape[0], cdf, u, x, pdf, index)
     return x, pdf, index
 
 
-@jit_parallel
+@jit
+def _pdf_1d_range(cdf, x, out, lo, hi):
+    for i in range(lo, hi):
+        out[i] = pdf_1d(cdf, x[i])
+
+
 def _pdf_1d_batch(cdf, x):
     out = np.empty(x.shape[0])
-    for i in prange(x.shape[0]):
-        out[i] = pdf_1d(cdf, x[i])
+    in_threads(_pdf_1d_range, x.shape[0], cdf, x, out)
     return out
 
 
-@jit_parallel
+@jit
+def _invert_1d_range(cdf, x, out, lo, hi):
+    for i in range(lo, hi):
+        out[i] = invert_1d(cdf, x[i])
+
+
 def _invert_1d_batch(cdf, x):
     out = np.empty(x.shape[0])
-    for i in prange(x.shape[0]):
-        out[i] = invert_1d(cdf, x[i])
+    in_threads(_invert_1d_range, x.shape[0], cdf, x, out)
     return out
 
 
-@jit_parallel
-def _sample_2d_batch(mc, cc, u):
-    pts = np.empty((u.shape[0], 2))
-    pdf = np.empty(u.shape[0])
-    for i in prange(u.shape[0]):
+@jit
+def _sample_2d_range(mc, cc, u, pts, pdf, lo, hi):
+    for i in range(lo, hi):
         x, y, p, _, _ = sample_2d(mc, cc, u[i, 0], u[i, 1])
         pts[i, 0] = x
         pts[i, 1] = y
         pdf[i] = p
+
+
+def _sample_2d_batch(mc, cc, u):
+    pts = np.empty((u.shape[0], 2))
+    pdf = np.empty(u.shape[0])
+    in_threads(_sample_2d_range, u.shape[0], mc, cc, u, pts, pdf)
     return pts, pdf
 
 
-@jit_parallel
+@jit
+def _pdf_2d_range(mc, cc, pts, out, lo, hi):
+    for i in range(lo, hi):
+        out[i] = pdf_2d(mc, cc, pts[i, 0], pts[i, 1])
+
+
 def _pdf_2d_batch(mc, cc, pts):
     out = np.empty(pts.shape[0])
-    for i in prange(pts.shape[0]):
-        out[i] = pdf_2d(mc, cc, pts[i, 0], pts[i, 1])
+    in_threads(_pdf_2d_range, pts.shape[0], mc, cc, pts, out)
     return out
 
 
-@jit_parallel
+@jit
+def _invert_2d_range(mc, cc, pts, out, lo, hi):
+    for i in range(lo, hi):
+        out[i, 0], out[i, 1] = invert_2d(mc, cc, pts[i, 0], pts[i, 1])
+
+
 def _invert_2d_batch(mc, cc, pts):
     out = np.empty((pts.shape[0], 2))
-    for i in prange(pts.shape[0]):
-        out[i, 0], out[i, 1] = invert_2d(mc, cc, pts[i, 0], pts[i, 1])
+    in_threads(_invert_2d_range, pts.shape[0], mc, cc, pts, out)
     return out
 
 
