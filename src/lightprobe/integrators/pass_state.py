@@ -47,7 +47,7 @@ class PassConstants(NamedTuple):
     mesh_scene: int  # Embree scene handle (0: no meshes)
     scratch: np.ndarray  # Embree's per-thread scratch rows (geometry/embree.py)
     ray_counts: np.ndarray  # (threads, 8) int64: rays sent to Embree per thread (a row = a cache line)
-    numbers: np.ndarray  # (threads, m rounded up to 8, 3): a camera sample's Sobol' numbers, per thread
+    numbers: np.ndarray  # (threads, SETUP_RUN x m rounded up to 8, 3): a run's Sobol' numbers (stages/setup.py)
     packet_slots: np.ndarray  # (threads, 8) int64: the slots of a thread's packet of shadow rays, or of its lane_rays
     lane_rays: np.ndarray  # (threads, ray_lanes.FIELDS, 8) float64: a thread's block of 8 rays and their hits
     pixels: np.ndarray  # the pass's pixels, in buffer order (schedule.pass_pixels)

@@ -54,6 +54,7 @@ from .schedule import pass_pixels
 from .settings import DIFFUSE, HEURISTICS, RenderSettings, settings_record
 from .stages import environment_lanes
 from .stages.ray_lanes import FIELDS as RAY_FIELDS
+from .stages.setup import SETUP_RUN
 from .techniques import STRATEGIES
 
 __all__ = [
@@ -437,8 +438,9 @@ class _Pass:
             mesh_scene=tracer.mesh_scene,
             scratch=tracer.scratch,
             ray_counts=self.ray_counts,
-            # a camera sample's Sobol' numbers, one row per thread (rows of whole cache lines: 8 slots x 24 bytes)
-            numbers=np.zeros((threads_max, (m + LANES - 1) // LANES * LANES, 3)),
+            # a run of camera samples' Sobol' numbers, per thread (stages/setup.py; rows of whole cache lines: 8
+            # slots x 24 bytes)
+            numbers=np.zeros((threads_max, (SETUP_RUN * m + LANES - 1) // LANES * LANES, 3)),
             packet_slots=np.zeros((threads_max, max(PACKET, LANES)), np.int64),
             lane_rays=np.zeros((threads_max, RAY_FIELDS, LANES)),
             pixels=np.zeros(0, np.int64),

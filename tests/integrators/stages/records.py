@@ -13,6 +13,7 @@ from lightprobe.integrators import outlines, pipeline
 from lightprobe.integrators.accumulation import Accumulator
 from lightprobe.integrators.pass_state import CameraSamples, PassConstants, Slots, camera_buffers, slot_buffers
 from lightprobe.integrators.stages.ray_lanes import FIELDS as RAY_FIELDS
+from lightprobe.integrators.stages.setup import SETUP_RUN
 from lightprobe.integrators.techniques import STRATEGIES
 from lightprobe.scene import Scene
 
@@ -38,7 +39,7 @@ def constants(m: int, **given) -> PassConstants:
         "mesh_scene": 0,
         "scratch": new_scratch(),
         "ray_counts": np.zeros((threads, 8), np.int64),
-        "numbers": np.zeros((threads, (m + 7) // 8 * 8, 3)),
+        "numbers": np.zeros((threads, (SETUP_RUN * m + 7) // 8 * 8, 3)),
         "packet_slots": np.zeros((threads, PACKET), np.int64),
         "lane_rays": np.zeros((threads, RAY_FIELDS, 8)),
         "pixels": np.zeros(0, np.int64),

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from numba import njit
 
-from lightprobe.integrators.stages.sobol_lanes import LANES, camera_numbers_block, slot_numbers_block
+from lightprobe.integrators.stages.sobol_lanes import LANES, camera_numbers_block, slot_numbers_run
 from lightprobe.integrators.techniques import BRDF, MIS, technique_slot
 from lightprobe.sampling.rng import SAMPLERS, sample_state, uniform, uniform_2d
 
@@ -12,20 +12,33 @@ SOBOL = SAMPLERS["sobol"]
 
 
 @njit
-def _lanes(seed, pixels, samples, strategy, n_bsdf, m):
-    out = np.full((pixels.shape[0] * m + 1, 3), -7.0)  # one row past the last camera sample's: must stay untouched
-    for k in range(pixels.shape[0]):
-        rs = sample_state(SOBOL, seed, pixels[k], samples[k])
-        for first in range(0, m, LANES):
-            slot_numbers_block(out, rs[2], rs[3], strategy == MIS, n_bsdf, m, k * m + first, first)
+def _lanes(seed, pixels, spp_pass, sample_start, material, strategy, n_bsdf, m, run):
+    """Every camera sample's slot numbers as the setup stage makes them: runs of ``run`` camera samples, 8 flat
+    slots at a time, into rows (k - k0) m + j of a scratch, copied out to rows k m + j."""
+    n = material.shape[0]
+    out = np.full((n * m + 1, 3), -7.0)  # one row past the last camera sample's: must stay untouched
+    own = np.full(((run * m + 7) // 8 * 8 + 1, 3), -9.0)
+    for k0 in range(0, n, run):
+        k1 = min(n, k0 + run)
+        own[:] = -9.0
+        for f in range(0, (k1 - k0) * m, LANES):
+            mis = strategy == MIS
+            slot_numbers_run(own, seed, pixels, spp_pass, sample_start, material, mis, n_bsdf, m, k0, k1 - k0, f)
+        if own[(k1 - k0) * m :].max() != -9.0:  # no row past the run's is written
+            out[-1] = 1e9
+        for k in range(k0, k1):
+            if material[k] >= 0:
+                out[k * m : (k + 1) * m] = own[(k - k0) * m : (k - k0 + 1) * m]
     return out
 
 
 @njit
-def _scalar(seed, pixels, samples, strategy, n_bsdf, m):
-    out = np.full((pixels.shape[0] * m + 1, 3), -7.0)
-    for k in range(pixels.shape[0]):
-        rs = sample_state(SOBOL, seed, pixels[k], samples[k])
+def _scalar(seed, pixels, spp_pass, sample_start, material, strategy, n_bsdf, m):
+    out = np.full((material.shape[0] * m + 1, 3), -7.0)
+    for k in range(material.shape[0]):
+        if material[k] < 0:
+            continue
+        rs = sample_state(SOBOL, seed, pixels[k // spp_pass], sample_start + k % spp_pass)
         for j in range(m):
             rj, slot = technique_slot(rs, strategy, n_bsdf, m - n_bsdf, j)
             u0, u1 = uniform_2d(rj, 2 + 3 * slot)
@@ -36,20 +49,33 @@ def _scalar(seed, pixels, samples, strategy, n_bsdf, m):
 
 
 @pytest.mark.parametrize(
-    ("strategy", "n_bsdf", "m"),
-    [(MIS, 4, 8), (MIS, 2, 3), (MIS, 1, 2), (MIS, 5, 13), (MIS, 0, 4), (BRDF, 1, 1), (BRDF, 9, 9)],
+    ("strategy", "n_bsdf", "m", "spp_pass", "sample_start", "run"),
+    [
+        (MIS, 4, 8, 1, 0, 32),
+        (MIS, 2, 3, 3, 5, 32),
+        (MIS, 1, 2, 64, 1 << 20, 32),
+        (MIS, 5, 13, 2, (1 << 32) - 1, 7),
+        (MIS, 0, 4, 1, 0, 5),
+        (BRDF, 1, 1, 4, 0, 32),
+        (BRDF, 9, 9, 1, 0, 3),
+    ],
 )
-def test_slot_numbers_in_lanes_are_the_scalar_samplers(strategy, n_bsdf, m):
+def test_slot_numbers_in_lanes_are_the_scalar_samplers(strategy, n_bsdf, m, spp_pass, sample_start, run):
+    """Slot j of camera sample k (pixel k // spp_pass, sample index sample_start + k % spp_pass, across 2^32 where a
+    fresh scramble starts), runs whose slots do not fill whole blocks of 8, camera samples with nothing to shade
+    (material -1: theirs are not needed), a pass whose length is not a multiple of the run."""
     rng = np.random.default_rng(m * 31 + n_bsdf)
-    pixels = rng.integers(0, 1 << 20, 3000)
-    samples = rng.integers(0, 1 << 12, 3000)
-    samples[:4] = [0, (1 << 32) - 1, 1 << 32, (1 << 40) + 12345]  # indices past 2^32 start a fresh scramble
+    n = 1001 * spp_pass + 3
+    pixels = rng.integers(0, 1 << 20, n // spp_pass + 1)
+    material = np.where(rng.random(n) < 0.2, -1, rng.integers(0, 3, n))
+    material[:40] = -1  # whole runs and blocks with nothing shaded
     seed = int(rng.integers(0, 1 << 31))
-    lanes = _lanes(seed, pixels, samples, strategy, n_bsdf, m)
-    scalar = _scalar(seed, pixels, samples, strategy, n_bsdf, m)
+    lanes = _lanes(seed, pixels, spp_pass, sample_start, material, strategy, n_bsdf, m, run)
+    scalar = _scalar(seed, pixels, spp_pass, sample_start, material, strategy, n_bsdf, m)
     assert np.array_equal(lanes, scalar)
     assert np.all(lanes[-1] == -7.0)
-    assert np.all((lanes[:-1] >= 0.0) & (lanes[:-1] < 1.0))
+    shaded = np.repeat(material >= 0, m)
+    assert np.all((lanes[:-1][shaded] >= 0.0) & (lanes[:-1][shaded] < 1.0))
 
 
 @njit

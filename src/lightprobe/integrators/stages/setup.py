@@ -11,6 +11,7 @@ sample, its weight f cos / pdf) or, for a light slot, its 2D pair for the light-
 
 from __future__ import annotations
 
+import numpy as np
 from numba import types
 from numba.extending import overload
 
@@ -34,9 +35,9 @@ from ..techniques import (
     technique_slot,
 )
 from ..textured_hits import apply_textures, material_parameters
-from .sobol_lanes import slot_numbers_block
+from .sobol_lanes import slot_numbers_run
 
-__all__ = ["emitter_of", "shading_setup", "shading_setup_textured"]
+__all__ = ["SETUP_RUN", "emitter_of", "shading_setup", "shading_setup_textured"]
 
 
 @jit_inline
@@ -102,13 +103,37 @@ def shading_setup_textured(s, env, lights, c, cams, slots, worker, lo, hi):
     _shading_setup(s, env, lights, c, cams, slots, worker, lo, hi, True)
 
 
+#: camera samples whose slots' Sobol' numbers are made together (``slot_numbers_run``: 8 slots at a time, across
+#: camera samples): the per-thread rows of ``PassConstants.numbers`` hold SETUP_RUN x m of them
+SETUP_RUN = 32
+
+
 @jit_inline
 def _shading_setup(s, env, lights, c, cams, slots, worker, lo, hi, textured):
-    """Camera samples lo .. hi - 1 (``textured``: a compile-time constant, whether their materials may be)."""
-    m, n_bsdf = c.m, c.n_bsdf
+    """Camera samples lo .. hi - 1 (``textured``: a compile-time constant, whether their materials may be), in runs
+    of SETUP_RUN: each sample's hit, frame and what its ray sees; then, under ``sobol``, the run's slot numbers 8 at a
+    time; then each shaded sample's slots."""
+    for k0 in range(lo, hi, SETUP_RUN):
+        k1 = min(hi, k0 + SETUP_RUN)
+        _hits(s, env, lights, c, cams, slots, k0, k1, textured)
+        if c.sampler == SOBOL:
+            own = c.numbers[worker]
+            for f in range(0, (k1 - k0) * c.m, LANES):
+                slot_numbers_run(
+                    own, c.seed, c.pixels, c.spp_pass, c.sample_start, cams.material, c.strategy == MIS, c.n_bsdf, c.m,
+                    k0, k1 - k0, f,
+                )  # fmt: skip
+        _slots(s, c, cams, slots, worker, k0, k1)
+
+
+@jit_inline
+def _hits(s, env, lights, c, cams, slots, k0, k1, textured):
+    """Camera samples k0 .. k1 - 1: the hit point, shading frame and material (``material`` -1 where nothing is
+    shaded), the radiance the camera ray sees directly, the textures; every slot emptied."""
+    m = c.m
     ox, oy, oz = c.cam[0], c.cam[1], c.cam[2]
-    state, wdir, tpdf = slots.state, slots.wdir, slots.tpdf
-    for k in range(lo, hi):
+    state = slots.state
+    for k in range(k0, k1):
         base = k * m
         cams.material[k] = -1  # no shading for this camera sample (a miss, or the back of a one-sided surface)
         for j in range(m):
@@ -134,22 +159,33 @@ def _shading_setup(s, env, lights, c, cams, slots, worker, lo, hi, textured):
         if wo[2] <= 0.0:
             continue
         _textures_if(textured, s, cams, k, dx, dy, dz)
+
+
+@jit_inline
+def _slots(s, c, cams, slots, worker, k0, k1):
+    """The slots of the shaded camera samples among k0 .. k1 - 1: a direction from BSDF or hemisphere sampling, or
+    the 2D pair of a light slot; under ``sobol`` from the run's numbers (``c.numbers[worker]``, row (k - k0) m + j)."""
+    m, n_bsdf = c.m, c.n_bsdf
+    state, wdir, tpdf = slots.state, slots.wdir, slots.tpdf
+    sobol = c.sampler == SOBOL
+    own = c.numbers[worker]
+    for k in range(k0, k1):
+        if cams.material[k] < 0:
+            continue
+        base = k * m
+        row = (k - k0) * m
         ts, tt, ns, wo = load_shading_frame(cams.frame, cams.wo_local, k)
         mk, mp = s.material_kind[cams.material[k]], material_parameters(s, cams, k)
-        rs = sample_state(c.sampler, c.seed, c.pixels[k // c.spp_pass], c.sample_start + k % c.spp_pass)
-        sobol = c.sampler == SOBOL
-        own = c.numbers[worker]
-        if sobol:
-            # the slots' Sobol' numbers 8 at a time (sobol_lanes.py): the same bits as uniform_2d and uniform below
-            for first in range(0, m, LANES):
-                slot_numbers_block(own, rs[2], rs[3], c.strategy == MIS, n_bsdf, m, first, first)
+        rs = (c.sampler, np.uint64(0), np.uint64(0), np.int64(0))  # the independent sampler's state, below
+        if not sobol:
+            rs = sample_state(c.sampler, c.seed, c.pixels[k // c.spp_pass], c.sample_start + k % c.spp_pass)
         for j in range(m):
             r = base + j
             technique = c.strategy
             if c.strategy == MIS:
                 technique = BRDF if j < n_bsdf else ENV
             if sobol:
-                u0, u1, u2 = own[j, 0], own[j, 1], own[j, 2]
+                u0, u1, u2 = own[row + j, 0], own[row + j, 1], own[row + j, 2]
             else:
                 rj, slot = technique_slot(rs, c.strategy, n_bsdf, m - n_bsdf, j)
                 u0, u1 = uniform_2d(rj, 2 + 3 * slot)

@@ -1,12 +1,13 @@
-"""A camera sample's shading-slot random numbers under the ``sobol`` sampler, eight slots at a time, as vector IR.
+"""The camera samples' shading-slot random numbers under the ``sobol`` sampler, eight slots at a time, as vector IR.
 
 The shading setup draws three numbers per slot -- the 2D pair ``uniform_2d(rj, 2 + 3 slot)`` and the 1D choice
 ``uniform(rj, 4 + 3 slot)`` of :func:`lightprobe.integrators.techniques.technique_slot`'s (state, slot) -- and in
 scalar code they are a fifth of the setup stage: chains of 64-bit multiplies (SplitMix64) and the Laine-Karras
-hash, a few hundred integer operations per slot that wait on one another.  :func:`slot_numbers_block` computes them
-for 8 slots at once in 8 integer lanes (AVX-512 multiplies 8 x 64 bits per instruction).  Integer arithmetic is
-exact, so every lane gives the scalar code's bits; the float conversion ``x * 2^-32`` of a 32-bit integer is exact
-too.  Tested against :mod:`lightprobe.sampling.rng` number for number (``tests/sampling/test_sobol_lanes.py``).
+hash, a few hundred integer operations per slot that wait on one another.  :func:`slot_numbers_run` computes them
+for 8 slots at once in 8 integer lanes (AVX-512 multiplies 8 x 64 bits per instruction), the slots of several camera
+samples side by side where a camera sample has fewer than 8 (decisions.md 132).  Integer arithmetic is exact, so
+every lane gives the scalar code's bits; the float conversion ``x * 2^-32`` of a 32-bit integer is exact too.  Tested
+against :mod:`lightprobe.sampling.rng` number for number (``tests/integrators/stages/test_sobol_lanes.py``).
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from numba.extending import intrinsic
 from ...sampling.rng import _DIM, _GOLDEN, _INV32, _LK1, _LK2, _LK3, _M1, _M2, _PIXEL, _SUPERSET
 from ...simd import LANES, Lanes
 
-__all__ = ["LANES", "camera_numbers_block", "slot_numbers_block"]
+__all__ = ["LANES", "camera_numbers_block", "slot_numbers_run"]
 
 F64, I32, I64 = ir.DoubleType(), ir.IntType(32), ir.IntType(64)
 VI32, VI64, VF64 = ir.VectorType(I32, LANES), ir.VectorType(I64, LANES), ir.VectorType(F64, LANES)
@@ -98,51 +99,78 @@ class _Integers:
         return self.sobol_x(h, shuffled), self.to_unit(y)
 
 
+def _slot_numbers(n: _Integers, pkey, sample, mis, n_bsdf, m, j):
+    """(u0, u1, u2) of shading slot ``j`` (int64 lanes) of camera samples with pixel keys ``pkey`` and sample indices
+    ``sample``: the numbers ``technique_slot(state, strategy, n_bsdf, m - n_bsdf, j)`` gives its slot,
+    ``uniform_2d(rj, 2 + 3 slot)`` and ``uniform(rj, 4 + 3 slot)``; ``mis`` (i1 lanes) whether the strategy is MIS."""
+    v, b = n.v, n.b
+    # techniques.technique_slot + rng.group_slot: under MIS the BSDF slots are one group and the light slots another;
+    # otherwise all m slots are one.  Member jj of a group of size g takes sample index sample g + jj and the
+    # dimensions of the group's first slot.
+    light = b.and_(mis, b.icmp_signed(">=", j, n_bsdf))
+    group_first = b.select(light, n_bsdf, v.i(0))
+    group_size = b.select(mis, b.select(light, b.sub(m, n_bsdf), n_bsdf), m)
+    index = b.add(b.mul(sample, group_size), b.sub(j, group_first))
+    # the 2D pair: dimensions 2 + 3 slot and 3 + 3 slot are Sobol' pair 1 + 2 slot (rng._pair_of)
+    u0, u1 = n.sobol_2d(pkey, index, b.add(v.i(1), b.mul(v.i(2), group_first)))
+    # the 1D choice: dimension 4 + 3 slot is the first coordinate of Sobol' pair 2 + 2 slot
+    h2, shuffled2 = n.pair_hash(pkey, index, b.add(v.i(2), b.mul(v.i(2), group_first)))
+    return u0, u1, n.sobol_x(h2, shuffled2)
+
+
 @intrinsic
-def slot_numbers_block(typingctx, out, pkey, sample, mis, n_bsdf, m, row, first_slot):
-    """out[row + j - first_slot] = (u0, u1, u2) for shading slots j = first_slot .. first_slot + 7 below m of one
-    camera sample whose ``sample_state`` under ``sobol`` has pixel key ``pkey`` and sample index ``sample``: the
-    numbers ``technique_slot(state, strategy, n_bsdf, m - n_bsdf, j)`` gives its slot, ``uniform_2d(rj, 2 + 3 slot)``
-    and ``uniform(rj, 4 + 3 slot)``, where ``mis`` says whether the strategy is MIS.  out (N, 3) float64
-    C-contiguous, pkey uint64, mis a boolean, the rest integers."""
+def slot_numbers_run(typingctx, out, seed, pixels, spp_pass, sample_start, material, mis, n_bsdf, m, k0, count, f):
+    """out[f + i] = (u0, u1, u2) for the 8 flat slots f + i = (k - k0) m + j, i = 0 .. 7, of camera samples k = k0 ..
+    k0 + count - 1 of a pass (pixel ``pixels[k // spp_pass]``, sample index ``sample_start + k % spp_pass``, as
+    ``sample_state(sobol, seed, ...)``): slot j's ``uniform_2d(rj, 2 + 3 slot)`` and ``uniform(rj, 4 + 3 slot)`` of
+    ``technique_slot(state, strategy, n_bsdf, m - n_bsdf, j)``, ``mis`` saying whether the strategy is MIS.  The
+    slots of several camera samples share the lanes (a camera sample of 2 or 3 slots filled 2 or 3 of 8 before), and
+    a block where no camera sample is shaded (``material[k] < 0``) computes nothing.  Rows past the range stay
+    untouched.  out (N, 3) float64 C-contiguous, pixels and material (P,) / (K,) int64, mis a boolean, the rest
+    integers."""
+    integer = (seed, spp_pass, sample_start, n_bsdf, m, k0, count, f)
     if not (
         out == types.Array(types.float64, 2, "C")
-        and pkey == types.uint64
+        and all(
+            isinstance(a, types.Array) and (a.dtype, a.ndim, a.layout) == (types.int64, 1, "C")
+            for a in (pixels, material)
+        )
         and isinstance(mis, types.Boolean)
-        and all(isinstance(t, types.Integer) for t in (sample, n_bsdf, m, row, first_slot))
+        and all(isinstance(t, types.Integer) for t in integer)
     ):
         return None
-    signature_args = (out, pkey, sample, mis, n_bsdf, m, row, first_slot)
+    signature_args = (out, seed, pixels, spp_pass, sample_start, material, mis, n_bsdf, m, k0, count, f)
 
     def codegen(context, builder, signature, args):
         out_a = context.make_array(signature.args[0])(context, builder, args[0])
+        pixels_a = context.make_array(signature.args[2])(context, builder, args[2])
+        material_a = context.make_array(signature.args[5])(context, builder, args[5])
         v, b = Lanes(builder), builder
         n = _Integers(v)
 
         def scalar(i):
             return context.cast(b, args[i], signature.args[i], types.int64)
 
-        sample_v, n_bsdf_v, m_v, first_v = (v.splat(scalar(i), VI64) for i in (2, 4, 5, 7))
-        mis = v.splat(context.cast(b, args[3], signature.args[3], types.boolean), ir.VectorType(ir.IntType(1), LANES))
-        pkey_v = v.splat(args[1], VI64)
-        j = b.add(first_v, ir.Constant(VI64, list(range(LANES))))
-        live = b.icmp_signed("<", j, m_v)
-        # techniques.technique_slot + rng.group_slot: under MIS the BSDF slots are one group and the light slots
-        # another; otherwise all m slots are one.  Member jj of a group of n takes sample index sample n + jj and
-        # the dimensions of the group's first slot.
-        light = b.and_(mis, b.icmp_signed(">=", j, n_bsdf_v))
-        group_first = b.select(light, n_bsdf_v, v.i(0))
-        group_size = b.select(mis, b.select(light, b.sub(m_v, n_bsdf_v), n_bsdf_v), m_v)
-        index = b.add(b.mul(sample_v, group_size), b.sub(j, group_first))
-
-        # the 2D pair: dimensions 2 + 3 slot and 3 + 3 slot are Sobol' pair 1 + 2 slot (rng._pair_of)
-        u0, u1 = n.sobol_2d(pkey_v, index, b.add(v.i(1), b.mul(v.i(2), group_first)))
-        # the 1D choice: dimension 4 + 3 slot is the first coordinate of Sobol' pair 2 + 2 slot
-        h2, shuffled2 = n.pair_hash(pkey_v, index, b.add(v.i(2), b.mul(v.i(2), group_first)))
-        u2 = n.sobol_x(h2, shuffled2)
-        # the 8 rows (u0, u1, u2) are 24 consecutive doubles: one masked vector store (a scatter per number measured
-        # the same in the render, 3.0-3.1 s of setup)
-        v.store_run([u0, u1, u2], b.gep(out_a.data, [b.mul(scalar(6), I64(3))]), live)
+        seed_v, spp_v, first_sample_v, n_bsdf_v, m_v, k0_v, count_v = (
+            v.splat(scalar(i), VI64) for i in (1, 3, 4, 7, 8, 9, 10)
+        )
+        mis_v = v.splat(context.cast(b, args[6], signature.args[6], types.boolean), ir.VectorType(ir.IntType(1), LANES))
+        flat = b.add(v.splat(scalar(11), VI64), ir.Constant(VI64, list(range(LANES))))
+        q = v.quotient(flat, m_v)  # the camera sample's place in the run
+        j = b.sub(flat, b.mul(q, m_v))
+        live = b.icmp_signed("<", q, count_v)
+        k = b.add(k0_v, v.imin(q, b.sub(count_v, v.i(1))))  # clipped for reading
+        shaded = b.and_(live, b.icmp_signed(">=", v.gather(I64, v.address(material_a, k, 8)), v.i(0)))
+        done = v.skip_unless(shaded)
+        p = v.quotient(k, spp_v)  # the camera sample's pixel in the pass
+        pixel = v.gather(I64, v.address(pixels_a, p, 8))
+        sample = b.add(first_sample_v, b.sub(k, b.mul(p, spp_v)))
+        pkey = n.mix(b.add(b.mul(seed_v, n.c64(_GOLDEN)), b.mul(pixel, n.c64(_PIXEL))))  # rng.pixel_key
+        u0, u1, u2 = _slot_numbers(n, pkey, sample, mis_v, n_bsdf_v, m_v, j)
+        # the 8 rows (u0, u1, u2) are 24 consecutive doubles: one vector store (a scatter per number measured the
+        # same in the render, 3.0-3.1 s of setup)
+        v.store_run([u0, u1, u2], b.gep(out_a.data, [b.mul(scalar(11), I64(3))]), live)
+        v.end_skip(done)
         return context.get_dummy_value()
 
     return types.void(*signature_args), codegen
