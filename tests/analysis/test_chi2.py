@@ -86,3 +86,26 @@ def test_cell_integrals_match_their_closed_forms_in_a_turned_frame():
     assert got.sum() == pytest.approx(1.0, abs=1e-10)
     with pytest.raises(ValueError, match="returned 1 values for"):
         chi2.spherical_expected(lambda v: np.ones(1), theta, phi, max_depth=0)
+
+
+def test_directions_are_counted_in_the_cells_of_their_angles_in_a_turned_frame():
+    """Each direction lands in the cell of its (theta, phi) in the frame's local axes: directions at known cell
+    centres; a direction exactly on an inner edge belongs to the cell above it (NumPy's ``searchsorted(side=
+    "right")``); the poles and phi = 0 fall in the first and last cells."""
+    rng = np.random.default_rng(4)
+    frame = np.linalg.qr(rng.normal(size=(3, 3)))[0]
+    theta = np.array([0.0, 0.05, 0.4, 1.3, 2.0, 3.0, np.pi])
+    phi = np.array([0.0, 0.7, 2.5, 2.6, 5.0, 2 * np.pi])
+    expected = rng.integers(0, 4, size=(theta.size - 1, phi.size - 1)).astype(float)
+    ti, pi = np.nonzero(expected)
+    ti, pi = np.repeat(ti, expected[ti, pi].astype(int)), np.repeat(pi, expected[ti, pi].astype(int))
+    t = 0.5 * (theta[ti] + theta[ti + 1])
+    p = 0.5 * (phi[pi] + phi[pi + 1])
+    local = np.column_stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)])
+    np.testing.assert_array_equal(chi2.spherical_counts(local @ frame, theta, phi, frame=frame), expected)
+
+    # a direction exactly on an inner edge of both angles: theta = acos(0) and phi = atan2(1, 0) are pi / 2 exactly
+    on_edges = chi2.spherical_counts(np.array([[0.0, 1.0, 0.0]]), [0.0, np.pi / 2, np.pi], [0.0, np.pi / 2, 2 * np.pi])
+    np.testing.assert_array_equal(on_edges, [[0, 0], [0, 1]])
+    poles = chi2.spherical_counts(np.array([[0.0, 0.0, 1.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]]), theta, phi)
+    assert poles[0, 0] == 1 and poles[-1, 0] == 1 and poles[3, 0] == 1 and poles.sum() == 3

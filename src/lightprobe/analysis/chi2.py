@@ -144,25 +144,47 @@ def _frame(frame) -> np.ndarray:
     return m
 
 
-def _angles(dirs: np.ndarray, frame: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    local = dirs @ frame.T
-    theta = np.arccos(np.clip(local[:, 2], -1.0, 1.0))
-    phi = np.mod(np.arctan2(local[:, 1], local[:, 0]), 2.0 * np.pi)
-    return theta, phi
+@jit
+def _bin_of(edges, x):
+    """The cell of ``x`` among ``edges`` (increasing): ``searchsorted(edges, x, side="right") - 1`` clipped to the
+    cells 0 .. len(edges) - 2."""
+    lo, hi = 0, edges.shape[0]  # the first edge above x lies in [lo, hi]
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if edges[mid] <= x:
+            lo = mid + 1
+        else:
+            hi = mid
+    return min(max(lo - 1, 0), edges.shape[0] - 2)
+
+
+@jit
+def _count_directions(dirs, frame, theta_edges, phi_edges, counts):
+    """Add each direction (turned into the frame: rows of ``frame`` are the local axes) to its (theta, phi) cell."""
+    for i in range(dirs.shape[0]):
+        x, y, z = dirs[i, 0], dirs[i, 1], dirs[i, 2]
+        lx = x * frame[0, 0] + y * frame[0, 1] + z * frame[0, 2]
+        ly = x * frame[1, 0] + y * frame[1, 1] + z * frame[1, 2]
+        lz = x * frame[2, 0] + y * frame[2, 1] + z * frame[2, 2]
+        theta = math.acos(min(max(lz, -1.0), 1.0))
+        phi = math.atan2(ly, lx) % (2.0 * math.pi)
+        counts[_bin_of(theta_edges, theta), _bin_of(phi_edges, phi)] += 1.0
 
 
 def spherical_counts(dirs, theta_edges, phi_edges, *, frame=None) -> np.ndarray:
-    """Histogram of unit directions over (theta, phi) cells, shape (len(theta_edges)-1, len(phi_edges)-1)."""
-    m = _frame(frame)
-    d = np.asarray(dirs, dtype=np.float64)
+    """Histogram of unit directions over (theta, phi) cells, shape (len(theta_edges)-1, len(phi_edges)-1).
+
+    One compiled pass (the frame, the angles, a bisection per axis): NumPy's matrix product of a million
+    directions, ``arctan2`` and two ``searchsorted`` took 0.17-0.2 s a test, the pass about 0.04 s (decisions.md
+    133)."""
+    m = np.ascontiguousarray(_frame(frame))
+    d = np.ascontiguousarray(dirs, dtype=np.float64)
     if d.ndim != 2 or d.shape[1] != 3:
         raise ValueError(f"dirs must be (N, 3), got {d.shape}")
-    theta, phi = _angles(d, m)
-    te, pe = np.asarray(theta_edges), np.asarray(phi_edges)
-    ti = np.clip(np.searchsorted(te, theta, side="right") - 1, 0, te.size - 2)
-    pi = np.clip(np.searchsorted(pe, phi, side="right") - 1, 0, pe.size - 2)
+    te = np.ascontiguousarray(theta_edges, dtype=np.float64)
+    pe = np.ascontiguousarray(phi_edges, dtype=np.float64)
     counts = np.zeros((te.size - 1, pe.size - 1))
-    np.add.at(counts, (ti, pi), 1.0)
+    _count_directions(d, m, te, pe, counts)
     return counts
 
 
