@@ -3,10 +3,11 @@ directly, and its shading slots' directions.
 
 A camera ray that misses sees the infinite lights (the environment, directional lights' discs); one that hits an
 emitter sees its radiance (from the hit itself, never a second intersection, which from another origin can miss a
-small light's edge).  Then each of the camera sample's ``m`` slots gets its random numbers (under ``sobol`` 8 slots
-at a time in integer lanes, ``sobol_lanes.py``: the same bits as ``uniform_2d`` and ``uniform``) and either a
-direction from BSDF or hemisphere sampling (state ``SLOT_BSDF`` / ``SLOT_HEMI``, with its density and, for a BSDF
-sample, its weight f cos / pdf) or, for a light slot, its 2D pair for the light-sample stage (``SLOT_LIGHT``).
+small light's edge).  Then each of the camera sample's ``m`` slots gets its random numbers (under ``sobol`` made for a
+run of camera samples, 8 slots at a time in integer lanes, ``sobol_lanes.py``: the same bits as ``uniform_2d`` and
+``uniform``) and either a direction from BSDF or hemisphere sampling (state ``SLOT_BSDF`` / ``SLOT_HEMI``, with its
+density and, for a BSDF sample, its weight f cos / pdf) or, for a light slot, its 2D pair for the light-sample stage
+(``SLOT_LIGHT``).
 """
 
 from __future__ import annotations
