@@ -4,6 +4,12 @@ code named.
 
     python benchmarks/perf_profile.py                  # the peer scene (../shared/peers) at 16 spp, else the demo
     python benchmarks/perf_profile.py --scene demo --spp 64 --top 40
+    python benchmarks/perf_profile.py --scene city --equal-counts --hot light_samples setup   # any suite scene
+
+``--equal-counts`` renders with one light and one BSDF sample a camera sample (``benchmarks/equal_counts.py``'s
+settings, the BVH selector); ``--hot NAME ...`` also prints, for each compiled function whose name contains NAME,
+its hottest 128-byte stretches of machine code with each instruction's samples (the code is copied from the
+process and disassembled with ``objdump``): where a stage waits, to the instruction (decision 132).
 
 ``peer_scene.py --profile`` gives seconds per kernel; this gives the share of CPU samples per function, the
 functions a kernel calls (``uniform_2d``, ``bsdf_eval``, libm's ``atan2``, Embree) apart from the kernel's own
@@ -20,8 +26,10 @@ from __future__ import annotations
 
 import argparse
 import collections
+import ctypes
 import json
 import os
+import pickle
 import re
 import shutil
 import signal
@@ -43,6 +51,10 @@ def _demangle(symbol: str) -> str:
     return ".".join(parts) or symbol
 
 
+#: benchmarks/equal_counts.py's settings: one light sample and one BSDF sample a camera sample
+EQUAL_COUNTS = dict(n_bsdf=1, lights_per_sample=1, adaptive=False, outline_control_variate=False, light_sampler="bvh")
+
+
 def child(args) -> None:
     work = Path(args.work)
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "src"))
@@ -55,7 +67,7 @@ def child(args) -> None:
 
         scene = peer_scene()
         warm = peer_scene(resolution=(32, 32))
-    elif args.scene in ("area", "many"):
+    elif args.scene != "demo":
         from lightprobe.reference_scenes import build
 
         scene = build(args.scene, resolution=(320, 240))
@@ -65,11 +77,12 @@ def child(args) -> None:
 
         scene = demo_scene()
         warm = demo_scene(resolution=(32, 20))
-    render(warm, RenderSettings(spp=4))  # compile
+    options = EQUAL_COUNTS if args.equal_counts else {}
+    render(warm, RenderSettings(spp=4, **options))  # compile
     (work / "ready").touch()
     while not (work / "go").exists():
         time.sleep(0.05)
-    result = render(scene, RenderSettings(spp=args.spp))
+    result = render(scene, RenderSettings(spp=args.spp, **options))
     (work / "done").write_text(json.dumps({"seconds": result.stats.get("seconds")}))
     while not (work / "stopped").exists():
         time.sleep(0.05)
@@ -77,18 +90,30 @@ def child(args) -> None:
     symbols = sorted(
         (address, name) for name in engine._defined_symbols if (address := engine._ee.get_function_address(name)) != 0
     )
+    code = {}
     with open(f"/tmp/perf-{os.getpid()}.map", "w") as out:
         for (address, name), (following, _) in zip(symbols, [*symbols[1:], (symbols[-1][0] + 4096, "")], strict=True):
-            out.write(f"{address:x} {min(following - address, 1 << 20):x} {name}\n")
+            size = min(following - address, 1 << 20)
+            out.write(f"{address:x} {size:x} {name}\n")
+            if name.startswith("_ZN") and any(hot in _demangle(name) for hot in args.hot or ()):
+                code[name] = (address, ctypes.string_at(address, size))  # this process's own machine code
+    (work / "code.pickle").write_bytes(pickle.dumps(code))
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    from lightprobe.reference_scenes import NAMES, SUITE
+
     parser.add_argument(
-        "--scene", choices=["peer", "demo", "area", "many"], help="default: peer if ../shared/peers is found"
+        "--scene",
+        choices=sorted({"peer", "demo", *NAMES, *SUITE}),
+        help="default: peer if ../shared/peers is found",
     )
     parser.add_argument("--spp", type=int, default=16)
     parser.add_argument("--top", type=int, default=30, help="functions to list")
+    parser.add_argument("--equal-counts", action="store_true", help="one light and one BSDF sample a camera sample")
+    parser.add_argument("--hot", nargs="*", metavar="NAME", help="functions whose hottest machine code to print")
+    parser.add_argument("--regions", type=int, default=6, help="128-byte stretches printed per --hot function")
     parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--work", help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -104,6 +129,8 @@ def main() -> None:
     with tempfile.TemporaryDirectory(prefix="lightprobe-perf-") as work:
         env = dict(os.environ, NUMBA_CACHE_DIR=str(Path(work) / "numba"))
         command = [sys.executable, __file__, "--child", "--work", work, "--scene", args.scene, "--spp", str(args.spp)]
+        command += ["--equal-counts"] if args.equal_counts else []
+        command += ["--hot", *args.hot] if args.hot else []
         print(f"compiling in a fresh cache, then rendering the {args.scene} scene at {args.spp} spp ...", flush=True)
         proc = subprocess.Popen(command, env=env)
         while not Path(work, "ready").exists():
@@ -134,6 +161,7 @@ def main() -> None:
             ["perf", "script", "-i", data, "-F", "ip,sym,dso"], capture_output=True, text=True, check=True
         ).stdout
         os.unlink(f"/tmp/perf-{proc.pid}.map")
+        code = pickle.loads(Path(work, "code.pickle").read_bytes()) if args.hot else {}
     counts = collections.Counter()
     for line in script.splitlines():
         line = line.strip()
@@ -154,6 +182,47 @@ def main() -> None:
     print(json.dumps({"scene": args.scene, "spp": args.spp, "seconds": seconds, "samples": total}))
     for key, n in counts.most_common(args.top):
         print(f"{100 * n / total:6.2f} %  {key}")
+    for name, (address, blob) in code.items():
+        _print_hot(name, address, blob, script, args.regions)
+
+
+def _print_hot(name: str, address: int, blob: bytes, script: str, regions: int) -> None:
+    """The function's hottest 128-byte stretches, each instruction with its samples (a sample usually lands on
+    the instruction after the one it waits for: a square root's or a division's latency shows on its successor)."""
+    ips = collections.Counter()
+    for line in script.splitlines():
+        field = line.split()
+        try:
+            ip = int(field[0], 16) if field else -1
+        except ValueError:
+            continue
+        if address <= ip < address + len(blob):
+            ips[ip - address] += 1
+    total = sum(ips.values())
+    if total == 0:
+        return
+    with tempfile.NamedTemporaryFile(suffix=".bin") as f:
+        f.write(blob)
+        f.flush()
+        listing = subprocess.run(
+            ["objdump", "-D", "-b", "binary", "-mi386:x86-64", f.name], capture_output=True, text=True
+        ).stdout
+    instructions = []
+    for line in listing.splitlines():
+        found = re.match(r"\s*([0-9a-f]+):\s+(?:[0-9a-f]{2} )+\s*(.*)", line)
+        if found and found.group(2).strip():
+            instructions.append((int(found.group(1), 16), found.group(2).strip()))
+    stretches = collections.Counter()
+    for offset, n in ips.items():
+        stretches[offset // 128] += n
+    print(f"\n{_demangle(name)}: {total} samples, {len(blob)} bytes of code")
+    for stretch, n in stretches.most_common(regions):
+        print(f"  +{stretch * 128:#x}: {n} samples ({100 * n / total:.1f} %)")
+        for offset, text in instructions:
+            if stretch * 128 <= offset < (stretch + 1) * 128 and (
+                ips[offset] or "call" in text or "div" in text or "sqrt" in text
+            ):
+                print(f"    {offset:#7x} {ips[offset]:5d}  {text}")
 
 
 if __name__ == "__main__":
