@@ -174,9 +174,9 @@ def _count_directions(dirs, frame, theta_edges, phi_edges, counts):
 def spherical_counts(dirs, theta_edges, phi_edges, *, frame=None) -> np.ndarray:
     """Histogram of unit directions over (theta, phi) cells, shape (len(theta_edges)-1, len(phi_edges)-1).
 
-    One compiled pass (the frame, the angles, a bisection per axis): NumPy's matrix product of a million
-    directions, ``arctan2`` and two ``searchsorted`` took 0.17-0.2 s a test, the pass about 0.04 s (decisions.md
-    133)."""
+    One compiled pass (the frame, the angles, a bisection per axis), 0.09-0.12 s for a million directions, where
+    NumPy's matrix product, ``arctan2``, two ``searchsorted`` and ``add.at`` took 0.10-0.16 s with OpenBLAS on one
+    thread and several times that with its threads spinning on a loaded machine (decisions.md 133)."""
     m = np.ascontiguousarray(_frame(frame))
     d = np.ascontiguousarray(dirs, dtype=np.float64)
     if d.ndim != 2 or d.shape[1] != 3:
