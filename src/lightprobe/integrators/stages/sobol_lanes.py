@@ -86,6 +86,16 @@ class _Integers:
         """rng._sobol_x."""
         return self.to_unit(self.reverse32(self.laine_karras(shuffled, self.b.lshr(h, self.c64(32)))))
 
+    def pass_sample(self, pixels, seed, spp_pass, sample_start, k):
+        """(pixel key, sample index) of camera samples k (int64 lanes) of a pass: ``sample_state(sobol, seed,
+        pixels[k // spp_pass], sample_start + k % spp_pass)``'s; ``pixels`` the pass's pixel array (a Numba array
+        struct), the rest int64 lanes."""
+        b, v = self.b, self.v
+        q = v.quotient(k, spp_pass)  # the camera sample's pixel in the pass
+        pixel = v.gather(I64, v.address(pixels, q, 8))
+        sample = b.add(sample_start, b.sub(k, b.mul(q, spp_pass)))
+        return self.mix(b.add(b.mul(seed, self.c64(_GOLDEN)), b.mul(pixel, self.c64(_PIXEL)))), sample  # pixel_key
+
     def sobol_2d(self, pkey, index, pair):
         """Both coordinates of Sobol' pair ``pair`` for sample ``index`` (rng.uniform_2d): x as rng._sobol_x, y as
         rng._sobol_y_scrambled.  rng._sobol_y is reverse32 of a superset sum z, and owen_scramble begins by
@@ -162,10 +172,7 @@ def slot_numbers_run(typingctx, out, seed, pixels, spp_pass, sample_start, mater
         k = b.add(k0_v, v.imin(q, b.sub(count_v, v.i(1))))  # clipped for reading
         shaded = b.and_(live, b.icmp_signed(">=", v.gather(I64, v.address(material_a, k, 8)), v.i(0)))
         done = v.skip_unless(shaded)
-        p = v.quotient(k, spp_v)  # the camera sample's pixel in the pass
-        pixel = v.gather(I64, v.address(pixels_a, p, 8))
-        sample = b.add(first_sample_v, b.sub(k, b.mul(p, spp_v)))
-        pkey = n.mix(b.add(b.mul(seed_v, n.c64(_GOLDEN)), b.mul(pixel, n.c64(_PIXEL))))  # rng.pixel_key
+        pkey, sample = n.pass_sample(pixels_a, seed_v, spp_v, first_sample_v, k)
         u0, u1, u2 = _slot_numbers(n, pkey, sample, mis_v, n_bsdf_v, m_v, j)
         # the 8 rows (u0, u1, u2) are 24 consecutive doubles: one vector store (a scatter per number measured the
         # same in the render, 3.0-3.1 s of setup)
@@ -202,10 +209,7 @@ def camera_numbers_block(typingctx, dirs, seed, pixels, spp_pass, sample_start, 
 
         seed_v, spp_v, first_sample_v = (v.splat(scalar(i), VI64) for i in (1, 3, 4))
         _, inside, k = v.slots(scalar(5), cgutils.unpack_tuple(b, dirs_a.shape, 2)[0])
-        q = v.quotient(k, spp_v)  # the camera sample's pixel in the pass
-        pixel = v.gather(I64, v.address(pixels_a, q, 8))
-        sample = b.add(first_sample_v, b.sub(k, b.mul(q, spp_v)))
-        pkey = n.mix(b.add(b.mul(seed_v, n.c64(_GOLDEN)), b.mul(pixel, n.c64(_PIXEL))))  # rng.pixel_key
+        pkey, sample = n.pass_sample(pixels_a, seed_v, spp_v, first_sample_v, k)
         u0, u1 = n.sobol_2d(pkey, sample, v.i(0))  # dimensions 0 and 1: Sobol' pair 0
         first = b.extract_element(k, I32(0))
         v.store_run([u0, u1, v.f(0.0)], b.gep(dirs_a.data, [b.mul(first, I64(3))]), inside)
