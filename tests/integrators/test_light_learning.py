@@ -105,3 +105,31 @@ def test_learning_leaves_the_mean_where_it_was(scene):
         sigma = np.sqrt(variances["learned"][..., c].sum() + variances["bvh"][..., c].sum())
         assert abs(difference) < 4 * sigma, (c, difference / sigma)
         assert sigma < 0.01 * sums["bvh"][..., c].sum()
+
+
+def test_compiling_the_learning_kernels_records_nothing_and_runs_every_kernel(scene, monkeypatch):
+    # a first render compiles the learning's kernels in its warm-up (decisions.md 135): with the pass's own record
+    # types, while recording nothing and learning nothing; the made-up records must take ``learned`` to its last
+    # kernel, or the pilot would still compile that one
+    from lightprobe.emitters import selection_learning
+    from lightprobe.geometry.raytracer import RayTracer
+    from lightprobe.integrators.accumulation import Accumulator
+    from lightprobe.integrators.schedule import pass_pixels
+    from lightprobe.integrators.wavefront import _Pass, resolve
+
+    arrays = scene.compile()
+    n_pixels = int(np.prod(scene.camera.resolution))
+    plan = resolve(scene, RenderSettings(spp=16, light_sampler="learned", adaptive=False))
+    work = _Pass(scene, plan, arrays, RayTracer(arrays), n_pixels, 1)
+    work.make_buffers()
+    assert work.learning is not None
+    selector = work.learning.selector
+    reached = []
+    last_kernel = selection_learning._learned_probabilities
+    monkeypatch.setattr(
+        selection_learning, "_learned_probabilities", lambda *args: reached.append(1) or last_kernel(*args)
+    )
+    work.learning.compile_kernels(work.records(Accumulator(n_pixels), pass_pixels(0, 1), 1, 0))
+    assert reached == [1]
+    assert work.learning.recording and work.learning.selector is selector
+    assert np.all(work.learning.records.light == -1)  # nothing recorded

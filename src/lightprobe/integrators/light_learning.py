@@ -123,12 +123,34 @@ class Learning:
             r.normal, r.light, r.value,
         )  # fmt: skip
 
+    def compile_kernels(self, records: tuple) -> None:
+        """Compile (or load from the cache) the kernels that record the pilot and learn from it, with the types the
+        render calls them with, now rather than in the pilot's passes: a first render of its kind does this while
+        its compile helper still works on the stages (decisions.md 135).  Nothing is recorded and nothing is learned:
+        ``_record`` runs over no camera sample, and ``learned`` over a few made-up records, its result dropped."""
+        _s, _env, _lights, sel, c, cams, slots, _acc = records
+        r = self.records
+        _record(sel, c, cams, slots, self.first, self.slots, r.samples, r.stride, r.point, r.normal, r.light, r.value,
+                0, 0)  # fmt: skip
+        learned(self.selector, _made_up_records(self.selector))
+
     def learn(self) -> LightSelector:
         """The selector learned from the records (kept no longer)."""
         self.selector = learned(self.selector, self.records)
         self.recording = False
         self.records = None
         return self.selector
+
+
+def _made_up_records(selector: LightSelector, count: int = 64) -> Records:
+    """``count`` records along a line, each of a bounded light, every other one blocked: enough for ``learned`` to
+    run each of its kernels (it learns nothing from records that no shadow blocked)."""
+    records = Records(count, 1, 1, limit=count)
+    records.point[:] = np.linspace(0.0, 1.0, records.point.size, dtype=np.float32).reshape(-1, 3)
+    records.normal[:, 1] = 1.0
+    records.light[:] = np.arange(count) % max(1, selector.n_bounded)
+    records.value[:] = np.where(np.arange(count) % 2 == 0, 1.0, -1.0)
+    return records
 
 
 @jit

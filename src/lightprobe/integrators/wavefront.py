@@ -306,6 +306,8 @@ def _warm_up(work: _Pass, n_pixels: int, helpers: precompile.Helpers) -> None:
             signatures = precompile.record_types_pickled(records)
             precompile.save_record_types(signatures)  # for the next render's early helpers
             helpers.start(plan.stages(), signatures)
+            if work.learning is not None:  # its kernels now, beside the helpers, not in the pilot's first passes
+                work.learning.compile_kernels(records)
             work.launcher.prepare(work.stages, records, helpers if helpers.started else None)
         work.run(Accumulator(n_pixels), pass_pixels(0, 1), 1, 0)
     finally:
