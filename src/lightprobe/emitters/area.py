@@ -543,7 +543,8 @@ def light_sample(lights, l, strategy, px, py, pz, nx, ny, nz, u0, u1):
         # a direction toward a sphere crosses it twice, and area sampling may pick either point (the far one seen
         # through the sphere): the density of the direction sums both (light_pdf), and the radiance and distance
         # are those of the first crossing, which is what a ray in direction w meets
-        pdf = light_pdf(lights, l, AREA, px, py, pz, nx, ny, nz, wx, wy, wz)
+        # (the strategy as an int64, not the literal AREA: Numba would compile light_pdf again for the literal)
+        pdf = light_pdf(lights, l, np.int64(AREA), px, py, pz, nx, ny, nz, wx, wy, wz)
         return _toward(lights, l, px, py, pz, wx, wy, wz, pdf)
     r, gg, b = light_radiance(lights, l, cos_light)
     return wx, wy, wz, dist, r, gg, b, pdf

@@ -382,8 +382,9 @@ def _saoh_split(order, start, end, centroid, lo, hi, phi, w, cos_o, cos_e, scrat
             side_scratch[x, 0] += phi[light]
             side_scratch[x, 1] = min(side_scratch[x, 1], cos_e[light])
             side_scratch[x, 2] += 1.0
-        _side_costs(k, side_scratch, kr, nb - 1, 0, -1, none, right_cost)  # buckets x .. 11: the right sides
-        _side_costs(k, side_scratch, kr, 0, nb - 1, 1, right_cost, split_cost)  # + buckets 0 .. x: each split
+        # (int64 bounds, not literals: one compiled _side_costs for both sweeps, not one per literal)
+        _side_costs(k, side_scratch, kr, nb - 1, np.int64(0), np.int64(-1), none, right_cost)  # x .. 11: right sides
+        _side_costs(k, side_scratch, kr, np.int64(0), nb - 1, np.int64(1), right_cost, split_cost)  # + 0 .. x: splits
         for split in range(nb - 1):
             cost = split_cost[split]
             if 0.0 < cost < best_cost:  # as pbrt-v4: boxes of no area (point lights) cost nothing, and say nothing
