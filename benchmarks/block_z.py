@@ -34,8 +34,6 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 sys.path.insert(0, str(ROOT / "src"))
 
-LUMINANCE = np.array([0.212671, 0.715160, 0.072169])
-
 
 def blocks(image: np.ndarray, block: int) -> np.ndarray:
     """Block means (H / block, W / block, 3) of an image (H, W, 3); the last partial rows and columns left out."""
@@ -47,15 +45,19 @@ def block_z(images: np.ndarray, ref_mean: np.ndarray, ref_variance: np.ndarray, 
     """Each block's z per channel: the seeds' block means against the reference's, with the variance of the seeds'
     mean from their spread and the reference's from its passes plus (2e-4 ref)^2 + 1e-4^2 per pixel (float32
     round-off of Mitsuba's film, as suite.py's pooled z), both averaged over the block's pixels."""
+    from suite import ABSOLUTE
+
     seeds = images.shape[0]
     means = np.array([blocks(image, block) for image in images])
     lp_var = means.var(axis=0, ddof=1) / seeds
-    ref_var = blocks(ref_variance + (2e-4 * ref_mean) ** 2 + 1e-4**2, block) / block**2
+    ref_var = blocks(ref_variance + (2e-4 * ref_mean) ** 2 + ABSOLUTE**2, block) / block**2
     return (means.mean(axis=0) - blocks(ref_mean, block)) / np.sqrt(lp_var + ref_var + 1e-300)
 
 
 def region_difference(images: np.ndarray, ref_mean: np.ndarray, ref_variance: np.ndarray, rows, cols) -> dict:
     """The luminance mean over a region, lightprobe's seeds against the reference: relative difference and z."""
+    from lightprobe.color import LUMINANCE_WEIGHTS as LUMINANCE
+
     per_seed = (images[:, rows, cols] @ LUMINANCE).mean(axis=(1, 2))
     ref = float((ref_mean[rows, cols] @ LUMINANCE).mean())
     n = ref_mean[rows, cols].shape[0] * ref_mean[rows, cols].shape[1]

@@ -114,24 +114,23 @@ class Learning:
 
     def record(self, records: tuple) -> None:
         """Keep the light samples of the pass whose stage records are ``records`` (``_Pass.records``)."""
-        _s, _env, _lights, sel, c, cams, slots, _acc = records
+        c, cams = records[4], records[5]
         if not self.recording or c.sample_start >= self.records.samples:
             return
+        in_threads(_record, cams.t.shape[0], *self._record_arguments(records))
+
+    def _record_arguments(self, records: tuple) -> tuple:
+        """``_record``'s arguments but the camera samples' range, for the pass whose stage records are ``records``."""
+        _s, _env, _lights, sel, c, cams, slots, _acc = records
         r = self.records
-        in_threads(
-            _record, cams.t.shape[0], sel, c, cams, slots, self.first, self.slots, r.samples, r.stride, r.point,
-            r.normal, r.light, r.value,
-        )  # fmt: skip
+        return sel, c, cams, slots, self.first, self.slots, r.samples, r.stride, r.point, r.normal, r.light, r.value
 
     def compile_kernels(self, records: tuple) -> None:
         """Compile (or load from the cache) the kernels that record the pilot and learn from it, with the types the
         render calls them with, now rather than in the pilot's passes: a first render of its kind does this while
         its compile helper still works on the stages (decisions.md 135).  Nothing is recorded and nothing is learned:
         ``_record`` runs over no camera sample, and ``learned`` over a few made-up records, its result dropped."""
-        _s, _env, _lights, sel, c, cams, slots, _acc = records
-        r = self.records
-        _record(sel, c, cams, slots, self.first, self.slots, r.samples, r.stride, r.point, r.normal, r.light, r.value,
-                0, 0)  # fmt: skip
+        _record(*self._record_arguments(records), 0, 0)
         learned(self.selector, _made_up_records(self.selector))
 
     def learn(self) -> LightSelector:
