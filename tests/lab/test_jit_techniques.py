@@ -129,6 +129,23 @@ def test_material_records_share_a_type_per_class():
     assert type(material_record(Lambert(0.5))) is not type(a)
 
 
+def test_a_users_technique_alone_sees_the_map_without_lightprobes_kernel_record(exercise_scene):
+    """Numba compiles a context's every field: a user's loops get the map's record without lightprobe's ~25 kernel
+    arrays (decisions.md 136), the same record each call; lightprobe's map sampling gets the kernel."""
+    from lightprobe.integrators.batch_estimator import Context
+    from lightprobe.lab.jit_techniques import environment_record
+
+    env = exercise_scene[0].environment
+    full, slim = environment_record(env), environment_record(env, kernel=False)
+    assert full.kernel is env.kernel and len(full.kernel) > 10 and slim.kernel == ()
+    assert slim.luminance is full.luminance and environment_record(env, kernel=False) is slim
+    technique = load_technique(f"{TECHNIQUES}:Cosine").technique
+    ctx = Context.local([0.3, 0.2, 0.9], 4, environment=env)
+    assert technique.arguments(ctx)[5] is slim
+    wi, pdf = technique.sample(np.full((4, 2), 0.25), ctx)
+    assert np.allclose(np.linalg.norm(wi, axis=1), 1.0) and np.allclose(pdf, wi[:, 2] / np.pi)
+
+
 # --- render ----------------------------------------------------------------------------------------------------------
 @pytest.mark.parametrize("seed", [1, 2])
 def test_njit_techniques_under_mis_match_the_render_core(exercise_scene, seed):

@@ -25,7 +25,8 @@ compiled loops, instead of once per batch::
 ``rho_d``, ``rho_s`` ((3,) arrays), ``exponent``, ``diffuse_probability``, and for every material ``kind`` and
 ``params``, the block lightprobe's kernels read: :func:`material_record`), ``environment``
 (:class:`EnvironmentRecord`: ``luminance`` (H, W), ``radiance`` (H, W, 3), ``to_world`` (3, 3) and ``kernel``,
-lightprobe's own arrays) and ``data``: the technique's ``data`` attribute, a tuple of arrays and numbers (empty when
+lightprobe's own arrays for its map sampling, an empty tuple where none of lightprobe's map sampling runs beside the
+technique) and ``data``: the technique's ``data`` attribute, a tuple of arrays and numbers (empty when
 it has none), read after ``prepare(environment)`` has run, which is where a light technique builds its
 distributions (in NumPy, once per map).
 
@@ -100,7 +101,8 @@ class KernelMaterial(NamedTuple):
 
 class EnvironmentRecord(NamedTuple):
     """The environment map for njit code: texel luminance (H, W) and radiance (H, W, 3), lat-long with row 0 the
-    zenith; ``to_world`` the map's rotation (3, 3); ``kernel`` lightprobe's arrays (``emitters.envmap``)."""
+    zenith; ``to_world`` the map's rotation (3, 3); ``kernel`` lightprobe's arrays (``emitters.envmap``) where its
+    map sampling reads them, else an empty tuple (:func:`environment_record`)."""
 
     luminance: np.ndarray
     radiance: np.ndarray
@@ -140,19 +142,25 @@ def material_record(material) -> tuple:
     return record_type(*values)
 
 
-def environment_record(environment) -> EnvironmentRecord:
-    """The map's :class:`EnvironmentRecord` (lightprobe's placeholder map when there is none)."""
+def environment_record(environment, *, kernel: bool = True) -> EnvironmentRecord:
+    """The map's :class:`EnvironmentRecord` (lightprobe's placeholder map when there is none); with ``kernel``
+    False, its ``kernel`` an empty tuple.
+
+    Only lightprobe's own map sampling reads the kernel record (about 25 arrays), and Numba compiles each function
+    that takes a context for every field of its type, read or not: a three-line technique compiled in 0.22-0.31 s
+    with the kernel in its context and 0.11 s without (decisions.md 136). A user's technique is therefore given the
+    record without it, unless lightprobe's map sampling runs in the same loop."""
     env = environment if environment is not None else placeholder_environment()
-    record = _ENVIRONMENT_RECORDS.get(env)
-    if record is None:
-        record = EnvironmentRecord(
+    records = _ENVIRONMENT_RECORDS.get(env)
+    if records is None:
+        full = EnvironmentRecord(
             np.ascontiguousarray(env.luminance, dtype=np.float64),
             np.ascontiguousarray(env.radiance, dtype=np.float64),
             np.ascontiguousarray(env.to_world, dtype=np.float64),
             env.kernel,
         )
-        _ENVIRONMENT_RECORDS[env] = record
-    return record
+        records = _ENVIRONMENT_RECORDS[env] = (full, full._replace(kernel=()))
+    return records[0] if kernel else records[1]
 
 
 def _njit_function(technique, method: str, label: str):
@@ -343,7 +351,7 @@ class JitTechnique:
             np.ascontiguousarray(np.broadcast_to(ctx.frame, (n, 3, 3))[:rows], dtype=np.float64),
             np.ascontiguousarray(np.broadcast_to(ctx.position, (n, 3))[:rows], dtype=np.float64),
             material_record(ctx.material),
-            environment_record(ctx.environment),
+            environment_record(ctx.environment, kernel=False),  # a user's functions alone run in these loops
             self.data(),
         )
 

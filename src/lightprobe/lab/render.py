@@ -298,7 +298,10 @@ class _Shader:
         # record type made at run time could not be cached)
         builtin = all(t.builtin for t in techniques) and isinstance(self.heuristic, str)
         record = KernelMaterial(material.kind, material.params) if builtin else material_record(material)
-        environment = environment_record(self.env)
+        # the map's kernel record where lightprobe's map sampling may read it (its cached loops name it either way);
+        # a user's techniques alone get a smaller context type, which compiles faster (environment_record)
+        map_sampling = builtin or any(t.builtin and t.kind == "light" for t in techniques)
+        environment = environment_record(self.env, kernel=map_sampling)
         frame = np.ascontiguousarray(ctx.frame)
         wo = np.ascontiguousarray(ctx.wo)
         normal = np.ascontiguousarray(ctx.normal)
