@@ -862,7 +862,8 @@ def _pmf_rows(sel, points, normals, light, compensated):
 def _pmf_all(sel, p, n, compensated):
     out = np.empty(sel.n_lights)
     for light in prange(sel.n_lights):
-        out[light] = selector_pmf(sel, p[0], p[1], p[2], n[0], n[1], n[2], light, compensated)
+        # prange's index is unsigned: as int64, selector_pmf keeps the one signature the renders compile
+        out[light] = selector_pmf(sel, p[0], p[1], p[2], n[0], n[1], n[2], np.int64(light), compensated)
     return out
 
 
@@ -1042,6 +1043,17 @@ def _root_only(lights: LightArrays) -> dict:
     return nodes
 
 
+def _receivers(x, n: int) -> np.ndarray:
+    """(n, 3) float64, C order and read-only: one array type however the caller gives the receivers (one point
+    broadcast, or n of their own), so that Numba compiles the range kernels once, not once for writable arrays and
+    again for read-only ones (2.8-3.0 s each for :func:`_select_range`)."""
+    out = np.ascontiguousarray(np.broadcast_to(np.asarray(x, dtype=np.float64), (n, 3)))
+    if out.flags.writeable:
+        out = out.view()
+        out.flags.writeable = False
+    return out
+
+
 class LightSampler:
     """A selector usable from Python: ``select(points, normals, u) -> (lights, pmf)`` (with ``rescaled=True`` also
     each u rescaled to [0, 1) within the interval that chose its light), ``pmf(point, normal)`` (the probability of
@@ -1057,19 +1069,18 @@ class LightSampler:
 
     def select(self, points, normals, u, *, rescaled: bool = False, compensated: bool = False):
         u = np.ascontiguousarray(np.asarray(u, dtype=np.float64).reshape(-1))
-        points = np.ascontiguousarray(np.broadcast_to(np.asarray(points, dtype=np.float64), (u.size, 3)))
-        normals = np.ascontiguousarray(np.broadcast_to(np.asarray(normals, dtype=np.float64), (u.size, 3)))
+        points, normals = _receivers(points, u.size), _receivers(normals, u.size)
         light, pmf, rest = _select_batch(self.arrays, points, normals, u, bool(compensated))
         return (light, pmf, rest) if rescaled else (light, pmf)
 
     def pmf_of(self, points, normals, lights, *, compensated: bool = False) -> np.ndarray:
         """(N,) the probability that :meth:`select` picks ``lights[i]`` for receiver i."""
         lights = np.ascontiguousarray(np.asarray(lights, dtype=np.int64).reshape(-1))
-        points = np.ascontiguousarray(np.broadcast_to(np.asarray(points, dtype=np.float64), (lights.size, 3)))
-        normals = np.ascontiguousarray(np.broadcast_to(np.asarray(normals, dtype=np.float64), (lights.size, 3)))
+        points, normals = _receivers(points, lights.size), _receivers(normals, lights.size)
         return _pmf_rows(self.arrays, points, normals, lights, bool(compensated))
 
     def pmf(self, point, normal, *, compensated: bool = False) -> np.ndarray:
+        # fresh copies: one array type for the kernel, as _receivers
         return _pmf_all(
-            self.arrays, np.asarray(point, dtype=np.float64), np.asarray(normal, dtype=np.float64), bool(compensated)
+            self.arrays, np.array(point, dtype=np.float64), np.array(normal, dtype=np.float64), bool(compensated)
         )
