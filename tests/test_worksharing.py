@@ -94,3 +94,28 @@ def test_in_threads_covers_every_item_once_and_gives_each_worker_its_own_scratch
     assert np.all(visits == 1)
     assert scratch[:threads, 0].tolist() == [1] * threads and not scratch[threads:, 0].any()
     assert sorted(set(owner.tolist())) == list(range(threads))  # each worker's items carry its own row's mark
+
+
+def test_read_only_views_give_a_batch_kernel_one_signature_whatever_the_caller_passed():
+    """A range kernel's inputs are read-only views however they come (a fresh array, a contiguous broadcast), so
+    Numba compiles the kernel once (decisions.md 136): a material's and a map's batches see both kinds here."""
+    from lightprobe._worksharing import read_only
+    from lightprobe.bsdfs import GGXConductor, dispatch
+    from lightprobe.emitters import envmap
+    from lightprobe.emitters.procedural import constant
+
+    a = np.arange(6.0).reshape(2, 3)
+    view = read_only(a)
+    assert not view.flags.writeable and np.shares_memory(view, a) and a.flags.writeable and read_only(view) is view
+    wo = np.array([[0.0, 0.6, 0.8]])
+    fresh = np.array([[0.3, 0.0, np.sqrt(0.91)]])
+    shared = np.broadcast_to(fresh, (1, 3))  # contiguous and read-only: ascontiguousarray keeps it as it is
+    assert not shared.flags.writeable and shared.flags.c_contiguous
+    metal = GGXConductor(0.3, material="Al")
+    values = [metal.eval(wo, wi) for wi in (fresh, shared)] + [metal.pdf(wo, wi) for wi in (fresh, shared)]
+    np.testing.assert_array_equal(values[0], values[1])
+    np.testing.assert_array_equal(values[2], values[3])
+    sky = envmap.EnvironmentMap.from_array(constant(1.0, width=8, height=4))
+    np.testing.assert_array_equal(sky.pdf(fresh), sky.pdf(shared))
+    for kernel in (dispatch._eval_range, dispatch._pdf_range, envmap._pdf_range):
+        assert len(kernel.signatures) == 1, (kernel.py_func.__name__, kernel.signatures)

@@ -26,7 +26,7 @@ from numba.extending import intrinsic
 
 from ._numba import jit_inline
 
-__all__ = ["CHUNK", "COUNTER_TYPE", "claim", "claim_range", "in_threads", "new_counter", "on_workers"]
+__all__ = ["CHUNK", "COUNTER_TYPE", "claim", "claim_range", "in_threads", "new_counter", "on_workers", "read_only"]
 
 #: items per claimed chunk (camera samples, slots or lanes blocks): thousands of chunks per pass, each tens of
 #: microseconds, so the counter is touched rarely and the last chunk ends soon after the others
@@ -99,3 +99,14 @@ def in_threads(kernel, n: int, *args, scratch=None) -> None:
         on_workers(lambda w: kernel(*args, bounds[w], bounds[w + 1]), threads)
     else:
         on_workers(lambda w: kernel(scratch[w], *args, bounds[w], bounds[w + 1]), threads)
+
+
+def read_only(a: np.ndarray) -> np.ndarray:
+    """``a`` as a read-only view (``a`` itself when it is one): a range kernel's inputs of one array type however the
+    caller made them (a broadcast view is read-only, a fresh array writable), so that Numba compiles the kernel once
+    and not a second time for the other kind (1.3 s for a material's eval batch, 2.8-3.0 s for the light
+    selector's; decisions.md 136)."""
+    if a.flags.writeable:
+        a = a.view()
+        a.flags.writeable = False
+    return a

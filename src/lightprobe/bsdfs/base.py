@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._worksharing import read_only
 from ..errors import ParameterError, numeric_array
 
 __all__ = ["BSDF", "PARAM_SIZE", "TEXTURED_PARAM_SIZE", "rgb_param"]
@@ -55,7 +56,7 @@ def _directions(v, name: str, n: int | None = None) -> np.ndarray:
         raise ParameterError(f"{name} must be an (N, 3) array of directions, got shape {arr.shape}")
     if n is not None and arr.shape[0] != n:
         raise ParameterError(f"{name} has {arr.shape[0]} rows, expected {n}")
-    return np.ascontiguousarray(arr)
+    return read_only(np.ascontiguousarray(arr))  # one signature of the batch kernels, whatever the caller passed
 
 
 class BSDF:
@@ -108,4 +109,6 @@ class BSDF:
         uu = np.asarray(u, dtype=np.float64)
         if uu.ndim != 2 or uu.shape[1] != 3:
             raise ParameterError(f"u must be an (N, 3) array, got shape {uu.shape}")
-        return sample_batch(self.kind, self.params, _directions(wo, "wo", uu.shape[0]), np.ascontiguousarray(uu))
+        return sample_batch(
+            self.kind, self.params, _directions(wo, "wo", uu.shape[0]), read_only(np.ascontiguousarray(uu))
+        )

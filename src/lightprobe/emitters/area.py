@@ -56,7 +56,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._numba import jit, jit_inline
-from .._worksharing import in_threads
+from .._worksharing import in_threads, read_only
 from ..errors import ParameterError
 from ..geometry.frame import coordinate_system, normalize, to_world
 from ..geometry.intersect import (
@@ -704,7 +704,7 @@ def _rows(points, name: str, n: int | None = None) -> np.ndarray:
         raise ParameterError(f"{name} must be (N, 3) or (3,), got shape {a.shape}")
     if n is not None and a.shape[0] == 1 and n > 1:
         a = np.repeat(a, n, axis=0)
-    return np.ascontiguousarray(a)
+    return read_only(np.ascontiguousarray(a))  # one signature of the batch kernels
 
 
 class AreaLight:

@@ -59,7 +59,7 @@ import numpy as np
 
 from .._memory import fresh_array
 from .._numba import jit, jit_inline
-from .._worksharing import in_threads
+from .._worksharing import in_threads, read_only
 from ..errors import ImageError, ParameterError, warn_once
 from ..sampling.distributions import invert_2d, pdf_2d, sample_2d
 from ..sampling.kernels import TWO_PI
@@ -755,14 +755,14 @@ def _directions(dirs) -> np.ndarray:
     d = np.asarray(dirs, dtype=np.float64)
     if d.ndim != 2 or d.shape[1] != 3:
         raise ParameterError(f"dirs must be an (N, 3) array, got shape {d.shape}")
-    return np.ascontiguousarray(d)
+    return read_only(np.ascontiguousarray(d))  # one signature of the batch kernels, whatever the caller passed
 
 
 def _unit_square(u) -> np.ndarray:
     a = np.asarray(u, dtype=np.float64)
     if a.ndim != 2 or a.shape[1] != 2:
         raise ParameterError(f"u must be an (N, 2) array, got shape {a.shape}")
-    return np.ascontiguousarray(a)
+    return read_only(np.ascontiguousarray(a))
 
 
 @functools.lru_cache(maxsize=1)

@@ -61,7 +61,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .._numba import jit, jit_alloc, jit_inline, jit_parallel, prange
-from .._worksharing import in_threads
+from .._worksharing import in_threads, read_only
 from ..color import luminance
 from ..errors import ParameterError
 from ..geometry.shape_bvh import push_halves, sort_along_widest_axis
@@ -1044,14 +1044,9 @@ def _root_only(lights: LightArrays) -> dict:
 
 
 def _receivers(x, n: int) -> np.ndarray:
-    """(n, 3) float64, C order and read-only: one array type however the caller gives the receivers (one point
-    broadcast, or n of their own), so that Numba compiles the range kernels once, not once for writable arrays and
-    again for read-only ones (2.8-3.0 s each for :func:`_select_range`)."""
-    out = np.ascontiguousarray(np.broadcast_to(np.asarray(x, dtype=np.float64), (n, 3)))
-    if out.flags.writeable:
-        out = out.view()
-        out.flags.writeable = False
-    return out
+    """(n, 3) float64, C order and read-only however the caller gives the receivers (one point broadcast, or n of
+    their own): one signature of the range kernels (:func:`~lightprobe._worksharing.read_only`)."""
+    return read_only(np.ascontiguousarray(np.broadcast_to(np.asarray(x, dtype=np.float64), (n, 3))))
 
 
 class LightSampler:

@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._numba import jit
-from .._worksharing import in_threads
+from .._worksharing import in_threads, read_only
 from . import kernels as k
 
 __all__ = [
@@ -135,7 +135,7 @@ def _points(a, width: int, name: str) -> np.ndarray:
     arr = np.asarray(a, dtype=np.float64)
     if arr.ndim != 2 or arr.shape[1] != width:
         raise ValueError(f"{name} must be an (N, {width}) array, got shape {arr.shape}")
-    return np.ascontiguousarray(arr)
+    return read_only(np.ascontiguousarray(arr))  # one signature of the batch kernels, whatever the caller passed
 
 
 def _positive(value, name: str) -> float:
