@@ -147,6 +147,24 @@ def test_a_users_technique_alone_sees_the_map_without_lightprobes_kernel_record(
 
 
 # --- render ----------------------------------------------------------------------------------------------------------
+def test_lightprobes_twins_beside_a_users_technique_take_records_that_can_be_cached(exercise_scene):
+    """Under ``mis:`` a user's BSDF sampling runs beside lightprobe's map sampling. The map sampling's njit twins
+    get the material as its kernel block (a type of the module, which Numba's disk cache finds again), not the
+    user's named tuple made at run time (compiled anew every run, 1.9 s); the user's functions get the map without
+    lightprobe's kernel arrays (decisions.md 136)."""
+    from lightprobe.lab import jit_techniques as jt
+
+    strategy, _ = parse_lab_token(f"mis:{EXAMPLE}:PhongLobes")
+    result = render_lab(exercise_scene[0], strategy, RenderSettings(spp=1, seed=3))
+    assert result.stats["estimator"] == "lightprobe.lab (user techniques, compiled)"
+    for twin in (jt.builtin_env_sample, jt.builtin_env_pdf):
+        materials = {signature[1].types[4] for signature in twin.signatures}  # ctx.material's Numba type
+        assert materials and all(m.instance_class is jt.KernelMaterial for m in materials), materials
+    user = next(t for t in strategy.techniques if not t.builtin)
+    for function in user.jit:
+        assert {signature[1].types[5].types[3] for signature in function.signatures} == {numba.types.Tuple(())}
+
+
 @pytest.mark.parametrize("seed", [1, 2])
 def test_njit_techniques_under_mis_match_the_render_core(exercise_scene, seed):
     scene, reference = exercise_scene

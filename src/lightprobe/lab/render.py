@@ -131,14 +131,16 @@ def _heuristic_rows(lo, hi, heuristic, n_f, p_f, n_g, p_g, out):
 
 # --- the compiled estimator: every technique an njit function (lightprobe's own have njit twins) -------------------
 def _rows(lo, hi, sample, other_pdf, heuristic, is_bsdf, has_other, count, other_count, u, wo, normal, frame, position,
-          material, environment, data, other_data, wi, pdf, world, local, p_other, weight):  # fmt: skip
+          material, environment, data, other_material, other_environment, other_data, wi, pdf, world, local, p_other,
+          weight):  # fmt: skip
     """Rows [lo, hi) of one technique's ``count`` samples per point (row r: sample r // n of point r % n): the
     direction and pdf ``sample`` returns, the direction in both frames, the other technique's pdf there and the MIS
-    weight (1 without another technique)."""
+    weight (1 without another technique).  Each technique's context holds its own records (``_records``)."""
     n = wo.shape[0]
     wo, normal, frame, position = borrowed(wo), borrowed(normal), borrowed(frame), borrowed(position)
-    material, environment = borrowed(material), borrowed(environment)
-    data, other_data = borrowed(data), borrowed(other_data)
+    material, environment, data = borrowed(material), borrowed(environment), borrowed(data)
+    other_material, other_environment = borrowed(other_material), borrowed(other_environment)
+    other_data = borrowed(other_data)
     for r in range(lo, hi):
         k = r % n
         ctx = JitContext(wo[k], normal[k], frame[k], position[k], material, environment, data)
@@ -155,7 +157,7 @@ def _rows(lo, hi, sample, other_pdf, heuristic, is_bsdf, has_other, count, other
             for j in range(3):
                 local[r, j] = frame[k, j, 0] * x + frame[k, j, 1] * y + frame[k, j, 2] * z
         if has_other:
-            other = JitContext(wo[k], normal[k], frame[k], position[k], material, environment, other_data)
+            other = JitContext(wo[k], normal[k], frame[k], position[k], other_material, other_environment, other_data)
             q = other_pdf(world[r] if is_bsdf else local[r], other)
             p_other[r] = q
             weight[r] = heuristic(count, p, other_count, q)
@@ -171,30 +173,32 @@ _technique_rows = _user_serial(_rows)
 
 @jit
 def _builtin_bsdf_rows(lo, hi, power, has_other, count, other_count, u, wo, normal, frame, position, material,
-                       environment, data, other_data, wi, pdf, world, local, p_other, weight):  # fmt: skip
+                       environment, data, other_material, other_environment, other_data, wi, pdf, world, local,
+                       p_other, weight):  # fmt: skip
     """:func:`_rows` for lightprobe's BSDF sampling, against its map sampling under MIS."""
     if power:
         _rows_inline(lo, hi, builtin_bsdf_sample, builtin_env_pdf, power_weight, True, has_other, count, other_count,
-                     u, wo, normal, frame, position, material, environment, data, other_data, wi, pdf, world, local,
-                     p_other, weight)  # fmt: skip
+                     u, wo, normal, frame, position, material, environment, data, other_material, other_environment,
+                     other_data, wi, pdf, world, local, p_other, weight)  # fmt: skip
     else:
         _rows_inline(lo, hi, builtin_bsdf_sample, builtin_env_pdf, balance_weight, True, has_other, count, other_count,
-                     u, wo, normal, frame, position, material, environment, data, other_data, wi, pdf, world, local,
-                     p_other, weight)  # fmt: skip
+                     u, wo, normal, frame, position, material, environment, data, other_material, other_environment,
+                     other_data, wi, pdf, world, local, p_other, weight)  # fmt: skip
 
 
 @jit
 def _builtin_light_rows(lo, hi, power, has_other, count, other_count, u, wo, normal, frame, position, material,
-                        environment, data, other_data, wi, pdf, world, local, p_other, weight):  # fmt: skip
+                        environment, data, other_material, other_environment, other_data, wi, pdf, world, local,
+                        p_other, weight):  # fmt: skip
     """:func:`_rows` for lightprobe's map sampling, against its BSDF sampling under MIS."""
     if power:
-        _rows_inline(lo, hi, builtin_env_sample, builtin_bsdf_pdf, power_weight, False, has_other, count, other_count,
-                     u, wo, normal, frame, position, material, environment, data, other_data, wi, pdf, world, local,
-                     p_other, weight)  # fmt: skip
+        _rows_inline(lo, hi, builtin_env_sample, builtin_bsdf_pdf, power_weight, False, has_other, count,
+                     other_count, u, wo, normal, frame, position, material, environment, data, other_material,
+                     other_environment, other_data, wi, pdf, world, local, p_other, weight)  # fmt: skip
     else:
         _rows_inline(lo, hi, builtin_env_sample, builtin_bsdf_pdf, balance_weight, False, has_other, count,
-                     other_count, u, wo, normal, frame, position, material, environment, data, other_data, wi, pdf,
-                     world, local, p_other, weight)  # fmt: skip
+                     other_count, u, wo, normal, frame, position, material, environment, data, other_material,
+                     other_environment, other_data, wi, pdf, world, local, p_other, weight)  # fmt: skip
 
 
 @jit_parallel
@@ -285,6 +289,17 @@ class _Shader:
             value[rows] += shade(ctx, [u[:, rows] for u in numbers], gnormal[rows], error[rows])
         return value
 
+    def _records(self, technique, material) -> tuple:
+        """The material and map records of a technique's context in the compiled estimator. lightprobe's own
+        techniques get the material as its kernel block and the map with its kernel arrays, types defined once in
+        the module, so that their njit twins are compiled once and cached, beside a user's technique too (a record
+        type made at run time is not found in the cache: the twins compiled for 1.9 s on every run). A user's
+        technique gets its material's named tuple and the map without lightprobe's kernel arrays, a context that
+        compiles faster (``environment_record``, decisions.md 136)."""
+        if technique.builtin:
+            return KernelMaterial(material.kind, material.params), environment_record(self.env)
+        return material_record(material), environment_record(self.env, kernel=False)
+
     def _shade_compiled(self, ctx: Context, numbers: list[np.ndarray], gnormal, error) -> np.ndarray:
         """:meth:`_shade` with every technique's njit functions called inside compiled loops, one sample at a time,
         and the rest of the estimator in the render core's compiled routines, in the same order of operations.
@@ -294,14 +309,8 @@ class _Shader:
         n = len(ctx)
         out = np.zeros((n, 3))
         material = ctx.material
-        # lightprobe's own techniques alone run cached loops, which take the material as its kernel block only (a
-        # record type made at run time could not be cached)
-        builtin = all(t.builtin for t in techniques) and isinstance(self.heuristic, str)
-        record = KernelMaterial(material.kind, material.params) if builtin else material_record(material)
-        # the map's kernel record where lightprobe's map sampling may read it (its cached loops name it either way);
-        # a user's techniques alone get a smaller context type, which compiles faster (environment_record)
-        map_sampling = builtin or any(t.builtin and t.kind == "light" for t in techniques)
-        environment = environment_record(self.env, kernel=map_sampling)
+        builtin = all(t.builtin for t in techniques) and isinstance(self.heuristic, str)  # their cached loops
+        records = [self._records(t, material) for t in techniques]
         frame = np.ascontiguousarray(ctx.frame)
         wo = np.ascontiguousarray(ctx.wo)
         normal = np.ascontiguousarray(ctx.normal)
@@ -320,8 +329,9 @@ class _Shader:
             wi, pdf, world, local = np.empty((m, 3)), np.empty(m), np.empty((m, 3)), np.empty((m, 3))
             p_other, weight = np.zeros(m), np.empty(m)
             start = time.perf_counter()
-            arrays = (float(count), float(other_count), u, wo, normal, frame, position, record, environment, data[j],
-                      data[1 - j] if has_other else data[j], wi, pdf, world, local, p_other, weight)  # fmt: skip
+            i = 1 - j if has_other else j
+            arrays = (float(count), float(other_count), u, wo, normal, frame, position, *records[j], data[j],
+                      *records[i], data[i], wi, pdf, world, local, p_other, weight)  # fmt: skip
             try:
                 if builtin:
                     loop = _builtin_bsdf_rows if tech.kind == "bsdf" else _builtin_light_rows
