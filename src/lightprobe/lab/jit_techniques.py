@@ -25,10 +25,10 @@ compiled loops, instead of once per batch::
 ``rho_d``, ``rho_s`` ((3,) arrays), ``exponent``, ``diffuse_probability``, and for every material ``kind`` and
 ``params``, the block lightprobe's kernels read: :func:`material_record`), ``environment``
 (:class:`EnvironmentRecord`: ``luminance`` (H, W), ``radiance`` (H, W, 3), ``to_world`` (3, 3) and ``kernel``,
-lightprobe's own arrays for its map sampling, an empty tuple where none of lightprobe's map sampling runs beside the
-technique) and ``data``: the technique's ``data`` attribute, a tuple of arrays and numbers (empty when
-it has none), read after ``prepare(environment)`` has run, which is where a light technique builds its
-distributions (in NumPy, once per map).
+lightprobe's own arrays for its map sampling: an empty tuple in the context of a user's technique) and ``data``:
+the technique's ``data`` attribute, a tuple of arrays and numbers (empty when it has none), read after
+``prepare(environment)`` has run, which is where a light technique builds its distributions (in NumPy, once per
+map).
 
 :class:`JitTechnique` gives such a technique the NumPy contract (arrays in, arrays out; what ``check`` and the
 laboratory's NumPy estimator call) through one compiled loop per method. An exception raised inside the user's
@@ -149,7 +149,7 @@ def environment_record(environment, *, kernel: bool = True) -> EnvironmentRecord
     Only lightprobe's own map sampling reads the kernel record (about 25 arrays), and Numba compiles each function
     that takes a context for every field of its type, read or not: a three-line technique compiled in 0.22-0.31 s
     with the kernel in its context and 0.11 s without (decisions.md 136). A user's technique is therefore given the
-    record without it, unless lightprobe's map sampling runs in the same loop."""
+    record without it; lightprobe's techniques get the whole record (``lab.render._Shader._records``)."""
     env = environment if environment is not None else placeholder_environment()
     records = _ENVIRONMENT_RECORDS.get(env)
     if records is None:

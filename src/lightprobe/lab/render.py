@@ -309,7 +309,8 @@ class _Shader:
         n = len(ctx)
         out = np.zeros((n, 3))
         material = ctx.material
-        builtin = all(t.builtin for t in techniques) and isinstance(self.heuristic, str)  # their cached loops
+        # lightprobe's techniques alone, under a named heuristic, run their two cached loops
+        builtin = all(t.builtin for t in techniques) and isinstance(self.heuristic, str)
         records = [self._records(t, material) for t in techniques]
         frame = np.ascontiguousarray(ctx.frame)
         wo = np.ascontiguousarray(ctx.wo)
@@ -329,7 +330,7 @@ class _Shader:
             wi, pdf, world, local = np.empty((m, 3)), np.empty(m), np.empty((m, 3)), np.empty((m, 3))
             p_other, weight = np.zeros(m), np.empty(m)
             start = time.perf_counter()
-            i = 1 - j if has_other else j
+            i = 1 - j if has_other else j  # the other technique (the same one alone)
             arrays = (float(count), float(other_count), u, wo, normal, frame, position, *records[j], data[j],
                       *records[i], data[i], wi, pdf, world, local, p_other, weight)  # fmt: skip
             try:
