@@ -26,7 +26,17 @@ from numba.extending import intrinsic
 
 from ._numba import jit_inline
 
-__all__ = ["CHUNK", "COUNTER_TYPE", "claim", "claim_range", "in_threads", "new_counter", "on_workers", "read_only"]
+__all__ = [
+    "CHUNK",
+    "COUNTER_TYPE",
+    "claim",
+    "claim_range",
+    "in_threads",
+    "new_counter",
+    "on_workers",
+    "read_only",
+    "read_only_rows",
+]
 
 #: items per claimed chunk (camera samples, slots or lanes blocks): thousands of chunks per pass, each tens of
 #: microseconds, so the counter is touched rarely and the last chunk ends soon after the others
@@ -110,3 +120,10 @@ def read_only(a: np.ndarray) -> np.ndarray:
         a = a.view()
         a.flags.writeable = False
     return a
+
+
+def read_only_rows(x, n: int) -> np.ndarray:
+    """(n, 3) float64, C order, read-only (:func:`read_only`): one row given for all n, or n rows of their own (any
+    leading shape): the points, normals or directions a range kernel reads, as one array type."""
+    a = np.asarray(x, dtype=np.float64)
+    return read_only(np.ascontiguousarray(np.broadcast_to(a.reshape(-1, 3) if a.ndim > 1 else a, (n, 3))))

@@ -27,7 +27,7 @@ import importlib
 import numpy as np
 
 from .._numba import jit, jit_inline
-from .._worksharing import in_threads
+from .._worksharing import in_threads, read_only, read_only_rows
 from .area import light_normal, light_radiance
 from .area import light_pdf_at as area_pdf_at
 from .kinds import (
@@ -220,11 +220,6 @@ def _escaped_batch(lights, env, dirs):
     return out
 
 
-def _rows(a, n: int) -> np.ndarray:
-    a = np.asarray(a, dtype=np.float64)
-    return np.ascontiguousarray(np.broadcast_to(a.reshape(-1, 3) if a.ndim > 1 else a, (n, 3)))
-
-
 def _env_kernel(env):
     if env is not None:
         return env.kernel
@@ -239,11 +234,9 @@ def sample_batch(lights: LightArrays, l: int, points, normals, u, *, env=None, s
     distance, radiance, pdf and delta (1.0 or 0.0); ``env`` the scene's EnvironmentMap when row l is its."""
     from .area import STRATEGIES
 
-    u = np.ascontiguousarray(np.asarray(u, dtype=np.float64).reshape(-1, 2))
-    n = u.shape[0]
-    return _sample_batch(
-        lights, _env_kernel(env), l, STRATEGIES[strategy], bool(compensated), _rows(points, n), _rows(normals, n), u
-    )
+    u = read_only(np.ascontiguousarray(np.asarray(u, dtype=np.float64).reshape(-1, 2)))
+    points, normals = read_only_rows(points, u.shape[0]), read_only_rows(normals, u.shape[0])
+    return _sample_batch(lights, _env_kernel(env), l, STRATEGIES[strategy], bool(compensated), points, normals, u)
 
 
 def pdf_batch(lights: LightArrays, l: int, points, normals, dirs, *, env=None, strategy="solid-angle",
@@ -251,16 +244,14 @@ def pdf_batch(lights: LightArrays, l: int, points, normals, dirs, *, env=None, s
     """The density of row l's samples at ``dirs`` (N, 3) from ``points`` with ``normals``."""
     from .area import STRATEGIES
 
-    d = np.ascontiguousarray(np.asarray(dirs, dtype=np.float64).reshape(-1, 3))
-    n = d.shape[0]
-    return _pdf_batch(
-        lights, _env_kernel(env), l, STRATEGIES[strategy], bool(compensated), _rows(points, n), _rows(normals, n), d
-    )
+    d = read_only(np.ascontiguousarray(np.asarray(dirs, dtype=np.float64).reshape(-1, 3)))
+    points, normals = read_only_rows(points, d.shape[0]), read_only_rows(normals, d.shape[0])
+    return _pdf_batch(lights, _env_kernel(env), l, STRATEGIES[strategy], bool(compensated), points, normals, d)
 
 
 def escaped_batch(lights: LightArrays, dirs, *, env=None) -> np.ndarray:
     """What rays leaving the scene along ``dirs`` see from the infinite lights (the table's last rows)."""
-    d = np.ascontiguousarray(np.asarray(dirs, dtype=np.float64).reshape(-1, 3))
+    d = read_only(np.ascontiguousarray(np.asarray(dirs, dtype=np.float64).reshape(-1, 3)))
     return _escaped_batch(lights, _env_kernel(env), d)
 
 

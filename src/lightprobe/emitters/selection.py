@@ -61,7 +61,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .._numba import jit, jit_alloc, jit_inline, jit_parallel, prange
-from .._worksharing import in_threads, read_only
+from .._worksharing import in_threads, read_only_rows
 from ..color import luminance
 from ..errors import ParameterError
 from ..geometry.shape_bvh import push_halves, sort_along_widest_axis
@@ -1043,12 +1043,6 @@ def _root_only(lights: LightArrays) -> dict:
     return nodes
 
 
-def _receivers(x, n: int) -> np.ndarray:
-    """(n, 3) float64, C order and read-only however the caller gives the receivers (one point broadcast, or n of
-    their own): one signature of the range kernels (:func:`~lightprobe._worksharing.read_only`)."""
-    return read_only(np.ascontiguousarray(np.broadcast_to(np.asarray(x, dtype=np.float64), (n, 3))))
-
-
 class LightSampler:
     """A selector usable from Python: ``select(points, normals, u) -> (lights, pmf)`` (with ``rescaled=True`` also
     each u rescaled to [0, 1) within the interval that chose its light), ``pmf(point, normal)`` (the probability of
@@ -1064,18 +1058,18 @@ class LightSampler:
 
     def select(self, points, normals, u, *, rescaled: bool = False, compensated: bool = False):
         u = np.ascontiguousarray(np.asarray(u, dtype=np.float64).reshape(-1))
-        points, normals = _receivers(points, u.size), _receivers(normals, u.size)
+        points, normals = read_only_rows(points, u.size), read_only_rows(normals, u.size)
         light, pmf, rest = _select_batch(self.arrays, points, normals, u, bool(compensated))
         return (light, pmf, rest) if rescaled else (light, pmf)
 
     def pmf_of(self, points, normals, lights, *, compensated: bool = False) -> np.ndarray:
         """(N,) the probability that :meth:`select` picks ``lights[i]`` for receiver i."""
         lights = np.ascontiguousarray(np.asarray(lights, dtype=np.int64).reshape(-1))
-        points, normals = _receivers(points, lights.size), _receivers(normals, lights.size)
+        points, normals = read_only_rows(points, lights.size), read_only_rows(normals, lights.size)
         return _pmf_rows(self.arrays, points, normals, lights, bool(compensated))
 
     def pmf(self, point, normal, *, compensated: bool = False) -> np.ndarray:
-        # fresh copies: one array type for the kernel, as _receivers
+        # fresh copies: one array type for the kernel whatever the caller passed
         return _pmf_all(
             self.arrays, np.array(point, dtype=np.float64), np.array(normal, dtype=np.float64), bool(compensated)
         )
