@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 
+import numba
 import numpy as np
 import pytest
 
@@ -300,6 +301,19 @@ def assert_the_same_bits_on_any_threads_and_pass_size(scene, options: dict):
         np.testing.assert_array_equal(other.image, base.image)
         np.testing.assert_array_equal(other.variance, base.variance)
     return base
+
+
+@pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="one core: no thread count to restore")
+def test_a_render_gives_its_caller_back_the_thread_count_it_had():
+    """A render that names its threads runs on them and leaves the caller's Numba thread count as it found it."""
+    before = numba.get_num_threads()
+    try:
+        for mine, asked in ((1, 2), (2, 1)):
+            numba.set_num_threads(mine)
+            result = render(small_scene((8, 6)), RenderSettings(spp=1, threads=asked))
+            assert result.stats["threads"] == asked and numba.get_num_threads() == mine
+    finally:
+        numba.set_num_threads(before)
 
 
 def test_an_adaptive_render_is_unbiased_and_spends_its_samples_where_the_noise_is(reference):

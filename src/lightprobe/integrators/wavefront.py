@@ -530,6 +530,7 @@ def render(
     (``analysis/distributed.py``): it picks as the whole render would (``resume``'s, if it carries one, wins)."""
     t_setup = time.perf_counter()
     helpers = precompile.take_prestarted()  # processes compiling some of the stages of a first render of this kind
+    callers_threads = numba.get_num_threads()  # given back after the render: its thread count is its own
     try:
         _start_helpers_early(scene, settings, helpers)
         render_plan = resolve(scene, settings, resumed=resume is not None)
@@ -539,6 +540,7 @@ def render(
         _warn_of_unreached_delta_lights(render_plan)
         return _render_planned(scene, render_plan, helpers, progress, tracer, resume, threads, t_setup, learned)
     finally:
+        numba.set_num_threads(callers_threads)
         helpers.stop()
 
 
