@@ -18,6 +18,23 @@ DATA = data_dir()
 os.environ["LIGHTPROBE_COMPILE_HELPERS"] = "0"
 
 
+def _one_thread_a_worker() -> None:
+    """Renders and batch kernels that do not name a thread count run on one thread in each test process.
+
+    The workers are one process per core already, so a render's second thread shared a core with the other worker:
+    4 threads on 2 cores, each stage of a pass waiting for its slowest thread (decisions.md 137: the render tests' CPU
+    3 % less on one thread).  Tests that name their threads (the same bits on 1 and 2 threads, the ray tracer's and
+    the work sharing's) still get them: ``numba.set_num_threads`` caps the count a caller may ask for only at
+    ``NUMBA_NUM_THREADS``, which stays the machine's cores.  Subprocesses the tests start (the CLI's, Dask's workers)
+    use every core, as a user's do."""
+    import numba
+
+    numba.set_num_threads(1)
+
+
+_one_thread_a_worker()
+
+
 def _keep_freed_memory_in_the_heap() -> None:
     """Ask glibc's malloc to keep 256 MB of freed memory at the top of its heap instead of giving it back.
 

@@ -85,12 +85,17 @@ def test_in_threads_covers_every_item_once_and_gives_each_worker_its_own_scratch
 
     from lightprobe._worksharing import in_threads
 
-    threads = numba.get_num_threads()
+    threads = min(2, numba.config.NUMBA_NUM_THREADS)  # the suite's processes run one thread unless asked (conftest)
     n = 1024 * threads + 7  # enough items for every thread
     scratch = np.zeros((numba.config.NUMBA_NUM_THREADS, 2), np.int64)
     scratch[:, 1] = np.arange(scratch.shape[0])
     visits, owner = np.zeros(n, np.int64), np.full(n, -1, np.int64)
-    in_threads(_mark, n, visits, owner, scratch=scratch)
+    before = numba.get_num_threads()
+    numba.set_num_threads(threads)
+    try:
+        in_threads(_mark, n, visits, owner, scratch=scratch)
+    finally:
+        numba.set_num_threads(before)
     assert np.all(visits == 1)
     assert scratch[:threads, 0].tolist() == [1] * threads and not scratch[threads:, 0].any()
     assert sorted(set(owner.tolist())) == list(range(threads))  # each worker's items carry its own row's mark
