@@ -67,18 +67,18 @@ def warn_once(message: str) -> None:
     warnings.warn(message, LightprobeWarning, stacklevel=3)
 
 
+def _is_numeric(v) -> bool:
+    if isinstance(v, list | tuple):
+        return all(_is_numeric(x) for x in v)
+    if isinstance(v, np.ndarray):
+        return v.dtype.kind in "iuf"
+    return isinstance(v, numbers.Real) and not isinstance(v, bool | np.bool_)
+
+
 def numeric_array(value, what: str, error: type[LightprobeError] = ParameterError) -> np.ndarray:
     """``value`` (a number, or nested lists of numbers) as a float64 array; anything else (a string, a boolean, a
     table, a ragged list) raises ``error`` naming ``what``.  Shape and range are the caller's to check."""
-
-    def is_numeric(v) -> bool:
-        if isinstance(v, list | tuple):
-            return all(is_numeric(x) for x in v)
-        if isinstance(v, np.ndarray):
-            return v.dtype.kind in "iuf"
-        return isinstance(v, numbers.Real) and not isinstance(v, bool | np.bool_)
-
-    if is_numeric(value):
+    if _is_numeric(value):
         try:
             return np.asarray(value, dtype=np.float64)
         except (TypeError, ValueError):

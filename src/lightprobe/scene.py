@@ -20,9 +20,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .bsdfs.base import BSDF, PARAM_SIZE
+from .bsdfs.base import BSDF, PARAM_SIZE, rgb_param
 from .emitters.envmap import EnvironmentMap
-from .errors import SceneError, warn_once
+from .errors import LightprobeError, SceneError, numeric_array, warn_once
 from .geometry.camera import Camera
 from .geometry.intersect import rectangle_rows_of
 from .geometry.mesh import TriangleMesh
@@ -278,9 +278,6 @@ def _light_rows(obj: SceneObject) -> int:
 
 def _emission(value, shape, label: str) -> np.ndarray | None:
     """RGB radiance (3,), or for a mesh also one per face (F, 3); None when it is black everywhere."""
-    from .bsdfs.base import rgb_param
-    from .errors import LightprobeError, numeric_array
-
     arr = numeric_array(value, f"{label}: emission", SceneError)
     if arr.ndim == 2 and isinstance(shape, TriangleMesh):
         if arr.shape != (shape.triangle_count, 3) or not np.all(np.isfinite(arr)) or np.any(arr < 0):
@@ -292,7 +289,7 @@ def _emission(value, shape, label: str) -> np.ndarray | None:
         rgb = rgb_param(arr, "emission")
     except LightprobeError as exc:
         raise SceneError(f"{label}: {exc}") from None
-    return rgb if rgb.max() > 0 else None
+    return rgb if max(rgb.tolist()) > 0 else None
 
 
 class _TextureRows:

