@@ -27,8 +27,10 @@ def _lanes(seed, pixels, spp_pass, sample_start, material, strategy, n_bsdf, m, 
         if own[(k1 - k0) * m :].max() != -9.0:  # no row past the run's is written
             out[-1] = 1e9
         for k in range(k0, k1):
-            if material[k] >= 0:
-                out[k * m : (k + 1) * m] = own[(k - k0) * m : (k - k0 + 1) * m]
+            if material[k] >= 0:  # a loop, not a slice copy: Numba compiles the copy's shape checks for 1-2 s
+                for j in range(m):
+                    for d in range(3):
+                        out[k * m + j, d] = own[(k - k0) * m + j, d]
     return out
 
 
