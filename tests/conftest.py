@@ -3,10 +3,8 @@
 from __future__ import annotations
 
 import ctypes
-import json
 import os
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -94,72 +92,37 @@ def rng():
 
 
 # Files that open the suite on the two workers (pytest-xdist hands out files in this order, each to a worker that
-# asks: in a clean clone's run one worker ran test_cli.py while the other ran the next three and test_area.py).
-# The render core compiles once, in about 100 s from an empty cache, and is then loaded from Numba's disk cache:
-# test_cli.py renders in its first test, so one worker compiles the core at once while the other runs core-free
+# asks: in clean clones' runs one worker ran test_cli.py while the other ran the next three, decisions.md 137).  The
+# render core compiles once, in about 100 s from an empty cache, and is then loaded from Numba's disk cache:
+# test_cli.py renders in its first test, so one worker compiles the core at once while the other runs the core-free
 # sampler and map tests; when both reached a render at the same moment both compiled it (decisions.md 89).
 FIRST_FILES = (
     "tests/test_cli.py",
     "tests/bsdfs/test_bsdfs.py",
     "tests/geometry/test_scene_file.py",
     "tests/emitters/test_envmap.py",
-    # core-free too: with the longest files next (below), the other worker's first file that renders would start
-    # about when test_cli.py's first two tests finish compiling the core (80-85 s); this one keeps it away until
-    # about 105 s
-    "tests/emitters/test_area.py",
 )
 
 
-#: seconds each file took in a clean clone's run (an empty kernel cache, both workers busy): the order after
-#: FIRST_FILES, longest first, so that the two workers end together; ``LIGHTPROBE_WRITE_DURATIONS=1 pytest``
-#: writes it again from the run
-DURATIONS = Path(__file__).with_name("durations.json")
-
-
-def _file_of(nodeid: str) -> str:  # as pytest-xdist names a file's scope: the node id's path
-    return nodeid.split("::", 1)[0]
-
-
 def pytest_collection_modifyitems(config, items):
-    """Order the files: FIRST_FILES first, then the others longest first by ``durations.json`` (a file it does not
-    know counts as its number of tests times the known files' mean seconds a test); a file's tests keep their order.
-    pytest-xdist hands a free worker the next file (its own reordering is turned off in pyproject.toml), so longest
-    first leaves short files to even out the end: in a simulation of the schedule from one run's file seconds the
-    workers ended 10 s apart in the order by number of tests, together in this one (decisions.md 137).  Only the
-    schedule changes: every test runs the same."""
+    """Order the files: FIRST_FILES first, then the others by their number of tests, most first (what
+    pytest-xdist's own reordering does, turned off in pyproject.toml so that this order is kept); a file's tests
+    keep their order.  Only the schedule changes: every test runs the same."""
+
+    def file_of(item) -> str:  # as pytest-xdist names a file's scope: the node id's path
+        return item.nodeid.split("::", 1)[0]
+
     counts: dict[str, int] = {}
     for item in items:
-        counts[_file_of(item.nodeid)] = counts.get(_file_of(item.nodeid), 0) + 1
-    try:
-        known = {name: float(seconds) for name, seconds in json.loads(DURATIONS.read_text()).items()}
-    except (OSError, ValueError, AttributeError):
-        known = {}
-    per_test = sum(known.values()) / max(1, sum(counts.get(name, 0) for name in known)) if known else 1.0
+        counts[file_of(item)] = counts.get(file_of(item), 0) + 1
 
     def rank(item):
-        name = _file_of(item.nodeid)
+        name = file_of(item)
         if name in FIRST_FILES:
             return (0, FIRST_FILES.index(name), name)
-        return (1, -known.get(name, counts[name] * per_test), name)
+        return (1, -counts[name], name)
 
     items.sort(key=rank)
-
-
-_seconds_by_file: dict[str, float] = {}
-
-
-def pytest_runtest_logreport(report):
-    """With ``LIGHTPROBE_WRITE_DURATIONS`` set, sum each file's seconds (setup, call and teardown) for
-    :func:`pytest_sessionfinish` (the controller receives every worker's reports)."""
-    if os.environ.get("LIGHTPROBE_WRITE_DURATIONS"):
-        name = _file_of(report.nodeid)
-        _seconds_by_file[name] = _seconds_by_file.get(name, 0.0) + report.duration
-
-
-def pytest_sessionfinish(session, exitstatus):
-    if os.environ.get("LIGHTPROBE_WRITE_DURATIONS") and _seconds_by_file and not hasattr(session.config, "workerinput"):
-        ordered = dict(sorted(((k, round(v, 1)) for k, v in _seconds_by_file.items()), key=lambda kv: -kv[1]))
-        DURATIONS.write_text(json.dumps(ordered, indent=0) + "\n")
 
 
 @pytest.fixture(autouse=True)
