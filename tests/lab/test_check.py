@@ -6,7 +6,7 @@ from pathlib import Path
 import pytest
 
 from lightprobe.lab.check import check_technique, figure_png, write_html
-from lightprobe.lab.techniques import TechniqueError, load_technique
+from lightprobe.lab.techniques import TechniqueError, load_module, load_technique
 
 HERE = Path(__file__).parent
 TECHNIQUES = HERE / "user_techniques.py"
@@ -110,6 +110,28 @@ def test_loading_errors_name_the_file(tmp_path):
     )
     with pytest.raises(TechniqueError, match="kind must be one of"):
         load_technique(str(kind))
+
+
+def test_an_unchanged_file_is_imported_once_and_a_changed_one_again(tmp_path):
+    """A second load of the same bytes returns the first import's module (its njit functions keep what Numba
+    compiled for them); new bytes at the same path are imported anew, and a file that failed is tried again."""
+    path = tmp_path / "mine.py"
+    path.write_text("import numba\nIMPORTS = []\nIMPORTS.append(1)\n@numba.njit\ndef f(x):\n    return x + 1\n")
+    first = load_module(path)
+    assert first.f(1) == 2
+    again = load_module(path)
+    assert again is first and again.f is first.f and len(again.IMPORTS) == 1
+    assert len(first.f.overloads) == 1  # compiled once, kept
+    path.write_text("import numba\nIMPORTS = []\n@numba.njit\ndef f(x):\n    return x + 2\n")
+    changed = load_module(path)
+    assert changed is not first and changed.f(1) == 3
+    broken = tmp_path / "broken.py"
+    broken.write_text("raise ValueError('not yet')\n")
+    for _ in range(2):  # a failed import is not remembered: each load reports it
+        with pytest.raises(TechniqueError, match="importing it raised ValueError: not yet"):
+            load_module(broken)
+    broken.write_text("X = 1\n")
+    assert load_module(broken).X == 1
 
 
 def test_pictures_and_page(tmp_path):

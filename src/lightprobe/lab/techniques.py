@@ -32,6 +32,7 @@ lightprobe's own techniques behind the same contract, and the :class:`Context` a
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import importlib.util
 import inspect
 import os
@@ -104,12 +105,34 @@ def _module_techniques(module) -> dict[str, object]:
     }
 
 
+#: the modules imported by :func:`load_module` in this process, by (resolved path, SHA-256 of the file's bytes)
+_IMPORTED: dict[tuple[str, str], object] = {}
+
+
 def load_module(path: str | Path, *, what: str = "technique file"):
     """Import a user's Python file; a missing file, an error while importing it or an import that would end the
-    program (``sys.exit``, ``os._exit``, a crash) is one line naming the file."""
+    program (``sys.exit``, ``os._exit``, a crash) is one line naming the file.
+
+    A file imported before in this process with the same bytes is not imported again: the module of that import is
+    returned, with its njit functions and what Numba compiled for them (a notebook that checks or compares the same
+    file again, or the laboratory's commands in one process, compile nothing twice; decisions.md 139). A file whose
+    bytes changed is imported anew. Like Python's own ``import``, the files it imports are not reloaded."""
     file = Path(path)
     if not file.is_file():
         raise TechniqueError(f"{file}: no such {what}")
+    try:
+        key = (str(file.resolve()), hashlib.sha256(file.read_bytes()).hexdigest())
+    except OSError as exc:
+        raise TechniqueError(f"{file}: cannot read the {what}: {exc.strerror or exc}") from None
+    if key in _IMPORTED:
+        return _IMPORTED[key]
+    module = _import_file(file, what)
+    _IMPORTED[key] = module
+    return module
+
+
+def _import_file(file: Path, what: str):
+    """:func:`load_module`'s import of ``file``, every time it is called."""
     name = f"lightprobe_user_{abs(hash(str(file.resolve())))}"
     spec = importlib.util.spec_from_file_location(name, file)
     if spec is None or spec.loader is None:
