@@ -16,6 +16,7 @@ from .bsdfs import GGXConductor, Lambert, RoughPlastic
 from .emitters.envmap import EnvironmentMap
 from .emitters.procedural import sky_with_sun
 from .geometry.camera import Camera
+from .geometry.icosphere import icosphere
 from .geometry.mesh import TriangleMesh
 from .geometry.shapes import Rectangle, Sphere
 from .scene import Scene
@@ -25,13 +26,10 @@ __all__ = ["DEMOS", "blob_mesh", "demo_scene", "many_lights_scene"]
 
 def blob_mesh(subdivisions: int = 5) -> TriangleMesh:
     """A unit icosphere with smooth sinusoidal bumps (20 x 4^subdivisions triangles)."""
-    import trimesh
-
-    ico = trimesh.creation.icosphere(subdivisions=subdivisions)
-    v = np.asarray(ico.vertices, dtype=np.float64)
+    v, faces = icosphere(subdivisions)
     x, y, z = v.T
     bump = 0.10 * np.sin(3 * x + 1) * np.sin(4 * y) * np.sin(3 * z + 2) + 0.04 * np.sin(11 * x) * np.sin(13 * y + 1)
-    return TriangleMesh.from_arrays(v * (1.0 + bump)[:, None], np.asarray(ico.faces), name="demo blob")
+    return TriangleMesh.from_arrays(v * (1.0 + bump)[:, None], faces, name="demo blob")
 
 
 def demo_scene(resolution: tuple[int, int] = (640, 400)) -> Scene:
