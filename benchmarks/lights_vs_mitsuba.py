@@ -229,7 +229,11 @@ def _run(args, worker: str, scene: str, *extra: str) -> list[dict]:
     ]
     out = subprocess.run(cmd, capture_output=True, text=True, env=os.environ.copy())
     if out.returncode != 0:
-        raise SystemExit(f"{worker} failed:\n{out.stderr[-2000:]}")
+        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        from mitsuba_references import llvm_crash
+
+        remedy = llvm_crash(out.stderr)  # one line where Dr.Jit aborted in an old libLLVM, not LLVM's dump
+        raise SystemExit(f"{worker} failed: {remedy}" if remedy else f"{worker} failed:\n{out.stderr[-2000:]}")
     rows = [json.loads(line) for line in out.stdout.splitlines() if line.startswith("{")]
     for row in rows:
         print(json.dumps(row), flush=True)

@@ -20,6 +20,7 @@ import argparse
 import glob
 import json
 import os
+import re
 import sys
 import tempfile
 import time
@@ -33,16 +34,42 @@ ROOT = Path(__file__).resolve().parents[1]
 TEST_SUITE_SCENES = ("building",)
 
 
+_LIBRARY_FOLDERS = ("/usr/lib/x86_64-linux-gnu", "/usr/lib/aarch64-linux-gnu", "/usr/lib64", "/usr/lib")
+
+
 def _prefer_llvm19() -> None:
-    """Dr.Jit 1.5 aborts with Debian 12's LLVM 15; point it at libLLVM 19 when installed (as the peer kit does)."""
+    """Dr.Jit 1.5 aborts with Debian 12's LLVM 15; point it at libLLVM 19 when installed (as the peer kit does).
+    Without it, and with no libLLVM newer than 15 on the machine, say so on one line before Mitsuba runs: an
+    in-process render aborts with LLVM's dump and no word of the remedy (:data:`LLVM_REMEDY`)."""
     if "DRJIT_LIBLLVM_PATH" in os.environ:
         return
-    for folder in ("/usr/lib/x86_64-linux-gnu", "/usr/lib/aarch64-linux-gnu", "/usr/lib64", "/usr/lib"):
+    for folder in _LIBRARY_FOLDERS:
         for pattern in ("libLLVM-19.so", "libLLVM.so.19*", "libLLVM-19*.so*"):
             hits = sorted(glob.glob(os.path.join(folder, pattern)))
             if hits:
                 os.environ["DRJIT_LIBLLVM_PATH"] = hits[0]
                 return
+    versions = [int(m.group(1)) for folder in _LIBRARY_FOLDERS for name in glob.glob(os.path.join(folder, "libLLVM*"))
+                if (m := re.search(r"libLLVM[-.](?:so\.)?(\d+)", os.path.basename(name)))]  # fmt: skip
+    if versions and max(versions) <= 15:
+        print(f"warning: only libLLVM {max(versions)} found; if Mitsuba aborts with '{_LLVM_CRASH}': {LLVM_REMEDY}",
+              file=sys.stderr, flush=True)  # fmt: skip
+
+
+# What Dr.Jit 1.5 prints, and then aborts, when an older libLLVM (Debian 12's 15) cannot emit its kernels for this CPU
+# (an AVX-512 one: "Cannot select: ... fminimum"); every Mitsuba render of the run would fail the same way
+_LLVM_CRASH = "LLVM ERROR: Cannot select"
+LLVM_REMEDY = (
+    "Mitsuba's llvm_ad_rgb variant aborted in LLVM's code generator: Dr.Jit 1.5 cannot use this machine's libLLVM "
+    "(Debian 12's LLVM 15); install libLLVM 19 (Debian 12: apt-get install libllvm19, found by itself) or point "
+    "DRJIT_LIBLLVM_PATH at it (../shared/peers/README.md)"
+)
+
+
+def llvm_crash(stderr: str) -> str | None:
+    """The one-line remedy when a Mitsuba worker's ``stderr`` is Dr.Jit's crash in an older libLLVM (a 40-line dump of
+    LLVM's selection DAG otherwise), else None."""
+    return LLVM_REMEDY if _LLVM_CRASH in stderr else None
 
 
 def _rgb(value) -> dict:

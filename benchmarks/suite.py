@@ -387,9 +387,17 @@ def write_docs(text: str, path: Path = ROOT / "docs" / "performance.md") -> None
 # ----------------------------------------------------------------------------------------------------- workers
 
 
+def _mitsuba_references():
+    """benchmarks/mitsuba_references.py (imports neither Mitsuba nor Dr.Jit)."""
+    if str(ROOT / "benchmarks") not in sys.path:
+        sys.path.insert(0, str(ROOT / "benchmarks"))
+    import mitsuba_references
+
+    return mitsuba_references
+
+
 def _mitsuba():
-    sys.path.insert(0, str(ROOT / "benchmarks"))
-    import mitsuba_references as mr
+    mr = _mitsuba_references()
 
     mr._prefer_llvm19()
     import drjit as dr
@@ -836,6 +844,9 @@ def _run(args, worker: str, scene: str, *extra: str, python: str | None = None, 
     out = subprocess.run(cmd, capture_output=True, text=True, env=os.environ.copy())
     rows = [json.loads(line) for line in out.stdout.splitlines() if line.startswith("{")]
     if out.returncode != 0:
+        remedy = _mitsuba_references().llvm_crash(out.stderr)
+        if remedy is not None:  # every later Mitsuba render would abort the same way: stop the run, in one line
+            raise SystemExit(f"suite.py: {worker} worker on {scene}: {remedy}")
         raise RuntimeError(f"{worker} worker on {scene} failed:\n{out.stderr[-3000:]}")
     for row in rows if echo else ():
         print(json.dumps(row), flush=True)

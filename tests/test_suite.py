@@ -5,7 +5,10 @@ from __future__ import annotations
 
 import importlib.util
 import math
+import os
+import subprocess
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -413,3 +416,45 @@ def test_rectangle_lights_as_a_mesh_keep_their_corners_and_radiance(name):
     v = np.asarray(mesh.shape.vertices, np.float64)[np.asarray(mesh.shape.faces)]
     areas = 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
     assert np.isclose(np.sum(areas * np.asarray(mesh.emission, np.float64).mean(axis=1)), power)
+
+
+def test_a_mitsuba_worker_aborting_in_an_old_llvm_stops_the_run_in_one_line_and_other_failures_keep_their_output(
+    monkeypatch, tmp_path
+):
+    suite = _suite_module()
+    crash = "LLVM ERROR: Cannot select: 0x7f03743a1dc8: f32 = fminimum 0x1, 0x2\n" + "  0x7f: v16f32 = fma\n" * 40
+    failure = {"stderr": crash}
+    monkeypatch.setattr(
+        suite.subprocess,
+        "run",
+        lambda *a, **k: subprocess.CompletedProcess(a, returncode=-6, stdout="", stderr=failure["stderr"]),
+    )
+    args = SimpleNamespace(seeds=2, resolution=[32, 24], cache=tmp_path, lightprobe_option=[])
+    with pytest.raises(SystemExit) as stopped:
+        suite._run(args, "mitsuba", "area", "--spp", "16")
+    message = str(stopped.value)
+    assert "\n" not in message and "mitsuba worker on area" in message
+    assert "apt-get install libllvm19" in message and "DRJIT_LIBLLVM_PATH" in message
+    failure["stderr"] = "Traceback (most recent call last):\nValueError: a scene the worker cannot build"
+    with pytest.raises(RuntimeError, match="ValueError: a scene the worker cannot build"):
+        suite._run(args, "mitsuba", "area", "--spp", "16")
+
+
+@pytest.mark.parametrize("present, warned", [(("libLLVM-15.so", "libLLVM.so.15"), True), (("libLLVM-19.so",), False)])
+def test_mitsuba_is_pointed_at_libllvm_19_and_a_machine_with_only_an_older_one_is_told_the_remedy(
+    monkeypatch, tmp_path, capsys, present, warned
+):
+    references = _suite_module()._mitsuba_references()
+    for name in present:
+        (tmp_path / name).write_bytes(b"")
+    monkeypatch.setattr(references, "_LIBRARY_FOLDERS", (str(tmp_path),))
+    monkeypatch.setenv("DRJIT_LIBLLVM_PATH", "")  # so that the path the function sets is undone after the test
+    monkeypatch.delenv("DRJIT_LIBLLVM_PATH")
+    references._prefer_llvm19()
+    said = capsys.readouterr().err
+    if warned:
+        assert "DRJIT_LIBLLVM_PATH" not in os.environ
+        assert said.count("\n") == 1 and "only libLLVM 15 found" in said and "apt-get install libllvm19" in said
+    else:
+        assert os.environ["DRJIT_LIBLLVM_PATH"] == str(tmp_path / "libLLVM-19.so")
+        assert said == ""
