@@ -837,6 +837,9 @@ def agreement_table(references: dict) -> str:
 # -------------------------------------------------------------------------------------------------------- main
 
 
+MITSUBA_WORKERS = ("mitsuba", "reference", "pilot")  # the workers that render with Mitsuba
+
+
 def _run(args, worker: str, scene: str, *extra: str, python: str | None = None, echo: bool = True) -> list[dict]:
     cmd = [python or sys.executable, __file__, "--worker", worker, "--scene", scene, "--seeds", str(args.seeds),
            "--resolution", *map(str, args.resolution), "--cache", str(args.cache),
@@ -844,7 +847,7 @@ def _run(args, worker: str, scene: str, *extra: str, python: str | None = None, 
     out = subprocess.run(cmd, capture_output=True, text=True, env=os.environ.copy())
     rows = [json.loads(line) for line in out.stdout.splitlines() if line.startswith("{")]
     if out.returncode != 0:
-        remedy = _mitsuba_references().llvm_crash(out.stderr)
+        remedy = _mitsuba_references().llvm_crash(out.stderr) if worker in MITSUBA_WORKERS else None
         if remedy is not None:  # every later Mitsuba render would abort the same way: stop the run, in one line
             raise SystemExit(f"suite.py: {worker} worker on {scene}: {remedy}")
         raise RuntimeError(f"{worker} worker on {scene} failed:\n{out.stderr[-3000:]}")

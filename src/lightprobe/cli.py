@@ -402,7 +402,10 @@ def doctor_command() -> None:
         ("kernel cache", str(cache)),
         ("cache size", f"{size / 2**20:.1f} MiB in {sum(p.suffix == '.nbc' for p in files)} compiled functions"),
         ("cache rule", "per module and its imports" if _numba.STAMPED_BY_IMPORTS else "one per version of all sources"),
-        ("demo kernels", "ready" if kernels_cached() else "not compiled yet: the first render compiles them (about 20 s on 2 cores)"),
+        (
+            "demo kernels",
+            "ready" if kernels_cached() else "not compiled yet: its first render compiles them (~20 s, 2 cores)",
+        ),
     ]
     width = max(len(name) for name, _ in rows)
     for name, value in rows:
