@@ -229,7 +229,7 @@ def _run(args, worker: str, scene: str, *extra: str) -> list[dict]:
     ]
     out = subprocess.run(cmd, capture_output=True, text=True, env=os.environ.copy())
     if out.returncode != 0:
-        sys.path.insert(0, str(Path(__file__).resolve().parent))
+        sys.path.insert(0, str(ROOT / "benchmarks"))  # as _mitsuba_worker does
         from mitsuba_references import llvm_crash
 
         remedy = llvm_crash(out.stderr)  # one line where Dr.Jit aborted in an old libLLVM, not LLVM's dump

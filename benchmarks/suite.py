@@ -837,7 +837,7 @@ def agreement_table(references: dict) -> str:
 # -------------------------------------------------------------------------------------------------------- main
 
 
-MITSUBA_WORKERS = ("mitsuba", "reference", "pilot")  # the workers that render with Mitsuba
+MITSUBA_WORKERS = ("mitsuba", "reference")  # the workers that render with Mitsuba (the pilot is lightprobe's)
 
 
 def _run(args, worker: str, scene: str, *extra: str, python: str | None = None, echo: bool = True) -> list[dict]:

@@ -435,6 +435,8 @@ def test_a_mitsuba_worker_aborting_in_an_old_llvm_stops_the_run_in_one_line_and_
     message = str(stopped.value)
     assert "\n" not in message and "mitsuba worker on area" in message
     assert "apt-get install libllvm19" in message and "DRJIT_LIBLLVM_PATH" in message
+    with pytest.raises(RuntimeError, match="pilot worker on area failed"):  # lightprobe's pilot: not Mitsuba's LLVM
+        suite._run(args, "pilot", "area", "--spp", "16")
     failure["stderr"] = "Traceback (most recent call last):\nValueError: a scene the worker cannot build"
     with pytest.raises(RuntimeError, match="ValueError: a scene the worker cannot build"):
         suite._run(args, "mitsuba", "area", "--spp", "16")
